@@ -1,0 +1,378 @@
+"""The case JSON of the conventions: Table 4 errors with instance selectors, validated on load.
+
+A case is ``{"name", "design", "errors", "load_Nm", "direction"}``; every key is optional.
+Error values are in um or degrees exactly as the paper's Table 4 gives them (see
+``ERROR_TYPES``). :func:`load_case` and :meth:`Case.from_dict` validate everything and raise
+``ValueError`` naming the offending field; :class:`ResolvedErrors` turns the case into plain
+per-instance arrays in mm and rad that the geometry uses.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rvcad.params import Design
+
+
+@dataclass(frozen=True)
+class ErrorType:
+    """One Table 4 error type.
+
+    Attributes
+    ----------
+    key : str
+        JSON key.
+    letter : str
+        Paper Table 4 letter (B..L).
+    unit : str
+        ``"um"`` or ``"deg"``.
+    instance_keys : tuple of str
+        Allowed instance selector keys besides ``value`` and ``angle_deg``.
+    defaults : dict
+        Default instance (``None`` for "all pins").
+    has_angle : bool
+        Whether ``angle_deg`` is accepted.
+    pinwise : bool
+        Whether a list of ``Zp`` numbers is accepted.
+    meaning : str
+        What a positive value means.
+    """
+
+    key: str
+    letter: str
+    unit: str
+    instance_keys: tuple[str, ...]
+    defaults: dict[str, Any]
+    has_angle: bool
+    pinwise: bool
+    meaning: str
+    paper_value: float
+
+
+ERROR_TYPES: dict[str, ErrorType] = {e.key: e for e in [
+    ErrorType("sun_eccentricity", "B", "um", (), {}, True, False,
+              "sun gear axis offset from the input axis toward angle_deg (sun frame)", 10.0),
+    ErrorType("planet_eccentricity", "C", "um", ("crank",), {"crank": 0}, True, False,
+              "planet gear axis offset from its crankshaft axis toward angle_deg (planet frame)", 10.0),
+    ErrorType("cam_phase", "D", "um", ("crank", "disc"), {"crank": 0, "disc": 0}, False, False,
+              "cam centre moved along its circle of radius e in +psi by this arc length", 10.0),
+    ErrorType("cam_eccentricity", "E", "um", ("crank", "disc"), {"crank": 0, "disc": 0}, False, False,
+              "cam eccentricity e increased", 10.0),
+    ErrorType("carrier_hole_eccentricity", "F", "um", ("crank",), {"crank": 0}, False, False,
+              "carrier's crankshaft hole moved radially outward", 10.0),
+    ErrorType("disc_hole_eccentricity", "G", "um", ("disc", "hole"), {"disc": 0, "hole": 0}, False, False,
+              "crankshaft hole in the cycloid disc moved radially outward", 10.0),
+    ErrorType("pin_circle_offset", "H", "um", (), {}, True, False,
+              "centre of the pin distribution circle moved toward angle_deg", 10.0),
+    ErrorType("pin_circle_diameter", "I", "um", ("pin",), {"pin": None}, False, True,
+              "pin distribution circle diameter increased (each pin outward by value/2)", 10.0),
+    ErrorType("pin_radius", "J", "um", ("pin",), {"pin": None}, False, True,
+              "pin radius increased", 5.0),
+    ErrorType("disc_phase", "K", "deg", ("disc",), {"disc": 0}, False, False,
+              "cycloid profile turned +z relative to its crank holes", 0.1),
+    ErrorType("pin_pitch", "L", "deg", ("pin",), {"pin": 0}, False, True,
+              "one pin moved +z along the pin circle from its nominal angle", 0.01),
+]}
+"""The eleven error types of paper Table 4 (A = none is the empty case)."""
+
+#: Largest magnitude accepted for each unit (a sanity bound, not physics): 1 mm and 5 degrees.
+_MAX_ABS = {"um": 1000.0, "deg": 5.0}
+
+CASE_KEYS = ("name", "design", "errors", "load_Nm", "direction", "model")
+
+
+def _number(v: Any, where: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"{where} {v!r} must be a number")
+    v = float(v)
+    if not math.isfinite(v):
+        raise ValueError(f"{where} {v!r} must be finite (NaN and inf are not allowed)")
+    return v
+
+
+def _index(v: Any, where: str, n: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (isinstance(v, float) and not v.is_integer()):
+        raise ValueError(f"{where} {v!r} must be an integer in [0, {n - 1}]")
+    v = int(v)
+    if not 0 <= v < n:
+        raise ValueError(f"{where} {v} is out of range; allowed 0..{n - 1}")
+    return v
+
+
+@dataclass(frozen=True)
+class ErrorInstance:
+    """One applied error: type key, value (um or deg), instance selectors and direction angle."""
+
+    key: str
+    value: float
+    crank: int | None = None
+    disc: int | None = None
+    hole: int | None = None
+    pin: int | None = None
+    angle_deg: float = 0.0
+
+
+def parse_errors(errors: dict[str, Any] | None, design: Design) -> list[ErrorInstance]:
+    """Validate the ``errors`` object of a case and expand it into instances.
+
+    Parameters
+    ----------
+    errors : dict or None
+        ``{key: number | object | list}`` as in the conventions.
+    design : Design
+        Gives the index ranges (pins, cranks, discs).
+
+    Returns
+    -------
+    list of ErrorInstance
+
+    Raises
+    ------
+    ValueError
+        Naming the key for unknown keys, wrong types, out-of-range indices or values.
+    """
+    if errors is None:
+        return []
+    if not isinstance(errors, dict):
+        raise ValueError(f"errors must be an object mapping error keys to values, got {type(errors).__name__}")
+    n = {"crank": design.n_cranks, "disc": design.n_discs, "hole": design.n_cranks, "pin": design.z_pins}
+    out: list[ErrorInstance] = []
+    for key, spec in errors.items():
+        if key not in ERROR_TYPES:
+            raise ValueError(f"errors key {key!r} is unknown; allowed: {sorted(ERROR_TYPES)}")
+        et = ERROR_TYPES[key]
+        lim = _MAX_ABS[et.unit]
+        if isinstance(spec, list) and et.pinwise and len(spec) > 0 and all(
+                not isinstance(x, dict) for x in spec):
+            if len(spec) != design.z_pins:
+                raise ValueError(
+                    f"errors.{key}: a pin-wise list must have {design.z_pins} numbers, got {len(spec)}")
+            for i, x in enumerate(spec):
+                v = _number(x, f"errors.{key}[{i}]")
+                if abs(v) > lim:
+                    raise ValueError(f"errors.{key}[{i}] {v} {et.unit} is out of range; |value| <= {lim}")
+                if v != 0.0:
+                    out.append(ErrorInstance(key, v, pin=i))
+            continue
+        items = spec if isinstance(spec, list) else [spec]
+        for j, item in enumerate(items):
+            where = f"errors.{key}" + (f"[{j}]" if isinstance(spec, list) else "")
+            sel: dict[str, Any] = dict(et.defaults)
+            angle = 0.0
+            if isinstance(item, dict):
+                allowed = {"value", *et.instance_keys} | ({"angle_deg"} if et.has_angle else set())
+                for k in item:
+                    if k not in allowed:
+                        raise ValueError(f"{where}.{k} is not allowed; allowed keys: {sorted(allowed)}")
+                if "value" not in item:
+                    raise ValueError(f"{where} needs a 'value' ({et.unit})")
+                v = _number(item["value"], f"{where}.value")
+                for k in et.instance_keys:
+                    if k in item:
+                        sel[k] = _index(item[k], f"{where}.{k}", n[k])
+                if "angle_deg" in item:
+                    angle = _number(item["angle_deg"], f"{where}.angle_deg")
+            else:
+                v = _number(item, where)
+            if abs(v) > lim:
+                raise ValueError(f"{where} {v} {et.unit} is out of range; |value| <= {lim} {et.unit}")
+            out.append(ErrorInstance(key, v, crank=sel.get("crank"), disc=sel.get("disc"),
+                                     hole=sel.get("hole"), pin=sel.get("pin"), angle_deg=angle))
+    return out
+
+
+@dataclass(frozen=True)
+class Case:
+    """A validated case: design, error instances, load and direction.
+
+    Attributes
+    ----------
+    name : str
+    design : Design
+    errors : tuple of ErrorInstance
+    raw_errors : dict
+        The ``errors`` object as given (normalised JSON), kept for the cache key and export.
+    load_Nm : float
+        Output load torque magnitude, N m (default 20); it always resists the motion.
+    direction : int
+        +1 (input angle increasing) or -1.
+    model : dict
+        Extra physics options of the rvdyn model (unmodelled-effect parameters, see rvdyn).
+    """
+
+    name: str = "case"
+    design: Design = field(default_factory=Design)
+    errors: tuple[ErrorInstance, ...] = ()
+    raw_errors: dict[str, Any] = field(default_factory=dict)
+    load_Nm: float = 20.0
+    direction: int = 1
+    model: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any] | None) -> "Case":
+        """Validate a case object; raise ``ValueError`` naming the field on bad input."""
+        d = dict(d or {})
+        for k in d:
+            if k not in CASE_KEYS:
+                raise ValueError(f"case key {k!r} is unknown; allowed: {list(CASE_KEYS)}")
+        name = d.get("name", "case")
+        if not isinstance(name, str):
+            raise ValueError(f"name {name!r} must be a string")
+        design = Design.from_dict(d.get("design"))
+        raw = d.get("errors") or {}
+        errs = parse_errors(raw, design)
+        load = _number(d.get("load_Nm", 20.0), "load_Nm")
+        if load < 0:
+            raise ValueError(f"load_Nm {load} must be >= 0 (the load always resists the motion)")
+        direction = d.get("direction", 1)
+        if direction not in (1, -1) or isinstance(direction, bool):
+            raise ValueError(f"direction {direction!r} must be +1 or -1")
+        model = d.get("model") or {}
+        if not isinstance(model, dict):
+            raise ValueError(f"model {model!r} must be an object of rvdyn physics options")
+        case = cls(name=name, design=design, errors=tuple(errs), raw_errors=json.loads(json.dumps(raw)),
+                   load_Nm=load, direction=int(direction), model=dict(model))
+        ResolvedErrors(case)  # checks that the perturbed parts are valid
+        return case
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form that :meth:`from_dict` reads back to an equal case."""
+        d: dict[str, Any] = {"name": self.name, "design": self.design.to_dict(), "errors": self.raw_errors,
+                             "load_Nm": self.load_Nm, "direction": self.direction}
+        if self.model:
+            d["model"] = self.model
+        return d
+
+    def key(self) -> str:
+        """Content hash (sha256 hex, 16 chars) of everything that changes the physics (not the name)."""
+        d = self.to_dict()
+        d.pop("name")
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+    def with_errors(self, errors: dict[str, Any], name: str | None = None) -> "Case":
+        """A copy with another ``errors`` object (validated)."""
+        d = self.to_dict()
+        d["errors"] = errors
+        if name is not None:
+            d["name"] = name
+        return Case.from_dict(d)
+
+
+def load_case(path: str | Path | None) -> Case:
+    """Read a case JSON file (``None``: the nominal case with no errors)."""
+    if path is None:
+        return Case.from_dict({"name": "nominal"})
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"case file {str(p)!r} does not exist") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"case file {str(p)!r} is not valid JSON: {exc}") from None
+    if not isinstance(d, dict):
+        raise ValueError(f"case file {str(p)!r} must hold a JSON object")
+    d.setdefault("name", p.stem)
+    return Case.from_dict(d)
+
+
+class ResolvedErrors:
+    """Per-instance perturbations in mm and rad, ready for the geometry.
+
+    Attributes (all float64 numpy arrays)
+    ------------------------------------
+    sun_offset : (2,)
+        Sun gear centre offset in the sun frame, mm.
+    planet_offset : (n_cranks, 2)
+        Planet gear centre offset in the crank (planet) frame, mm.
+    cam_phase : (n_cranks, n_discs)
+        Cam phase shift, rad (arc length / e).
+    cam_ecc : (n_cranks, n_discs)
+        Cam eccentricity increase, mm.
+    carrier_hole : (n_cranks,)
+        Radial outward shift of the carrier's crank holes, mm.
+    disc_hole : (n_discs, n_cranks)
+        Radial outward shift of hole h in disc k, mm.
+    pin_circle_offset : (2,)
+        Offset of the pin circle centre in the fixed frame, mm.
+    pin_radial : (Zp,)
+        Radial outward shift of each pin centre, mm (half the diameter error).
+    pin_radius : (Zp,)
+        Pin radius increase, mm.
+    disc_phase : (n_discs,)
+        Profile rotation relative to the crank holes, rad.
+    pin_pitch : (Zp,)
+        Angular shift of each pin along the pin circle, rad.
+    """
+
+    def __init__(self, case: Case) -> None:
+        d = case.design
+        nc, nd, zp = d.n_cranks, d.n_discs, d.z_pins
+        self.sun_offset = np.zeros(2)
+        self.planet_offset = np.zeros((nc, 2))
+        self.cam_phase = np.zeros((nc, nd))
+        self.cam_ecc = np.zeros((nc, nd))
+        self.carrier_hole = np.zeros(nc)
+        self.disc_hole = np.zeros((nd, nc))
+        self.pin_circle_offset = np.zeros(2)
+        self.pin_radial = np.zeros(zp)
+        self.pin_radius = np.zeros(zp)
+        self.disc_phase = np.zeros(nd)
+        self.pin_pitch = np.zeros(zp)
+        um = 1e-3
+        e = d.eccentricity_mm
+        for inst in case.errors:
+            v = inst.value
+            ang = math.radians(inst.angle_deg)
+            u = np.array([math.cos(ang), math.sin(ang)])
+            pins = slice(None) if inst.pin is None else inst.pin
+            if inst.key == "sun_eccentricity":
+                self.sun_offset += v * um * u
+            elif inst.key == "planet_eccentricity":
+                self.planet_offset[inst.crank] += v * um * u
+            elif inst.key == "cam_phase":
+                self.cam_phase[inst.crank, inst.disc] += v * um / e
+            elif inst.key == "cam_eccentricity":
+                self.cam_ecc[inst.crank, inst.disc] += v * um
+            elif inst.key == "carrier_hole_eccentricity":
+                self.carrier_hole[inst.crank] += v * um
+            elif inst.key == "disc_hole_eccentricity":
+                self.disc_hole[inst.disc, inst.hole] += v * um
+            elif inst.key == "pin_circle_offset":
+                self.pin_circle_offset += v * um * u
+            elif inst.key == "pin_circle_diameter":
+                self.pin_radial[pins] += v * um / 2.0
+            elif inst.key == "pin_radius":
+                self.pin_radius[pins] += v * um
+            elif inst.key == "disc_phase":
+                self.disc_phase[inst.disc] += math.radians(v)
+            elif inst.key == "pin_pitch":
+                self.pin_pitch[pins] += math.radians(v)
+            else:  # pragma: no cover - parse_errors rejects unknown keys
+                raise ValueError(f"errors key {inst.key!r} is unknown")
+        self._check(case)
+
+    def _check(self, case: Case) -> None:
+        d = case.design
+        if np.any(d.eccentricity_mm + self.cam_ecc <= 0):
+            raise ValueError("errors.cam_eccentricity makes a cam eccentricity <= 0 mm")
+        r = d.pin_radius_mm + self.pin_radius
+        if np.any(r <= 0):
+            i = int(np.argmin(r))
+            raise ValueError(f"errors.pin_radius makes pin {i} radius {r[i]:.6f} mm <= 0")
+        ang = 2 * np.pi * np.arange(d.z_pins) / d.z_pins + self.pin_pitch
+        rad = d.pin_circle_radius_mm + self.pin_radial
+        xy = rad[:, None] * np.c_[np.cos(ang), np.sin(ang)] + self.pin_circle_offset
+        nxt = np.roll(np.arange(d.z_pins), -1)
+        dist = np.linalg.norm(xy[nxt] - xy, axis=1)
+        over = dist - (r + r[nxt])
+        if np.any(over <= 0):
+            i = int(np.argmin(over))
+            raise ValueError(
+                f"errors.pin_pitch / pin_radius / pin_circle_diameter make pins {i} and {int(nxt[i])} overlap "
+                f"(centre distance {dist[i]:.4f} mm < radii sum {r[i] + r[nxt[i]]:.4f} mm)")

@@ -1,0 +1,283 @@
+"""The error-perturbed reducer as numbers: part placements and kinematics, plain numpy.
+
+:class:`ReducerGeometry` resolves a :class:`~rvcad.errors.Case` into the perturbed positions
+of every feature (pins, holes, cams, gear centres) and places the moving parts for any state
+``(theta_in, theta_out, psi_0, psi_1)``. The CAD parts (:mod:`rvcad.parts`) and the contact
+analysis (:mod:`rvdyn`) both read their geometry from here: the exported geometry is the
+analysed geometry.
+
+Frames (conventions.md): fixed frame, right-handed about +z. The carrier turns by
+``theta_out``; crank j sits at ``(a + F_j) u(beta_j)`` in the carrier frame, turns by the
+absolute angle ``psi_j`` and carries the cam of disc k at eccentricity ``e + E_jk`` and phase
+``psi_j + k pi + D_jk / e``. Disc k hangs on the cams of both cranks: its pose is the rigid
+least-squares fit of its two crank holes to the two cam centres (equal bearing stiffness; a
+hole-distance mismatch is taken up in the bearings and carries no torque). Lengths in mm,
+angles in rad inside.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rvcad.errors import Case, ResolvedErrors
+from rvcad.params import Design
+from rvcad.profile import CycloidProfile, InvoluteGear
+
+#: Profile shift coefficients of the stage I gears (assumption; x1 = -x2 keeps the 30 mm centre
+#: distance, and x1 = +0.4 keeps the planet tip off the 12-tooth sun's base circle).
+SUN_SHIFT = 0.4
+PLANET_SHIFT = -0.4
+
+
+def rot(a: np.ndarray) -> np.ndarray:
+    """Rotation matrices for angles a (...,) -> (..., 2, 2)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+def _apply(R: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.einsum("...ij,...j->...i", R, v)
+
+
+def _u(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    return np.stack([np.cos(a), np.sin(a)], -1)
+
+
+class ReducerGeometry:
+    """Perturbed geometry and kinematics of one case.
+
+    Parameters
+    ----------
+    case : Case or None
+        Case with errors (``None``: nominal design, no errors).
+
+    Attributes
+    ----------
+    design : Design
+    errors : ResolvedErrors
+    profiles : list of CycloidProfile
+        Disc k's profile in its own frame (cam phase k*pi), cut for the design pin radius.
+    disc_profile_rotation : (n_discs,) rad
+        Profile turned relative to the crank holes (error K).
+    sun, planet : InvoluteGear
+    pin_angles_nominal : (Zp,) rad
+    pin_centers : (Zp, 2) mm, fixed frame
+    pin_radii : (Zp,) mm
+    carrier_holes : (n_cranks, 2) mm, carrier frame
+    disc_holes : (n_discs, n_cranks, 2) mm, disc frame
+    cam_ecc : (n_cranks, n_discs) mm
+    cam_phase : (n_cranks, n_discs) rad (includes k*pi)
+    sun_offset : (2,) mm, sun frame
+    planet_offsets : (n_cranks, 2) mm, planet frame
+    planet_tooth_phase : (n_cranks,) rad
+        Rotation of planet j's teeth relative to its crank frame so that it meshes at zero state.
+    """
+
+    def __init__(self, case: Case | None = None) -> None:
+        case = case if case is not None else Case()
+        self.case = case
+        d: Design = case.design
+        self.design = d
+        er = ResolvedErrors(case)
+        self.errors = er
+        zp, nc, nd = d.z_pins, d.n_cranks, d.n_discs
+        rp = d.pin_circle_radius_mm
+        self.profiles = [CycloidProfile(rp, d.eccentricity_mm, zp, d.pin_radius_mm, cam_phase=k * math.pi)
+                         for k in range(nd)]
+        self.disc_profile_rotation = er.disc_phase.copy()
+        alpha = math.radians(d.pressure_angle_deg)
+        share = d.stage1_backlash_mm
+        self.sun = InvoluteGear(d.z_sun, d.module_mm, alpha, SUN_SHIFT, 0.0)
+        self.planet = InvoluteGear(d.z_planet, d.module_mm, alpha, PLANET_SHIFT, share)
+        self.pin_angles_nominal = 2.0 * np.pi * np.arange(zp) / zp
+        ang = self.pin_angles_nominal + er.pin_pitch
+        self.pin_centers = (rp + er.pin_radial)[:, None] * _u(ang) + er.pin_circle_offset
+        self.pin_radii = d.pin_radius_mm + er.pin_radius
+        beta = np.array(d.crank_angles_rad)
+        self.crank_angles = beta
+        a = d.center_distance_mm
+        self.carrier_holes = (a + er.carrier_hole)[:, None] * _u(beta)
+        self.disc_holes = (a + er.disc_hole)[:, :, None] * _u(beta)[None, :, :]
+        self.cam_ecc = d.eccentricity_mm + er.cam_ecc
+        self.cam_phase = np.arange(nd)[None, :] * math.pi + er.cam_phase
+        self.sun_offset = er.sun_offset.copy()
+        self.planet_offsets = er.planet_offset.copy()
+        self.planet_tooth_phase = np.array([self._planet_phase(b) for b in beta])
+
+    # ------------------------------------------------------------------ kinematics
+    @property
+    def ratio(self) -> float:
+        return self.design.ratio
+
+    def ideal_state(self, theta_in: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ideal output and crank angles for input angles (rad).
+
+        Returns
+        -------
+        theta_out : (N,) rad, ``theta_in / ratio``
+        psi : (N, n_cranks) rad, ``-(theta_in - theta_out) Z1/Z2 + theta_out``
+        """
+        th = np.atleast_1d(np.asarray(theta_in, dtype=float))
+        d = self.design
+        out = th / self.ratio
+        psi = -(th - out) * d.z_sun / d.z_planet + out
+        return out, np.repeat(psi[:, None], d.n_cranks, axis=1)
+
+    def crank_axes(self, theta_out: np.ndarray) -> np.ndarray:
+        """Crank axis positions in the fixed frame, (N, n_cranks, 2) mm."""
+        R = rot(np.atleast_1d(theta_out))[:, None]
+        return _apply(R, self.carrier_holes[None])
+
+    def cam_centers(self, theta_out: np.ndarray, psi: np.ndarray) -> np.ndarray:
+        """Cam centres (N, n_cranks, n_discs, 2), mm, fixed frame."""
+        axes = self.crank_axes(theta_out)
+        ph = np.asarray(psi)[:, :, None] + self.cam_phase[None]
+        return axes[:, :, None, :] + self.cam_ecc[None, :, :, None] * _u(ph)
+
+    def disc_poses(self, theta_out: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pose of each disc: centre (N, n_discs, 2) mm and rotation (N, n_discs) rad.
+
+        Rigid least-squares fit of the disc's two crank holes to its two cam centres.
+        """
+        C = self.cam_centers(theta_out, psi)  # (N, nc, nd, 2)
+        C = np.swapaxes(C, 1, 2)  # (N, nd, nc, 2)
+        H = self.disc_holes  # (nd, nc, 2)
+        dc = C[:, :, 1] - C[:, :, 0]
+        dh = H[:, 1] - H[:, 0]
+        ang = np.arctan2(dc[..., 1], dc[..., 0]) - np.arctan2(dh[..., 1], dh[..., 0])[None]
+        theta_out = np.atleast_1d(theta_out)
+        ang = theta_out[:, None] + (np.mod(ang - theta_out[:, None] + np.pi, 2 * np.pi) - np.pi)
+        cen = C.mean(axis=2) - _apply(rot(ang), H.mean(axis=1)[None])
+        return cen, ang
+
+    def pins_in_profile_frames(self, theta_out: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pin centres in each disc's profile frame and the ideal-motion curve parameter.
+
+        Returns
+        -------
+        p : (N, n_discs, Zp, 2) mm
+        t0 : (N, n_discs, Zp) rad, the parameter of the pin-centre curve the pin sits at under
+            the ideal motion (``phi_i - disc rotation - profile rotation``): a start for the
+            foot-point search.
+        """
+        cen, ang = self.disc_poses(theta_out, psi)
+        full = ang + self.disc_profile_rotation[None]
+        Rinv = rot(-full)[:, :, None]  # (N, nd, 1, 2, 2)
+        rel = self.pin_centers[None, None] - cen[:, :, None, :]
+        p = _apply(Rinv, rel)
+        t0 = self.pin_angles_nominal[None, None] - full[:, :, None]
+        return p, t0
+
+    def pin_gaps(self, theta_out: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Exact signed gaps of every pin to every disc (analytic envelope distance).
+
+        Returns
+        -------
+        gap : (N, n_discs, Zp) mm, positive = clearance
+        normal : (N, n_discs, Zp, 2) outward normal of the disc at the foot point, profile frame
+        p : (N, n_discs, Zp, 2) pin centres in the profile frames, mm
+        t : (N, n_discs, Zp) foot parameters, rad
+        """
+        p, t0 = self.pins_in_profile_frames(theta_out, psi)
+        gap = np.empty(p.shape[:-1])
+        nrm = np.empty(p.shape)
+        tf = np.empty(p.shape[:-1])
+        for k, prof in enumerate(self.profiles):
+            bd, t, n = prof.boundary_distance(p[:, k].reshape(-1, 2), t0[:, k].ravel())
+            gap[:, k] = bd.reshape(p.shape[0], -1) - self.pin_radii[None]
+            nrm[:, k] = n.reshape(p.shape[0], -1, 2)
+            tf[:, k] = t.reshape(p.shape[0], -1)
+        return gap, nrm, p, tf
+
+    # ------------------------------------------------------------------ stage I
+    def sun_center(self, theta_in: np.ndarray) -> np.ndarray:
+        """Sun gear centre (N, 2), mm: the eccentricity turns with the sun."""
+        return _apply(rot(np.atleast_1d(theta_in)), self.sun_offset[None])
+
+    def planet_centers(self, theta_out: np.ndarray, psi: np.ndarray) -> np.ndarray:
+        """Planet gear centres (N, n_cranks, 2), mm: crank axis plus the offset turning with the crank."""
+        return self.crank_axes(theta_out) + _apply(rot(np.asarray(psi)), self.planet_offsets[None])
+
+    def _line_of_action(self, o1: np.ndarray, o2: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        c = o2 - o1
+        ad = np.linalg.norm(c, axis=-1)
+        gam = np.arctan2(c[..., 1], c[..., 0])
+        rb1, rb2 = self.sun.base_radius, self.planet.base_radius
+        alpha_w = np.arccos((rb1 + rb2) / ad)
+        tau1 = gam - direction * alpha_w
+        return ad * np.sin(alpha_w), tau1, tau1 + np.pi
+
+    def stage1_gaps(self, theta_in: np.ndarray, theta_out: np.ndarray, psi: np.ndarray,
+                    direction: int) -> np.ndarray:
+        """Gap of the loaded flank pair between the sun and each planet, along the line of action.
+
+        Exact for involute flanks (contact inside the active line): with base radii rb1, rb2,
+        operating pressure angle alpha_w = arccos((rb1 + rb2)/a_w) and tangency angles tau1 =
+        gamma -/+ alpha_w, tau2 = tau1 + pi,
+
+            g(+1) = a_w sin(alpha_w) - rb1 (xi1 + phi1 - tau1) - rb2 (xi2 + phi2 - tau2)
+            g(-1) = a_w sin(alpha_w) - rb1 (tau1 + xi1 - phi1) - rb2 (tau2 + xi2 - phi2)
+
+        reduced modulo the base pitch to (-p_b/2, p_b/2] (xi: flank origins, phi: gear rotations;
+        derivation in docs/physics.md).
+
+        Returns
+        -------
+        (N, n_cranks) mm
+        """
+        th_in = np.atleast_1d(theta_in)
+        o1 = self.sun_center(th_in)[:, None, :]
+        o2 = self.planet_centers(theta_out, psi)
+        L, tau1, tau2 = self._line_of_action(o1, o2, direction)
+        rb1, rb2 = self.sun.base_radius, self.planet.base_radius
+        x1, x2 = self.sun.flank_origin, self.planet.flank_origin
+        phi1 = th_in[:, None]
+        phi2 = np.asarray(psi) + self.planet_tooth_phase[None]
+        if direction == 1:
+            g = L - rb1 * (x1 + phi1 - tau1) - rb2 * (x2 + phi2 - tau2)
+        else:
+            g = L - rb1 * (tau1 + x1 - phi1) - rb2 * (tau2 + x2 - phi2)
+        pb = self.sun.base_pitch
+        return g - pb * np.round(g / pb)
+
+    def _planet_phase(self, beta: float) -> float:
+        """Planet tooth phase that makes the +1 flank gap zero at the zero state."""
+        rb1, rb2 = self.sun.base_radius, self.planet.base_radius
+        a = self.design.center_distance_mm
+        aw = math.acos((rb1 + rb2) / a)
+        L = a * math.sin(aw)
+        tau1 = beta - aw
+        tau2 = tau1 + math.pi
+        return (L - rb1 * (self.sun.flank_origin - tau1)) / rb2 - self.planet.flank_origin + tau2
+
+    # ------------------------------------------------------------------ placement
+    def placement(self, theta_in: float, theta_out: float | None = None,
+                  psi: tuple[float, float] | None = None) -> dict[str, tuple[float, float, float]]:
+        """Planar placement ``(x mm, y mm, rotation deg)`` of every moving part at one state.
+
+        Default state: the ideal kinematics at ``theta_in`` (rad). Keys: ``sun``, ``carrier``,
+        ``crank{j}``, ``planet{j}``, ``disc{k}`` (disc frame origin = profile centre, rotation
+        includes the profile rotation K), ``pins`` and ``housing`` are fixed.
+        """
+        to, ps = self.ideal_state(np.array([theta_in]))
+        if theta_out is not None:
+            to = np.array([theta_out])
+        if psi is not None:
+            ps = np.array([psi], dtype=float)
+        out: dict[str, tuple[float, float, float]] = {}
+        sc = self.sun_center(np.array([theta_in]))[0]
+        out["sun"] = (float(sc[0]), float(sc[1]), math.degrees(theta_in))
+        out["carrier"] = (0.0, 0.0, math.degrees(float(to[0])))
+        axes = self.crank_axes(to)[0]
+        pc = self.planet_centers(to, ps)[0]
+        for j in range(self.design.n_cranks):
+            out[f"crank{j}"] = (float(axes[j, 0]), float(axes[j, 1]), math.degrees(float(ps[0, j])))
+            out[f"planet{j}"] = (float(pc[j, 0]), float(pc[j, 1]),
+                                 math.degrees(float(ps[0, j] + self.planet_tooth_phase[j])))
+        cen, ang = self.disc_poses(to, ps)
+        for k in range(self.design.n_discs):
+            out[f"disc{k}"] = (float(cen[0, k, 0]), float(cen[0, k, 1]), math.degrees(float(ang[0, k])))
+        return out
