@@ -138,12 +138,12 @@ class ResponseSurfaceModel:
         for j, f in enumerate(self.factors):
             if np.ptp(x[:, j]) == 0.0:
                 raise ValueError(
-                    f"factor column '{f}' is constant (value {x[0, j]!r}); a constant factor "
+                    f"factor column '{f}' is constant (value {float(x[0, j])!r}); a constant factor "
                     "cannot be estimated: drop it from the factors"
                 )
         if np.ptp(y) == 0.0:
             raise ValueError(
-                f"response column '{self.response}' is constant (value {y[0]!r}); there is "
+                f"response column '{self.response}' is constant (value {float(y[0])!r}); there is "
                 "nothing to fit"
             )
         self.data = data

@@ -180,8 +180,9 @@ class RSMResults:
             self.pure_error_note = (
                 f"pure error is zero: the {self.df_pure_error + len(reps)} replicated runs "
                 f"(at {len(reps)} repeated setting(s), e.g. coded {reps[0]}) have identical "
-                "responses, as a deterministic simulator gives; the lack-of-fit F test is "
-                "skipped (F and p are NaN). Judge the fit by R2_pred, residuals and validation runs"
+                "responses (pure-error SS <= 1e-12 of the total SS), as a deterministic "
+                "simulator gives; the lack-of-fit F test is skipped (F and p are NaN). "
+                "Judge the fit by R2_pred, residuals and validation runs"
             )
         elif self.df_lack_of_fit == 0:
             self.pure_error_note = (

@@ -87,6 +87,61 @@ _MAX_ABS = {"um": 1000.0, "deg": 5.0}
 CASE_KEYS = ("name", "design", "errors", "load_Nm", "direction", "model")
 
 
+@dataclass(frozen=True)
+class ModelOption:
+    """A physical effect the base model of the paper lacks, as an option of the case's ``model`` object."""
+
+    key: str
+    unit: str
+    low: float
+    high: float
+    default: float
+    meaning: str
+
+
+MODEL_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
+    ModelOption("torsional_compliance_arcsec_per_Nm", "arcsec/(N m)", 0.0, 100.0, 0.0,
+                "torsional compliance of the carrier and crank bearings: the output lags by this times the "
+                "resisting torque (load dependent)"),
+    ModelOption("friction_torque_Nm", "N m", 0.0, 1000.0, 0.0,
+                "friction torque at the output that always resists the motion (direction-dependent hysteresis)"),
+    ModelOption("cam_bearing_clearance_um", "um", 0.0, 200.0, 0.0,
+                "radial clearance of every cam (crank) bearing between crank and disc (lost motion)"),
+    ModelOption("cam_bearing_stiffness_N_per_um", "N/um", 1.0, 1.0e6, 1000.0,
+                "radial stiffness of a cam bearing once its clearance is taken up"),
+    ModelOption("temperature_C", "degC", -40.0, 150.0, 20.0,
+                "temperature of the reducer (20 degC = as built)"),
+    ModelOption("pin_circle_diameter_um_per_K", "um/K", -20.0, 20.0, 0.0,
+                "thermal growth of the pin circle diameter relative to the discs per kelvin above 20 degC "
+                "(housing/disc expansion mismatch)"),
+    ModelOption("pin_circle_ovality_um", "um", -200.0, 200.0, 0.0,
+                "out-of-roundness of the pin circle: pin i moves radially by value*cos(2(phi_i - angle))"),
+    ModelOption("pin_circle_ovality_angle_deg", "deg", -360.0, 360.0, 0.0,
+                "direction of the major axis of the pin circle ovality"),
+]}
+"""Physics options of ``case["model"]``: effects that the paper's model lacks (units in the keys)."""
+
+
+def parse_model(model: dict[str, Any] | None) -> dict[str, float]:
+    """Validate the ``model`` object of a case: known keys, finite numbers inside their range."""
+    model = dict(model or {})
+    out: dict[str, float] = {}
+    for k, v in model.items():
+        if k not in MODEL_OPTIONS:
+            raise ValueError(f"model key {k!r} is unknown; allowed: {sorted(MODEL_OPTIONS)}")
+        o = MODEL_OPTIONS[k]
+        x = _number(v, f"model.{k}")
+        if not o.low <= x <= o.high:
+            raise ValueError(f"model.{k} {x} {o.unit} is out of range; allowed [{o.low}, {o.high}]")
+        out[k] = x
+    return out
+
+
+def model_value(model: dict[str, float], key: str) -> float:
+    """Value of a model option, or its default."""
+    return float(model.get(key, MODEL_OPTIONS[key].default))
+
+
 def _number(v: Any, where: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ValueError(f"{where} {v!r} must be a number")
@@ -236,6 +291,7 @@ class Case:
         model = d.get("model") or {}
         if not isinstance(model, dict):
             raise ValueError(f"model {model!r} must be an object of rvdyn physics options")
+        model = parse_model(model)
         case = cls(name=name, design=design, errors=tuple(errs), raw_errors=json.loads(json.dumps(raw)),
                    load_Nm=load, direction=int(direction), model=dict(model))
         ResolvedErrors(case)  # checks that the perturbed parts are valid
@@ -355,6 +411,14 @@ class ResolvedErrors:
                 self.pin_pitch[pins] += math.radians(v)
             else:  # pragma: no cover - parse_errors rejects unknown keys
                 raise ValueError(f"errors key {inst.key!r} is unknown")
+        # geometric effects of the case's model options (see MODEL_OPTIONS)
+        m = case.model
+        dT = model_value(m, "temperature_C") - 20.0
+        self.pin_radial += model_value(m, "pin_circle_diameter_um_per_K") * dT * um / 2.0
+        ov = model_value(m, "pin_circle_ovality_um")
+        if ov:
+            phi = 2 * np.pi * np.arange(zp) / zp
+            self.pin_radial += ov * um * np.cos(2.0 * (phi - math.radians(model_value(m, "pin_circle_ovality_angle_deg"))))
         self._check(case)
 
     def _check(self, case: Case) -> None:

@@ -153,8 +153,19 @@ class ReducerGeometry:
         cen = C.mean(axis=2) - _apply(rot(ang), H.mean(axis=1)[None])
         return cen, ang
 
-    def pins_in_profile_frames(self, theta_out: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def pins_in_profile_frames(self, theta_out: np.ndarray, psi: np.ndarray,
+                               disc_shift: np.ndarray | None = None,
+                               disc_turn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Pin centres in each disc's profile frame and the ideal-motion curve parameter.
+
+        Parameters
+        ----------
+        theta_out : (N,) rad
+        psi : (N, n_cranks) rad
+        disc_shift : (N, n_discs, 2) mm, optional
+            Extra translation of each disc relative to its cam fit (bearing clearance float).
+        disc_turn : (N, n_discs) rad, optional
+            Extra rotation of each disc relative to its cam fit.
 
         Returns
         -------
@@ -164,6 +175,10 @@ class ReducerGeometry:
             foot-point search.
         """
         cen, ang = self.disc_poses(theta_out, psi)
+        if disc_shift is not None:
+            cen = cen + disc_shift
+        if disc_turn is not None:
+            ang = ang + disc_turn
         full = ang + self.disc_profile_rotation[None]
         Rinv = rot(-full)[:, :, None]  # (N, nd, 1, 2, 2)
         rel = self.pin_centers[None, None] - cen[:, :, None, :]

@@ -1,0 +1,5 @@
+import sys
+
+from rvdyn.cli import main
+
+sys.exit(main())

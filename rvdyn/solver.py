@@ -1,0 +1,345 @@
+"""Quasi-static meshing equilibrium of the RV reducer for prescribed input angles.
+
+Model (derivation and assumptions in docs/physics.md):
+
+- Coordinates per step: carrier (output) angle ``theta_out`` and the absolute angles ``psi_0``,
+  ``psi_1`` of the two cranks; with a cam-bearing clearance, three more per disc (translation
+  and rotation of the disc relative to the least-squares fit of its holes to its cams).
+- Disc k's pose follows the cams of both cranks (rigid least-squares fit of its two holes,
+  :meth:`rvcad.geometry.ReducerGeometry.disc_poses`): the over-constraint of a disc held by two
+  cranks is resolved there; the two cranks share the load through the pin contacts of both discs
+  and through their own sun-planet meshes.
+- Contacts: every pin with both discs (exact signed gap, two-sided by geometry) and the sun with
+  each planet on the loaded flank (single flank; the coast flank is clear).
+  Each carries ``F = K delta**n``; stored energy ``K delta**(n+1)/(n+1)``.
+- Load: the output torque T resists the motion, potential ``direction * T * theta_out``.
+- Equilibrium = minimum of the total potential (convex in the linearised gaps). It is found by
+  an outer loop that evaluates the contact provider (analytic or fcl) at the current state and
+  linearises each gap with its normal, and an inner Levenberg-Marquardt Newton loop on the
+  linearised, convex problem. The outer loop repeats until the state moves less than
+  ``Tolerances.solver_angle_rad`` (converted to mm at the pin circle).
+
+Internally the unknowns are scaled to mm of motion: ``x0 = Rp * (theta_out - theta_in / i)``,
+``x_j = e * (psi_j - psi_ideal)``, disc shifts in mm and disc turns times the crank radius.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rvcad.errors import model_value
+from rvcad.geometry import ReducerGeometry, rot
+from rvcad.tolerances import TOL, Tolerances
+from rvdyn.contacts import ContactLaw
+
+ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
+
+#: Penetration (mm) beyond which an elastic solution is refused: the small-deformation contact
+#: law and the fcl probe margin (50 um) do not hold beyond it.
+MAX_ELASTIC_PENETRATION_MM = 0.05
+
+
+class InterferenceError(ValueError):
+    """The case's interference cannot be resolved at the given stiffness."""
+
+
+@dataclass
+class Solution:
+    """Equilibrium states for a set of input angles.
+
+    Attributes
+    ----------
+    theta_in, theta_out : (N,) rad
+    psi : (N, n_cranks) rad
+    te_rad : (N,) rad, ``theta_out - theta_in / ratio`` including the torsional wind-up option
+    n_contacts : (N,) int, contacts carrying load (penetration > 0)
+    peak_force_N : (N,) N, largest contact force (NaN in the rigid limit)
+    max_penetration_mm : (N,) mm
+    stage1_force_N : (N, n_cranks) N (NaN in the rigid limit)
+    iterations : int, outer iterations used (largest over the chunks)
+    """
+
+    theta_in: np.ndarray
+    theta_out: np.ndarray
+    psi: np.ndarray
+    te_rad: np.ndarray
+    n_contacts: np.ndarray
+    peak_force_N: np.ndarray
+    max_penetration_mm: np.ndarray
+    stage1_force_N: np.ndarray
+    iterations: int = 0
+    x: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+
+
+class QuasiStaticSolver:
+    """Quasi-static equilibrium for one case geometry with one contact provider.
+
+    Parameters
+    ----------
+    geom : ReducerGeometry
+    contacts : provider with ``disc_distance`` and ``stage1_gaps`` (analytic or fcl)
+    law : ContactLaw
+    tol : Tolerances
+    """
+
+    def __init__(self, geom: ReducerGeometry, contacts, law: ContactLaw | None = None,
+                 tol: Tolerances = TOL) -> None:
+        self.geom = geom
+        self.contacts = contacts
+        self.law = law if law is not None else ContactLaw()
+        self.tol = tol
+        d = geom.design
+        m = geom.case.model
+        self.clearance = model_value(m, "cam_bearing_clearance_um") * 1e-3
+        self.bearing_k = model_value(m, "cam_bearing_stiffness_N_per_um") * 1e3
+        self.float_discs = self.clearance > 0.0
+        self.nc, self.nd, self.zp = d.n_cranks, d.n_discs, d.z_pins
+        self.ndof = 1 + self.nc + (3 * self.nd if self.float_discs else 0)
+        self.Rp = d.pin_circle_radius_mm
+        self.e = d.eccentricity_mm
+        self.a = d.center_distance_mm
+        self.friction_Nmm = model_value(m, "friction_torque_Nm") * 1e3
+        self.compliance_rad_per_Nmm = model_value(m, "torsional_compliance_arcsec_per_Nm") / ARCSEC_PER_RAD * 1e-3
+
+    # ------------------------------------------------------------------ state maps
+    def _unpack(self, th_in: np.ndarray, x: np.ndarray):
+        to0, ps0 = self.geom.ideal_state(th_in)
+        to = to0 + x[:, 0] / self.Rp
+        ps = ps0 + x[:, 1:1 + self.nc] / self.e
+        shift = turn = None
+        if self.float_discs:
+            f = x[:, 1 + self.nc:].reshape(-1, self.nd, 3)
+            shift = f[:, :, :2]
+            turn = f[:, :, 2] / self.a
+        return to, ps, shift, turn
+
+    def _pins(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        to, ps, shift, turn = self._unpack(th_in, x)
+        return self.geom.pins_in_profile_frames(to, ps, shift, turn)
+
+    def _stage1(self, th_in: np.ndarray, x: np.ndarray, direction: int, provider: bool) -> np.ndarray:
+        to, ps, _, _ = self._unpack(th_in, x)
+        if provider:
+            return self.contacts.stage1_gaps(th_in, to, ps, direction)
+        return self.geom.stage1_gaps(th_in, to, ps, direction)
+
+    def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray]:
+        """Gaps (N, M) mm and their Jacobians (N, M, ndof) mm/mm at the states x."""
+        N = x.shape[0]
+        p, t0 = self._pins(th_in, x)
+        h = 1e-6
+        dp = np.empty(p.shape + (self.ndof,))
+        for i in range(self.ndof):
+            xp, xm = x.copy(), x.copy()
+            xp[:, i] += h
+            xm[:, i] -= h
+            dp[..., i] = (self._pins(th_in, xp)[0] - self._pins(th_in, xm)[0]) / (2 * h)
+        gaps = np.empty((N, self.nd, self.zp))
+        jac = np.empty((N, self.nd, self.zp, self.ndof))
+        for k in range(self.nd):
+            dist, nrm = self.contacts.disc_distance(k, p[:, k].reshape(-1, 2), t0[:, k].ravel())
+            nrm = nrm.reshape(N, self.zp, 2)
+            gaps[:, k] = dist.reshape(N, self.zp) - self.geom.pin_radii[None]
+            jac[:, k] = np.einsum("nzi,nzid->nzd", nrm, dp[:, k])
+        g1 = self._stage1(th_in, x, direction, provider=True)
+        j1 = np.empty((N, self.nc, self.ndof))
+        for i in range(self.ndof):
+            xp, xm = x.copy(), x.copy()
+            xp[:, i] += h
+            xm[:, i] -= h
+            j1[..., i] = (self._stage1(th_in, xp, direction, False) - self._stage1(th_in, xm, direction, False)) / (2 * h)
+        G = np.concatenate([gaps.reshape(N, -1), g1], axis=1)
+        J = np.concatenate([jac.reshape(N, -1, self.ndof), j1], axis=1)
+        return G, J
+
+    # ------------------------------------------------------------------ bearings
+    def _bearing(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Energy (N,), gradient (N, ndof) and Gauss-Newton Hessian (N, ndof, ndof) of the cam bearings."""
+        N = x.shape[0]
+        E = np.zeros(N)
+        g = np.zeros((N, self.ndof))
+        H = np.zeros((N, self.ndof, self.ndof))
+        if not self.float_discs:
+            return E, g, H
+        to, ps, _, _ = self._unpack(th_in, x)
+        _, ang = self.geom.disc_poses(to, ps)
+        for k in range(self.nd):
+            base = 1 + self.nc + 3 * k
+            for hidx in range(self.nc):
+                r = np.einsum("nij,j->ni", rot(ang[:, k]), self.geom.disc_holes[k, hidx])
+                # hole displacement s = shift + (turn*a/a) z x r ; d s / d(x) rows
+                B = np.zeros((N, 2, self.ndof))
+                B[:, 0, base] = 1.0
+                B[:, 1, base + 1] = 1.0
+                B[:, 0, base + 2] = -r[:, 1] / self.a
+                B[:, 1, base + 2] = r[:, 0] / self.a
+                s = np.einsum("nid,nd->ni", B, x)
+                sn = np.linalg.norm(s, axis=1)
+                over = np.maximum(sn - self.clearance, 0.0)
+                E += 0.5 * self.bearing_k * over ** 2
+                u = np.where(sn[:, None] > 0, s / np.maximum(sn, 1e-300)[:, None], 0.0)
+                Ju = np.einsum("ni,nid->nd", u, B)
+                g += (self.bearing_k * over)[:, None] * Ju
+                act = (over > 0).astype(float)
+                H += (self.bearing_k * act)[:, None, None] * np.einsum("nd,ne->nde", Ju, Ju)
+        return E, g, H
+
+    # ------------------------------------------------------------------ solve
+    def _load_Nmm(self, load_Nm: float) -> float:
+        if self.law.rigid or load_Nm == 0.0:
+            return ContactLaw.RIGID_LOAD_NMM
+        return load_Nm * 1e3 + self.friction_Nmm
+
+    def _law(self, load_Nm: float) -> ContactLaw:
+        if load_Nm == 0.0 and not self.law.rigid:
+            return ContactLaw(self.law.K, self.law.n, rigid=True)
+        return self.law
+
+    def _inner(self, th_in, x0, G, J, b, law: ContactLaw, max_iter: int = 200) -> np.ndarray:
+        """Minimise the linearised potential around x0; returns the step (N, ndof)."""
+        N, M, D = J.shape
+        step = np.zeros((N, D))
+        floor_k = law.stiffness(np.array(1e-4)) if not law.rigid else law.k_eff
+        floor = float(floor_k) * np.ones(D)
+        mu = np.full(N, 1e-3)
+        eye = np.eye(D)
+
+        def energy(s):
+            delta = -(G + np.einsum("nmd,nd->nm", J, s))
+            Eb = self._bearing(th_in, x0 + s)[0] if self.float_discs else 0.0
+            return law.energy(delta).sum(axis=1) + s @ b + Eb
+
+        E0 = energy(step)
+        tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
+        active = np.ones(N, dtype=bool)
+        for _ in range(max_iter):
+            idx = np.nonzero(active)[0]
+            if idx.size == 0:
+                break
+            s = step[idx]
+            delta = -(G[idx] + np.einsum("nmd,nd->nm", J[idx], s))
+            f = law.force(delta)
+            k = law.stiffness(delta)
+            grad = -np.einsum("nm,nmd->nd", f, J[idx]) + b[None]
+            H = np.einsum("nm,nmd,nme->nde", k, J[idx], J[idx])
+            if self.float_discs:
+                _, gb, Hb = self._bearing(th_in[idx], x0[idx] + s)
+                grad = grad + gb
+                H = H + Hb
+            diag = np.einsum("ndd->nd", H) + floor[None]
+            A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
+            dstep = -np.linalg.solve(A, grad[:, :, None])[:, :, 0]
+            # backtracking on the (convex) potential, all candidates at once
+            best_E = E0[idx].copy()
+            best_s = s.copy()
+            accepted_full = np.zeros(idx.size, dtype=bool)
+            for alpha in (1.0, 0.5, 0.25, 0.1, 0.02):
+                cand = s + alpha * dstep
+                Ec = energy_sub(self, th_in[idx], x0[idx], G[idx], J[idx], b, law, cand)
+                better = Ec < best_E - 1e-15 * np.abs(best_E)
+                upd = better & (Ec < best_E)
+                best_E = np.where(upd, Ec, best_E)
+                best_s[upd] = cand[upd]
+                if alpha == 1.0:
+                    accepted_full = upd
+            moved = np.linalg.norm(best_s - s, axis=1)
+            step[idx] = best_s
+            E0[idx] = best_E
+            mu[idx] = np.where(accepted_full, np.maximum(mu[idx] / 10.0, 1e-12), np.minimum(mu[idx] * 10.0, 1e12))
+            done = (moved < tol_mm) & (np.linalg.norm(dstep, axis=1) < 10 * tol_mm)
+            stuck = (moved == 0) & (mu[idx] >= 1e12)
+            active[idx[done | stuck]] = False
+        return step
+
+    def solve(self, theta_in: np.ndarray, direction: int = 1, load_Nm: float = 20.0,
+              chunk: int | None = None, x_init: np.ndarray | None = None) -> Solution:
+        """Equilibrium at each input angle.
+
+        Parameters
+        ----------
+        theta_in : (N,) rad
+            Input (sun) angles.
+        direction : int
+            +1: input angle increasing; -1: decreasing. The load resists the motion.
+        load_Nm : float
+            Output load torque, N m (0: the rigid single-flank limit under a vanishing load).
+        chunk : int or None
+            Steps solved together. ``None``: all at once (analytic provider); 1: step by step, each
+            started from the previous solution (fcl provider: fewer distance queries).
+        x_init : (N, ndof) or None
+            Start states (scaled coordinates); default the ideal kinematics.
+        """
+        if direction not in (1, -1):
+            raise ValueError(f"direction {direction!r} must be +1 or -1")
+        if not (math.isfinite(load_Nm) and load_Nm >= 0):
+            raise ValueError(f"load_Nm {load_Nm} must be a finite number >= 0")
+        th = np.atleast_1d(np.asarray(theta_in, dtype=float))
+        if not np.all(np.isfinite(th)):
+            raise ValueError("theta_in contains NaN or inf")
+        N = th.size
+        law = self._law(load_Nm)
+        T = self._load_Nmm(load_Nm)
+        b = np.zeros(self.ndof)
+        b[0] = direction * T / self.Rp
+        x = np.zeros((N, self.ndof)) if x_init is None else np.array(x_init, dtype=float)
+        chunk = N if chunk is None else max(1, int(chunk))
+        tol_mm = self.tol.solver_angle_rad * self.Rp
+        iters = 0
+        prev: np.ndarray | None = None
+        for s0 in range(0, N, chunk):
+            sl = slice(s0, min(N, s0 + chunk))
+            xs = x[sl]
+            if x_init is None and prev is not None:
+                xs[:] = prev
+            for it in range(self.tol.solver_max_iter):
+                G, J = self._linearise(th[sl], xs, direction)
+                dx = self._inner(th[sl], xs, G, J, b, law)
+                xs += dx
+                iters = max(iters, it + 1)
+                if np.abs(dx).max() < tol_mm:
+                    break
+            else:
+                raise RuntimeError(
+                    f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
+                    f"(last change {np.abs(dx).max():.3e} mm)")
+            x[sl] = xs
+            prev = xs[-1].copy()
+        return self._finish(th, x, direction, load_Nm, law, iters)
+
+    def _finish(self, th, x, direction, load_Nm, law, iters) -> Solution:
+        G, _ = self._linearise(th, x, direction)
+        delta = -G
+        pen = np.maximum(delta, 0.0).max(axis=1)
+        limit = self.tol.interference_mm if law.rigid else MAX_ELASTIC_PENETRATION_MM
+        if np.any(pen > limit):
+            i = int(np.argmax(pen))
+            mode = "the rigid limit" if law.rigid else f"K = {law.K:g} N/mm^{law.n:g}"
+            raise InterferenceError(
+                f"interference of {pen[i] * 1e3:.3f} um at input angle {math.degrees(th[i]):.3f} deg cannot be "
+                f"resolved at {mode} (allowed {limit * 1e3:g} um): the parts overlap; reduce the errors that "
+                "close the clearance or use the elastic contact law")
+        to, ps, _, _ = self._unpack(th, x)
+        F = law.force(delta)
+        te = to - th / self.geom.ratio
+        if not law.rigid:
+            te = te - direction * (load_Nm * 1e3 + self.friction_Nmm) * self.compliance_rad_per_Nmm
+        nan = law.rigid
+        n1 = self.nd * self.zp
+        return Solution(
+            theta_in=th, theta_out=to + (te - (to - th / self.geom.ratio)), psi=ps, te_rad=te,
+            n_contacts=(delta > (1e-12 if not law.rigid else 0.0)).sum(axis=1),
+            peak_force_N=np.full(th.size, np.nan) if nan else F.max(axis=1),
+            max_penetration_mm=pen,
+            stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:],
+            iterations=iters, x=x)
+
+
+def energy_sub(solver: QuasiStaticSolver, th_in, x0, G, J, b, law: ContactLaw, s: np.ndarray) -> np.ndarray:
+    """Linearised potential of the states x0 + s (N,), N mm."""
+    delta = -(G + np.einsum("nmd,nd->nm", J, s))
+    E = law.energy(delta).sum(axis=1) + s @ b
+    if solver.float_discs:
+        E = E + solver._bearing(th_in, x0 + s)[0]
+    return E

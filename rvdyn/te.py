@@ -1,0 +1,165 @@
+"""Transmission error of one case over one or more output revolutions.
+
+``run_te(case, solver=...)`` returns a :class:`TEResult`: a table with one row per step
+(``input_deg, output_deg, te_arcsec, contacts, peak_force_N``), the statistics of the
+conventions (``pp, mean, mean_abs, rms`` in arcsec), the measured ratio and timing.
+TE = theta_out - theta_in / ratio, in arcsec, positive when the output leads.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from rvcad.errors import Case
+from rvcad.geometry import ReducerGeometry
+from rvdyn.contacts import AnalyticContacts, ContactLaw
+from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver
+
+SOLVERS = ("analytic", "fcl")
+
+#: Light load (N m) at which lost motion is evaluated by default (conventions: "the same light load").
+LIGHT_LOAD_NM = 0.0
+
+
+def make_contacts(geom: ReducerGeometry, solver: str):
+    """Contact provider by name: ``analytic`` (exact) or ``fcl`` (python-fcl on the exported meshes)."""
+    if solver == "analytic":
+        return AnalyticContacts(geom)
+    if solver == "fcl":
+        from rvdyn.fcl_contacts import FclContacts
+
+        return FclContacts(geom)
+    raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
+
+
+def te_stats(te_arcsec: np.ndarray) -> dict[str, float]:
+    """Statistics of one TE curve, arcsec: ``pp`` (max - min), ``mean``, ``mean_abs``, ``rms``."""
+    te = np.asarray(te_arcsec, dtype=float)
+    return {"pp": float(te.max() - te.min()), "mean": float(te.mean()),
+            "mean_abs": float(np.abs(te).mean()), "rms": float(np.sqrt(np.mean(te ** 2)))}
+
+
+@dataclass
+class TEResult:
+    """TE of one case.
+
+    Attributes
+    ----------
+    case : Case
+    solver : str
+    table : pandas.DataFrame
+        ``input_deg, output_deg, te_arcsec, contacts, peak_force_N`` (one row per step, in the
+        order of motion).
+    stats : dict
+        ``pp, mean, mean_abs, rms`` (arcsec), ``ratio`` (least-squares slope of input over output
+        angle), ``seconds``, ``steps``, ``direction``, ``load_Nm``.
+    """
+
+    case: Case
+    solver: str
+    table: pd.DataFrame
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    def to_csv(self, path: str | Path) -> Path:
+        """Write the table atomically (temporary file in the same folder, then rename)."""
+        return write_table_atomic(self.table, path)
+
+
+def write_table_atomic(df: pd.DataFrame, path: str | Path) -> Path:
+    """Write a CSV so that no half-written file is ever left at ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            df.to_csv(fh, index=False, float_format="%.10g")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def input_angles(ratio: float, steps: int, revolutions: float, direction: int) -> np.ndarray:
+    """Input angles (rad) of the steps: ``steps`` equal steps over ``revolutions`` output turns.
+
+    Direction -1 visits the same angles in reverse order.
+    """
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 2:
+        raise ValueError(f"steps {steps!r} must be an integer >= 2")
+    if not (isinstance(revolutions, (int, float)) and math.isfinite(revolutions) and revolutions > 0):
+        raise ValueError(f"revolutions {revolutions!r} must be a finite number > 0")
+    th = np.arange(steps) * (2.0 * math.pi * ratio * revolutions / steps)
+    return th if direction == 1 else th[::-1].copy()
+
+
+def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: float = 1.0,
+           load_Nm: float | None = None, direction: int | None = None, law: ContactLaw | None = None,
+           geom: ReducerGeometry | None = None) -> TEResult:
+    """Quasi-static TE of a case.
+
+    Parameters
+    ----------
+    case : Case
+    solver : {"analytic", "fcl"}
+    steps : int
+        Steps over the revolutions (>= 2).
+    revolutions : float
+        Output revolutions.
+    load_Nm : float or None
+        Output load torque, N m (default: the case's). 0 gives the rigid single-flank limit.
+    direction : {+1, -1} or None
+        Default: the case's.
+    law : ContactLaw or None
+        Contact law (default K = 2e5 N/mm^1.5, n = 1.5).
+    geom : ReducerGeometry or None
+        Pre-built geometry of the case (saves rebuilding).
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
+    load = case.load_Nm if load_Nm is None else float(load_Nm)
+    d = case.direction if direction is None else int(direction)
+    if d not in (1, -1):
+        raise ValueError(f"direction {direction!r} must be +1 or -1")
+    g = geom if geom is not None else ReducerGeometry(case)
+    th = input_angles(g.ratio, steps, revolutions, d)
+    t0 = time.perf_counter()
+    s = QuasiStaticSolver(g, make_contacts(g, solver), law)
+    sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else 1)
+    secs = time.perf_counter() - t0
+    te = sol.te_rad * ARCSEC_PER_RAD
+    table = pd.DataFrame({
+        "input_deg": np.degrees(sol.theta_in),
+        "output_deg": np.degrees(sol.theta_out),
+        "te_arcsec": te,
+        "contacts": sol.n_contacts.astype(int),
+        "peak_force_N": sol.peak_force_N,
+    })
+    slope = np.polyfit(sol.theta_in, sol.theta_out, 1)[0]
+    stats: dict[str, Any] = te_stats(te)
+    stats.update({"ratio": float(1.0 / slope), "seconds": secs, "steps": int(steps),
+                  "revolutions": float(revolutions), "direction": d, "load_Nm": load, "solver": solver})
+    return TEResult(case=case, solver=solver, table=table, stats=stats)
+
+
+def lost_motion(case: Case, solver: str = "analytic", steps: int = 720, load_Nm: float = LIGHT_LOAD_NM,
+                law: ContactLaw | None = None) -> dict[str, float]:
+    """Lost motion = mean TE(direction -1) - mean TE(direction +1) at the same light load, arcsec.
+
+    The default light load 0 N m is the rigid single-flank limit (pure geometric clearance).
+    """
+    g = ReducerGeometry(case)
+    plus = run_te(case, solver, steps, 1.0, load_Nm, 1, law, geom=g)
+    minus = run_te(case, solver, steps, 1.0, load_Nm, -1, law, geom=g)
+    return {"lost_motion_arcsec": minus.stats["mean"] - plus.stats["mean"],
+            "te_plus_mean_arcsec": plus.stats["mean"], "te_minus_mean_arcsec": minus.stats["mean"],
+            "load_Nm": load_Nm}
