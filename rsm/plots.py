@@ -108,6 +108,7 @@ def plot_surface_pair(
     ax3.set_xlabel(_label(results, f1))
     ax3.set_ylabel(_label(results, f2))
     ax3.set_zlabel(results.model.response)
+    ax3.tick_params(labelsize=7)
     ax = fig.add_subplot(1, 2, 2)
     cs = ax.contourf(A1, A2, Y, levels=15, cmap="viridis")
     ax.contour(A1, A2, Y, levels=15, colors="k", linewidths=0.4)

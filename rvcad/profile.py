@@ -292,20 +292,33 @@ class CycloidProfile:
 
         Returns
         -------
-        (K,) array of rad.
+        (K,) array of rad. Newton on f(t) = (q - p).q' with f' = |q'|^2 + (q - p).q'' (replaced
+        by |q'|^2 where not positive), steps clipped to a quarter lobe pitch, until the foot
+        point moves less than ``Tolerances.foot_point_mm``.
         """
         p = np.asarray(p, dtype=float)
+        px, py = p[..., 0], p[..., 1]
         t = np.array(t0, dtype=float, copy=True)
+        R, e, Z, ph = self.pin_circle_radius, self.eccentricity, self.z_pins, self.cam_phase
         max_step = 0.25 * math.pi / self.z_lobes
+        eZ, eZ2 = e * Z, e * Z * Z
         for _ in range(self.tol.foot_point_max_iter):
-            d = self.q(t) - p
-            d1, d2 = self.dq(t), self.ddq(t)
-            f = np.einsum("...i,...i->...", d, d1)
-            fp = np.einsum("...i,...i->...", d1, d1) + np.einsum("...i,...i->...", d, d2)
-            fp = np.where(fp > 0, fp, np.einsum("...i,...i->...", d1, d1))
+            c1, s1 = np.cos(t), np.sin(t)
+            a2 = Z * t + ph
+            c2, s2 = np.cos(a2), np.sin(a2)
+            dx = R * c1 - e * c2 - px
+            dy = R * s1 - e * s2 - py
+            d1x = -R * s1 + eZ * s2
+            d1y = R * c1 - eZ * c2
+            d2x = -R * c1 + eZ2 * c2
+            d2y = -R * s1 + eZ2 * s2
+            sp2 = d1x * d1x + d1y * d1y
+            f = dx * d1x + dy * d1y
+            fp = sp2 + dx * d2x + dy * d2y
+            fp = np.where(fp > 0, fp, sp2)
             step = np.clip(f / fp, -max_step, max_step)
-            t = t - step
-            if np.all(np.abs(step) * np.linalg.norm(d1, axis=-1) < self.tol.foot_point_mm):
+            t -= step
+            if np.all(np.abs(step) * np.sqrt(sp2) < self.tol.foot_point_mm):
                 break
         return t
 

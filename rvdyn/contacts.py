@@ -61,7 +61,10 @@ class ContactLaw:
     def force(self, delta: np.ndarray) -> np.ndarray:
         """Contact force (N) for penetration delta (mm); zero where delta <= 0."""
         d = np.maximum(delta, 0.0)
-        return self.k_eff * d ** self.n_eff
+        n = self.n_eff
+        if n == 1.5:
+            return self.k_eff * d * np.sqrt(d)
+        return self.k_eff * d ** n
 
     def stiffness(self, delta: np.ndarray) -> np.ndarray:
         """dF/d(delta), N/mm."""
@@ -69,12 +72,18 @@ class ContactLaw:
         n = self.n_eff
         if n == 1.0:
             return np.where(delta > 0, self.k_eff, 0.0)
+        if n == 1.5:
+            return 1.5 * self.k_eff * np.sqrt(d)
         return n * self.k_eff * d ** (n - 1.0)
 
     def energy(self, delta: np.ndarray) -> np.ndarray:
         """Stored energy K delta^(n+1)/(n+1), N mm."""
         d = np.maximum(delta, 0.0)
         n = self.n_eff
+        if n == 1.5:
+            return self.k_eff / 2.5 * d * d * np.sqrt(d)
+        if n == 1.0:
+            return 0.5 * self.k_eff * d * d
         return self.k_eff * d ** (n + 1.0) / (n + 1.0)
 
 

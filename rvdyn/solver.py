@@ -115,9 +115,63 @@ class QuasiStaticSolver:
             turn = f[:, :, 2] / self.a
         return to, ps, shift, turn
 
-    def _pins(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _poses(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Disc centres (N, nd, 2) mm and rotations (N, nd) rad (without the profile rotation)."""
         to, ps, shift, turn = self._unpack(th_in, x)
-        return self.geom.pins_in_profile_frames(to, ps, shift, turn)
+        cen, ang = self.geom.disc_poses(to, ps)
+        if shift is not None:
+            cen = cen + shift
+            ang = ang + turn
+        return cen, ang
+
+    def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pin gaps (N, nd, Zp) mm and Jacobians (N, nd, Zp, ndof) mm/mm.
+
+        Disc poses are differentiated by central differences (cheap: N x nd values); the pins
+        follow by the chain rule: p = R(-phi)(P - c), dp = -R(-phi) dc + dphi (p_y, -p_x), and
+        the gap's gradient is the outward normal n: dg = n . dp.
+        """
+        N = x.shape[0]
+        cen, ang = self._poses(th_in, x)
+        h = 1e-6
+        dcen = np.zeros(cen.shape + (self.ndof,))
+        dang = np.zeros(ang.shape + (self.ndof,))
+        for i in range(1 + self.nc):
+            xp, xm = x.copy(), x.copy()
+            xp[:, i] += h
+            xm[:, i] -= h
+            cp, ap = self._poses(th_in, xp)
+            cm, am = self._poses(th_in, xm)
+            dcen[..., i] = (cp - cm) / (2 * h)
+            dang[..., i] = (ap - am) / (2 * h)
+        if self.float_discs:
+            for k in range(self.nd):
+                b = 1 + self.nc + 3 * k
+                dcen[:, k, 0, b] = 1.0
+                dcen[:, k, 1, b + 1] = 1.0
+                dang[:, k, b + 2] = 1.0 / self.a
+        full = ang + self.geom.disc_profile_rotation[None]
+        c, s = np.cos(full)[:, :, None], np.sin(full)[:, :, None]
+        rx = self.geom.pin_centers[None, None, :, 0] - cen[:, :, None, 0]
+        ry = self.geom.pin_centers[None, None, :, 1] - cen[:, :, None, 1]
+        px = c * rx + s * ry
+        py = -s * rx + c * ry
+        t0 = self.geom.pin_angles_nominal[None, None] - full[:, :, None]
+        gaps = np.empty((N, self.nd, self.zp))
+        nx = np.empty_like(gaps)
+        ny = np.empty_like(gaps)
+        for k in range(self.nd):
+            pts = np.stack([px[:, k].ravel(), py[:, k].ravel()], axis=1)
+            dist, nrm = self.contacts.disc_distance(k, pts, t0[:, k].ravel())
+            gaps[:, k] = dist.reshape(N, self.zp) - self.geom.pin_radii[None]
+            nx[:, k] = nrm[:, 0].reshape(N, self.zp)
+            ny[:, k] = nrm[:, 1].reshape(N, self.zp)
+        mx = nx * c - ny * s
+        my = nx * s + ny * c
+        lever = nx * py - ny * px
+        jac = (-(mx[..., None] * dcen[:, :, None, 0, :] + my[..., None] * dcen[:, :, None, 1, :])
+               + lever[..., None] * dang[:, :, None, :])
+        return gaps, jac
 
     def _stage1(self, th_in: np.ndarray, x: np.ndarray, direction: int, provider: bool) -> np.ndarray:
         to, ps, _, _ = self._unpack(th_in, x)
@@ -128,24 +182,12 @@ class QuasiStaticSolver:
     def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray]:
         """Gaps (N, M) mm and their Jacobians (N, M, ndof) mm/mm at the states x."""
         N = x.shape[0]
-        p, t0 = self._pins(th_in, x)
         h = 1e-6
-        dp = np.empty(p.shape + (self.ndof,))
-        for i in range(self.ndof):
-            xp, xm = x.copy(), x.copy()
-            xp[:, i] += h
-            xm[:, i] -= h
-            dp[..., i] = (self._pins(th_in, xp)[0] - self._pins(th_in, xm)[0]) / (2 * h)
-        gaps = np.empty((N, self.nd, self.zp))
-        jac = np.empty((N, self.nd, self.zp, self.ndof))
-        for k in range(self.nd):
-            dist, nrm = self.contacts.disc_distance(k, p[:, k].reshape(-1, 2), t0[:, k].ravel())
-            nrm = nrm.reshape(N, self.zp, 2)
-            gaps[:, k] = dist.reshape(N, self.zp) - self.geom.pin_radii[None]
-            jac[:, k] = np.einsum("nzi,nzid->nzd", nrm, dp[:, k])
+        gaps, jac = self._pin_gaps(th_in, x)
         g1 = self._stage1(th_in, x, direction, provider=True)
         j1 = np.empty((N, self.nc, self.ndof))
-        for i in range(self.ndof):
+        j1[:] = 0.0
+        for i in range(1 + self.nc):
             xp, xm = x.copy(), x.copy()
             xp[:, i] += h
             xm[:, i] -= h
@@ -201,9 +243,10 @@ class QuasiStaticSolver:
         """Minimise the linearised potential around x0; returns the step (N, ndof)."""
         N, M, D = J.shape
         step = np.zeros((N, D))
-        floor_k = law.stiffness(np.array(1e-4)) if not law.rigid else law.k_eff
-        floor = float(floor_k) * np.ones(D)
-        mu = np.full(N, 1e-3)
+        # damping floor: about a quarter of the contacts at 1 um of penetration (typical working stiffness)
+        floor_k = law.stiffness(np.array(1e-3)) if not law.rigid else law.k_eff
+        floor = float(floor_k) * max(1.0, M / 4.0) * np.ones(D)
+        mu = np.full(N, 1.0)
         eye = np.eye(D)
 
         def energy(s):
@@ -231,24 +274,30 @@ class QuasiStaticSolver:
             diag = np.einsum("ndd->nd", H) + floor[None]
             A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
             dstep = -np.linalg.solve(A, grad[:, :, None])[:, :, 0]
-            # backtracking on the (convex) potential, all candidates at once
+            # backtracking on the (convex) potential: take the first step length that lowers it
             best_E = E0[idx].copy()
             best_s = s.copy()
             accepted_full = np.zeros(idx.size, dtype=bool)
+            pending = np.ones(idx.size, dtype=bool)
             for alpha in (1.0, 0.5, 0.25, 0.1, 0.02):
-                cand = s + alpha * dstep
-                Ec = energy_sub(self, th_in[idx], x0[idx], G[idx], J[idx], b, law, cand)
-                better = Ec < best_E - 1e-15 * np.abs(best_E)
-                upd = better & (Ec < best_E)
-                best_E = np.where(upd, Ec, best_E)
-                best_s[upd] = cand[upd]
+                w = np.nonzero(pending)[0]
+                if w.size == 0:
+                    break
+                cand = s[w] + alpha * dstep[w]
+                Ec = energy_sub(self, th_in[idx[w]], x0[idx[w]], G[idx[w]], J[idx[w]], b, law, cand)
+                upd = Ec < best_E[w]
+                best_E[w[upd]] = Ec[upd]
+                best_s[w[upd]] = cand[upd]
                 if alpha == 1.0:
-                    accepted_full = upd
+                    accepted_full[w[upd]] = True
+                pending[w[upd]] = False
             moved = np.linalg.norm(best_s - s, axis=1)
             step[idx] = best_s
             E0[idx] = best_E
             mu[idx] = np.where(accepted_full, np.maximum(mu[idx] / 10.0, 1e-12), np.minimum(mu[idx] * 10.0, 1e12))
-            done = (moved < tol_mm) & (np.linalg.norm(dstep, axis=1) < 10 * tol_mm)
+            # stationarity of the potential relative to the forces in play, plus a settled step
+            scale = np.linalg.norm(b) + np.einsum("nm,nm->n", np.abs(f), np.linalg.norm(J[idx], axis=2))
+            done = (moved < tol_mm) & (np.linalg.norm(grad, axis=1) <= 1e-7 * scale)
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False
         return step
@@ -301,6 +350,7 @@ class QuasiStaticSolver:
                 if np.abs(dx).max() < tol_mm:
                     break
             else:
+                self._check_penetration(th[sl], xs, direction, law)  # an overlap is the usual cause
                 raise RuntimeError(
                     f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
                     f"(last change {np.abs(dx).max():.3e} mm)")
@@ -308,10 +358,10 @@ class QuasiStaticSolver:
             prev = xs[-1].copy()
         return self._finish(th, x, direction, load_Nm, law, iters)
 
-    def _finish(self, th, x, direction, load_Nm, law, iters) -> Solution:
+    def _check_penetration(self, th, x, direction, law) -> np.ndarray:
+        """Gaps at the states x; raise InterferenceError if an overlap exceeds what the law allows."""
         G, _ = self._linearise(th, x, direction)
-        delta = -G
-        pen = np.maximum(delta, 0.0).max(axis=1)
+        pen = np.maximum(-G, 0.0).max(axis=1)
         limit = self.tol.interference_mm if law.rigid else MAX_ELASTIC_PENETRATION_MM
         if np.any(pen > limit):
             i = int(np.argmax(pen))
@@ -320,6 +370,12 @@ class QuasiStaticSolver:
                 f"interference of {pen[i] * 1e3:.3f} um at input angle {math.degrees(th[i]):.3f} deg cannot be "
                 f"resolved at {mode} (allowed {limit * 1e3:g} um): the parts overlap; reduce the errors that "
                 "close the clearance or use the elastic contact law")
+        return G
+
+    def _finish(self, th, x, direction, load_Nm, law, iters) -> Solution:
+        G = self._check_penetration(th, x, direction, law)
+        delta = -G
+        pen = np.maximum(delta, 0.0).max(axis=1)
         to, ps, _, _ = self._unpack(th, x)
         F = law.force(delta)
         te = to - th / self.geom.ratio

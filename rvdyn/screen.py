@@ -1,0 +1,526 @@
+"""Single-factor screen of the Table 4 errors (paper Fig. 9) and sweeps of the RSM factors (Fig. 11).
+
+* :func:`screen_cases` -- the error-free case A and each of the eleven Table 4 error types alone at
+  its paper value (``ERROR_TYPES[key].paper_value``, default instance), optionally also at minus
+  that value (used by the stack-up's one-at-a-time variance shares).
+* :func:`sweep_cases` -- each RSM factor (EA = pin_pitch in deg, EB = pin_circle_diameter in um,
+  EC = pin_radius in um, ED = disc_hole_eccentricity in um) alone over the Table 5 range
+  (-0.06..0.06 deg, -14..14, -7..7, -14..14 um).
+* :func:`run_screen` -- runs both through a *runner* (default: :func:`serial_runner`, one
+  :func:`rvdyn.te.run_te` after another; ``rv-stackup`` passes its cached, parallel runner) and
+  returns the tables, the error ranking and the check of the paper's stage I / stage II claim.
+* :func:`screen_command` -- ``rvdyn screen``: writes ``screen.csv``, ``sweeps.csv`` and the PNG
+  plots atomically and prints a summary (or one JSON object with ``--json``).
+
+Responses, per case and over one output revolution: ``pp`` (max - min of TE), ``mean``, ``mean_abs``
+(mean of |TE|, our reading of the paper's "mean value of transmission error") and ``rms``, all in
+arcsec, plus ``te_mean_abs_arcmin`` and ``te_pp_arcmin``.
+
+Ranking: the paper ranks the errors by their influence on TE (Fig. 9). Here the primary measure is
+the increase of the peak-to-peak TE over case A (``d_pp_arcsec``; the load's constant elastic
+wind-up cancels in it); ``rank_mean_abs`` ranks by ``|mean_abs - mean_abs(A)|`` instead.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from rvcad.errors import ERROR_TYPES, Case
+from rvdyn.contacts import ContactLaw
+from rvdyn.te import SOLVERS, run_te, write_table_atomic
+
+#: RSM factors of the paper (Table 5) and the Table 4 error type each one is.
+RSM_FACTORS: dict[str, str] = {
+    "EA": "pin_pitch",
+    "EB": "pin_circle_diameter",
+    "EC": "pin_radius",
+    "ED": "disc_hole_eccentricity",
+}
+
+#: Half range of each RSM factor in Table 5 (levels -h, 0, +h), in the error's unit (deg or um).
+TABLE5_HALF_RANGE: dict[str, float] = {"EA": 0.06, "EB": 14.0, "EC": 7.0, "ED": 14.0}
+
+#: Reduction stage of each Table 4 letter: B (sun) and C (planet) are the involute stage I.
+STAGE: dict[str, str] = {e.letter: ("I" if e.key in ("sun_eccentricity", "planet_eccentricity") else "II")
+                         for e in ERROR_TYPES.values()}
+
+#: Paper Table 4 descriptions by letter (for tables and plots).
+PAPER_DESCRIPTION: dict[str, str] = {
+    "A": "none",
+    "B": "eccentricity error of sun gear assembly",
+    "C": "eccentricity error of involute gear assembly",
+    "D": "phase error of cam segment on crankshaft",
+    "E": "eccentricity error of cam segment on crankshaft",
+    "F": "eccentricity error of crankshaft hole of planetary carrier",
+    "G": "eccentricity error of crankshaft hole of cycloid gear (E_D)",
+    "H": "circumferential position error of distribution circle of pin",
+    "I": "error of pin distribution circle diameter (E_B)",
+    "J": "error of pin radius (E_C)",
+    "K": "phase error of cycloid gear",
+    "L": "deviation of pin pitch (E_A)",
+}
+
+ARCSEC_PER_ARCMIN = 60.0
+
+#: A runner maps a list of cases to one result dict per case (same order): ``{"stats": {pp, mean,
+#: mean_abs, rms, seconds, ...} (arcsec, s), "te_arcsec": array or None, "key": str, "cached": bool}``.
+Runner = Callable[[Sequence[Case], str], list[dict[str, Any]]]
+
+
+def _clean(v: float) -> float:
+    """Round a factor value to 12 significant digits so equal settings give equal case keys."""
+    v = float(f"{float(v):.12g}")
+    return 0.0 if v == 0 else v
+
+
+def make_case(errors: dict[str, float], name: str, load_Nm: float = 20.0, direction: int = 1,
+              base: dict[str, Any] | None = None) -> Case:
+    """A case with the given default-instance error values (zeros dropped, so equal physics => equal key).
+
+    Parameters
+    ----------
+    errors : dict
+        ``{error_key: value}`` in the error's unit (um or deg).
+    name : str
+        Case name (not part of the cache key).
+    load_Nm : float
+        Output load torque, N m.
+    direction : {1, -1}
+    base : dict or None
+        Case dict whose ``design`` and ``model`` are kept (errors are replaced).
+    """
+    d: dict[str, Any] = {"name": name, "load_Nm": float(load_Nm), "direction": int(direction)}
+    if base:
+        for k in ("design", "model"):
+            if base.get(k):
+                d[k] = base[k]
+    d["errors"] = {k: _clean(v) for k, v in errors.items() if _clean(v) != 0.0}
+    return Case.from_dict(d)
+
+
+def screen_cases(load_Nm: float = 20.0, both_signs: bool = False,
+                 base: dict[str, Any] | None = None) -> pd.DataFrame:
+    """Cases of the single-factor screen (paper Table 4 / Fig. 9).
+
+    Parameters
+    ----------
+    load_Nm : float
+        Output load, N m.
+    both_signs : bool
+        Also run every error at minus its paper value.
+    base : dict or None
+        Case dict supplying design and model options.
+
+    Returns
+    -------
+    DataFrame
+        ``letter, error, description, stage, value, unit, sign, case`` (``case`` holds the Case).
+    """
+    rows = [{"letter": "A", "error": "none", "description": PAPER_DESCRIPTION["A"], "stage": "-",
+             "value": 0.0, "unit": "", "sign": 0, "case": make_case({}, "screen-A", load_Nm, base=base)}]
+    for sign in ((1, -1) if both_signs else (1,)):
+        for et in ERROR_TYPES.values():
+            v = sign * et.paper_value
+            tag = "+" if sign > 0 else "-"
+            rows.append({"letter": et.letter, "error": et.key, "description": PAPER_DESCRIPTION[et.letter],
+                         "stage": STAGE[et.letter], "value": v, "unit": et.unit, "sign": sign,
+                         "case": make_case({et.key: v}, f"screen-{et.letter}{tag}", load_Nm, base=base)})
+    return pd.DataFrame(rows)
+
+
+def sweep_cases(points: int = 7, load_Nm: float = 20.0, half_range: dict[str, float] | None = None,
+                base: dict[str, Any] | None = None) -> pd.DataFrame:
+    """Cases of the factor sweeps (paper Fig. 11): each RSM factor alone over its Table 5 range.
+
+    Parameters
+    ----------
+    points : int
+        Points per sweep (>= 2), equally spaced from -h to +h.
+    load_Nm : float
+        Output load, N m.
+    half_range : dict or None
+        ``{factor: h}`` in the error's unit; default :data:`TABLE5_HALF_RANGE`.
+    base : dict or None
+        Case dict supplying design and model options.
+
+    Returns
+    -------
+    DataFrame
+        ``factor, error, value, unit, coded, case``.
+    """
+    if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or points < 2:
+        raise ValueError(f"sweep points {points!r} must be an integer >= 2")
+    hr = dict(TABLE5_HALF_RANGE if half_range is None else half_range)
+    rows = []
+    for f, key in RSM_FACTORS.items():
+        if f not in hr:
+            continue
+        h = float(hr[f])
+        for z in np.linspace(-1.0, 1.0, int(points)):
+            v = _clean(z * h)
+            rows.append({"factor": f, "error": key, "value": v, "unit": ERROR_TYPES[key].unit,
+                         "coded": _clean(z),
+                         "case": make_case({key: v}, f"sweep-{f}{v:+g}", load_Nm, base=base)})
+    return pd.DataFrame(rows)
+
+
+def serial_runner(solver: str = "analytic", steps: int = 720, law: ContactLaw | None = None,
+                  progress: bool = True) -> Runner:
+    """A runner that solves the cases one after another in this process (no cache).
+
+    Parameters
+    ----------
+    solver : {"analytic", "fcl"}
+    steps : int
+        Steps per output revolution.
+    law : ContactLaw or None
+    progress : bool
+        Show a tqdm bar on stderr.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
+
+    def run(cases: Sequence[Case], desc: str = "cases") -> list[dict[str, Any]]:
+        from tqdm.auto import tqdm
+
+        out = []
+        for c in tqdm(list(cases), desc=desc, unit="case", disable=not progress, file=sys.stderr):
+            r = run_te(c, solver, steps, 1.0, law=law)
+            out.append({"stats": dict(r.stats), "te_arcsec": r.table["te_arcsec"].to_numpy(),
+                        "key": c.key(), "cached": False})
+        return out
+
+    return run
+
+
+def _stat_columns(results: list[dict[str, Any]]) -> pd.DataFrame:
+    st = pd.DataFrame([r["stats"] for r in results])
+    out = pd.DataFrame({
+        "pp_arcsec": st["pp"].astype(float), "mean_arcsec": st["mean"].astype(float),
+        "mean_abs_arcsec": st["mean_abs"].astype(float), "rms_arcsec": st["rms"].astype(float)})
+    out["te_mean_abs_arcmin"] = out["mean_abs_arcsec"] / ARCSEC_PER_ARCMIN
+    out["te_pp_arcmin"] = out["pp_arcsec"] / ARCSEC_PER_ARCMIN
+    out["seconds"] = st["seconds"].astype(float) if "seconds" in st else np.nan
+    out["case_key"] = [r.get("key", "") for r in results]
+    out["cached"] = [bool(r.get("cached", False)) for r in results]
+    return out
+
+
+@dataclass
+class ScreenResult:
+    """Outcome of :func:`run_screen`.
+
+    Attributes
+    ----------
+    screen : DataFrame
+        One row per screen case (A, then B..L at +paper value, then at -paper value if run):
+        ``letter, error, description, stage, value, unit, sign``, the responses (arcsec/arcmin),
+        ``d_pp_arcsec`` and ``d_mean_abs_arcsec`` (change from case A) and, for the +paper-value
+        rows, ``rank_pp`` and ``rank_mean_abs`` (1 = largest influence).
+    sweeps : DataFrame
+        One row per sweep point: ``factor, error, value, unit, coded`` and the responses.
+    curves : dict
+        ``{case name: TE array (arcsec)}`` for the screen cases whose runner returned curves.
+    stage_check : dict
+        Whether the stage I errors (B, C) rank below every stage II error, per measure.
+    """
+
+    screen: pd.DataFrame
+    sweeps: pd.DataFrame
+    curves: dict[str, np.ndarray] = field(default_factory=dict)
+    stage_check: dict[str, Any] = field(default_factory=dict)
+
+
+def rank_errors(screen: pd.DataFrame) -> pd.DataFrame:
+    """Add ``d_pp_arcsec``, ``d_mean_abs_arcsec`` and the ranks of the +paper-value rows.
+
+    Parameters
+    ----------
+    screen : DataFrame
+        Screen rows with ``letter, sign, pp_arcsec, mean_abs_arcsec`` and an ``A`` row.
+    """
+    s = screen.copy()
+    a = s[s["letter"] == "A"]
+    if a.empty:
+        raise ValueError("the screen needs the error-free case A to rank the errors")
+    pp0, ma0 = float(a["pp_arcsec"].iloc[0]), float(a["mean_abs_arcsec"].iloc[0])
+    s["d_pp_arcsec"] = s["pp_arcsec"] - pp0
+    s["d_mean_abs_arcsec"] = s["mean_abs_arcsec"] - ma0
+    plus = s["sign"] == 1
+    s["rank_pp"] = np.nan
+    s["rank_mean_abs"] = np.nan
+    # ties are broken by the other measure so the ranking is total
+    order = s[plus].assign(_a=s["d_pp_arcsec"], _b=s["d_mean_abs_arcsec"].abs()).sort_values(
+        ["_a", "_b"], ascending=False).index
+    s.loc[order, "rank_pp"] = np.arange(1, len(order) + 1)
+    order = s[plus].assign(_a=s["d_mean_abs_arcsec"].abs(), _b=s["d_pp_arcsec"]).sort_values(
+        ["_a", "_b"], ascending=False).index
+    s.loc[order, "rank_mean_abs"] = np.arange(1, len(order) + 1)
+    return s
+
+
+def stage_check(screen: pd.DataFrame) -> dict[str, Any]:
+    """Do the stage I errors (B, C) rank below every stage II error (paper Fig. 9 and Sec. 5)?
+
+    Returns
+    -------
+    dict
+        Per measure (``pp``, ``mean_abs``): ranks of B and C, the best (smallest) stage II rank
+        below them, ``reproduced`` (both stage I errors below all stage II errors) and
+        ``below_rsm_factors`` (both below the four RSM factors L, I, J, G).
+    """
+    plus = screen[screen["sign"] == 1].set_index("letter")
+    out: dict[str, Any] = {}
+    for m in ("pp", "mean_abs"):
+        r = plus[f"rank_{m}"]
+        st1 = r[[x for x in ("B", "C") if x in r.index]]
+        st2 = r[[x for x in r.index if STAGE.get(x) == "II"]]
+        rsm = r[[x for x in ("L", "I", "J", "G") if x in r.index]]
+        out[m] = {
+            "rank_B": int(r.get("B", np.nan)) if "B" in r.index else None,
+            "rank_C": int(r.get("C", np.nan)) if "C" in r.index else None,
+            "worst_stage2_rank": int(st2.max()) if len(st2) else None,
+            "stage2_below_stage1": sorted(st2[st2 > st1.min()].index.tolist()) if len(st1) else [],
+            "reproduced": bool(len(st1) and len(st2) and st1.min() > st2.max()),
+            "below_rsm_factors": bool(len(st1) and len(rsm) and st1.min() > rsm.max()),
+        }
+    return out
+
+
+def run_screen(solver: str = "analytic", steps: int = 720, sweep_points: int = 7, load_Nm: float = 20.0,
+               runner: Runner | None = None, both_signs: bool = False, law: ContactLaw | None = None,
+               half_range: dict[str, float] | None = None, base: dict[str, Any] | None = None,
+               progress: bool = True, sweeps: bool = True) -> ScreenResult:
+    """Single-factor screen and factor sweeps.
+
+    Parameters
+    ----------
+    solver : {"analytic", "fcl"}
+        Contact provider (used by the default runner only).
+    steps : int
+        Steps per output revolution (default runner only).
+    sweep_points : int
+        Points per factor sweep (>= 2).
+    load_Nm : float
+        Output load, N m (>= 0).
+    runner : callable or None
+        ``runner(cases, desc) -> list of result dicts``; default :func:`serial_runner`.
+    both_signs : bool
+        Also run every error at minus its paper value.
+    law : ContactLaw or None
+    half_range : dict or None
+        Sweep half ranges ``{factor: h}``; default Table 5.
+    base : dict or None
+        Case dict supplying design and model options.
+    progress : bool
+    sweeps : bool
+        Run the sweeps (False: screen only).
+
+    Returns
+    -------
+    ScreenResult
+    """
+    if not (isinstance(load_Nm, (int, float)) and math.isfinite(load_Nm) and load_Nm >= 0):
+        raise ValueError(f"load_Nm {load_Nm!r} must be a finite number >= 0 (N m)")
+    if runner is None:
+        runner = serial_runner(solver, steps, law, progress)
+    sc = screen_cases(load_Nm, both_signs, base)
+    res = runner(list(sc["case"]), "screen")
+    screen = pd.concat([sc.drop(columns="case").reset_index(drop=True), _stat_columns(res)], axis=1)
+    screen = rank_errors(screen)
+    curves = {c.name: np.asarray(r["te_arcsec"]) for c, r in zip(sc["case"], res)
+              if r.get("te_arcsec") is not None}
+    if sweeps:
+        sw = sweep_cases(sweep_points, load_Nm, half_range, base)
+        sres = runner(list(sw["case"]), "sweeps")
+        sweep = pd.concat([sw.drop(columns="case").reset_index(drop=True), _stat_columns(sres)], axis=1)
+    else:
+        sweep = pd.DataFrame(columns=["factor", "error", "value", "unit", "coded"])
+    return ScreenResult(screen=screen, sweeps=sweep, curves=curves, stage_check=stage_check(screen))
+
+
+# ---------------------------------------------------------------------------------------------- output
+def save_figure_atomic(fig: Any, path: str | Path, dpi: int = 110) -> Path:
+    """Save a matplotlib Figure to ``path`` through a temporary file and ``os.replace``.
+
+    The figure is drawn on an Agg canvas (pyplot and the global backend are not touched).
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    FigureCanvasAgg(fig)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=dpi)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def plot_screen(screen: pd.DataFrame, path: str | Path) -> Path:
+    """Bar chart of the single-factor screen (paper Fig. 9 analogue): pp and mean|TE| per error."""
+    from matplotlib.figure import Figure
+
+    plus = screen[screen["sign"].isin([0, 1])].reset_index(drop=True)
+    labels = [f"{r.letter}" for r in plus.itertuples()]
+    colors = ["0.6" if r.stage == "-" else ("C1" if r.stage == "I" else "C0") for r in plus.itertuples()]
+    fig = Figure(figsize=(10, 6.5))
+    a1 = fig.add_subplot(2, 1, 1)
+    a1.bar(labels, plus["pp_arcsec"], color=colors)
+    a1.set_ylabel("TE peak-to-peak [arcsec]")
+    a1.set_title("Single-factor screen (each Table 4 error alone at its paper value); orange = stage I")
+    a1.set_yscale("symlog", linthresh=0.01)
+    a2 = fig.add_subplot(2, 1, 2)
+    a2.bar(labels, plus["mean_abs_arcsec"], color=colors)
+    a2.axhline(float(plus.loc[plus["letter"] == "A", "mean_abs_arcsec"].iloc[0]), color="k", lw=0.8, ls="--",
+               label="case A (no error)")
+    a2.set_ylabel("mean |TE| [arcsec]")
+    a2.set_xlabel("error type (paper Table 4 letter)")
+    a2.legend(fontsize=8)
+    fig.tight_layout()
+    return save_figure_atomic(fig, path)
+
+
+def plot_te_curves(curves: dict[str, np.ndarray], path: str | Path) -> Path:
+    """TE over one output revolution for case A and each error at +paper value (Fig. 9 style)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 5.5))
+    ax = fig.add_subplot(1, 1, 1)
+    for name, te in curves.items():
+        if name.endswith("-"):
+            continue
+        te = np.asarray(te, dtype=float)
+        x = np.arange(te.size) * 360.0 / te.size
+        ax.plot(x, te / ARCSEC_PER_ARCMIN, lw=1.0, label=name.replace("screen-", "").rstrip("+"))
+    ax.set_xlabel("output angle [deg]")
+    ax.set_ylabel("TE [arcmin]")
+    ax.set_title("Transmission error of each single-factor case")
+    ax.legend(ncol=6, fontsize=7)
+    fig.tight_layout()
+    return save_figure_atomic(fig, path)
+
+
+def plot_sweeps(sweeps: pd.DataFrame, path: str | Path) -> Path:
+    """Response against each RSM factor swept alone (paper Fig. 11 analogue)."""
+    from matplotlib.figure import Figure
+
+    factors = list(dict.fromkeys(sweeps["factor"]))
+    fig = Figure(figsize=(10, 7))
+    for i, f in enumerate(factors):
+        ax = fig.add_subplot(2, 2, i + 1) if len(factors) <= 4 else fig.add_subplot(1, len(factors), i + 1)
+        d = sweeps[sweeps["factor"] == f].sort_values("value")
+        ax.plot(d["value"], d["te_mean_abs_arcmin"], "o-", color="C0", label="mean |TE|")
+        ax.set_ylabel("mean |TE| [arcmin]", color="C0")
+        ax2 = ax.twinx()
+        ax2.plot(d["value"], d["te_pp_arcmin"], "s--", color="C3", label="TE pp")
+        ax2.set_ylabel("TE pp [arcmin]", color="C3")
+        unit = str(d["unit"].iloc[0])
+        ax.set_xlabel(f"{f} = {d['error'].iloc[0]} [{unit}]")
+        ax.set_title(f"{f} swept alone")
+    fig.tight_layout()
+    return save_figure_atomic(fig, path)
+
+
+def write_screen_outputs(result: ScreenResult, out: str | Path) -> dict[str, str]:
+    """Write ``screen.csv``, ``sweeps.csv``, ``screen.png``, ``te_curves.png``, ``sweeps.png`` atomically.
+
+    Returns
+    -------
+    dict
+        ``{artifact: path}``.
+    """
+    out = Path(out)
+    files = {"screen_csv": write_table_atomic(result.screen, out / "screen.csv"),
+             "screen_png": plot_screen(result.screen, out / "screen.png")}
+    if result.curves:
+        files["te_curves_png"] = plot_te_curves(result.curves, out / "te_curves.png")
+    if len(result.sweeps):
+        files["sweeps_csv"] = write_table_atomic(result.sweeps, out / "sweeps.csv")
+        files["sweeps_png"] = plot_sweeps(result.sweeps, out / "sweeps.png")
+    return {k: str(v) for k, v in files.items()}
+
+
+def summary_dict(result: ScreenResult) -> dict[str, Any]:
+    """JSON-ready summary: ranking (+paper-value rows), sweeps and the stage check."""
+    plus = result.screen[result.screen["sign"].isin([0, 1])]
+    cols = ["letter", "error", "stage", "value", "unit", "pp_arcsec", "mean_abs_arcsec", "d_pp_arcsec",
+            "d_mean_abs_arcsec", "rank_pp", "rank_mean_abs"]
+    rows = json.loads(plus[cols].to_json(orient="records"))
+    sw = json.loads(result.sweeps[[c for c in ("factor", "error", "value", "unit", "pp_arcsec",
+                                               "mean_abs_arcsec", "te_mean_abs_arcmin")
+                                   if c in result.sweeps]].to_json(orient="records"))
+    return {"screen": rows, "sweeps": sw, "stage_check": result.stage_check}
+
+
+def format_summary(result: ScreenResult) -> str:
+    """Human summary of the screen: the ranking and whether stage I ranks below stage II."""
+    plus = result.screen[result.screen["sign"].isin([0, 1])].sort_values("rank_pp", na_position="first")
+    lines = [f"{'':2}{'error':<28}{'stage':>6}{'value':>9}{'pp [as]':>11}{'mean|TE| [as]':>15}"
+             f"{'rank pp':>9}{'rank |mean|':>12}"]
+    for r in plus.itertuples():
+        rp = "-" if not np.isfinite(r.rank_pp) else f"{int(r.rank_pp)}"
+        rm = "-" if not np.isfinite(r.rank_mean_abs) else f"{int(r.rank_mean_abs)}"
+        lines.append(f"{r.letter:<2}{r.error:<28}{r.stage:>6}{r.value:>7g}{r.unit:>2}{r.pp_arcsec:>11.4f}"
+                     f"{r.mean_abs_arcsec:>15.4f}{rp:>9}{rm:>12}")
+    for m, c in result.stage_check.items():
+        verdict = "reproduced" if c["reproduced"] else "NOT reproduced"
+        lines.append(f"stage I (B rank {c['rank_B']}, C rank {c['rank_C']}) below every stage II error by "
+                     f"{m}: {verdict}" + ("" if c["reproduced"] else
+                                          f" (stage II errors ranked below: {', '.join(c['stage2_below_stage1'])})"))
+    if len(result.sweeps):
+        lines.append("sweeps (mean |TE| arcmin at -h / 0 / +h):")
+        for f, d in result.sweeps.groupby("factor", sort=False):
+            d = d.sort_values("value")
+            mid = d.iloc[len(d) // 2]
+            lines.append(f"  {f} ({d['error'].iloc[0]}): {d['te_mean_abs_arcmin'].iloc[0]:.4f} / "
+                         f"{mid['te_mean_abs_arcmin']:.4f} / {d['te_mean_abs_arcmin'].iloc[-1]:.4f}")
+    return "\n".join(lines)
+
+
+def screen_command(args: argparse.Namespace) -> int:
+    """``rvdyn screen``: run the screen and sweeps serially and write tables and plots to ``args.out``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``out, solver, steps, sweep_points, load_Nm, json``.
+
+    Returns
+    -------
+    int
+        Exit status (0). Bad options raise ``ValueError`` naming the option (the CLI exits 2).
+    """
+    if isinstance(args.steps, bool) or args.steps < 2:
+        raise ValueError(f"--steps {args.steps} must be an integer >= 2")
+    if args.sweep_points < 2:
+        raise ValueError(f"--sweep-points {args.sweep_points} must be an integer >= 2")
+    if not (math.isfinite(args.load_Nm) and args.load_Nm >= 0):
+        raise ValueError(f"--load-Nm {args.load_Nm} must be a finite number >= 0 (N m)")
+    result = run_screen(args.solver, args.steps, args.sweep_points, args.load_Nm,
+                        progress=not args.json and sys.stderr.isatty())
+    files = write_screen_outputs(result, args.out)
+    if args.json:
+        print(json.dumps({**summary_dict(result), "files": files, "solver": args.solver, "steps": args.steps,
+                          "load_Nm": args.load_Nm}))
+    else:
+        print(f"single-factor screen: solver {args.solver}, {args.steps} steps, load {args.load_Nm:g} N m")
+        print(format_summary(result))
+        print(f"wrote {', '.join(files.values())}")
+    return 0
