@@ -94,10 +94,22 @@ class AnalyticContacts:
 
     def __init__(self, geom: ReducerGeometry) -> None:
         self.geom = geom
+        self._last_t: dict[int, np.ndarray] = {}
 
     def disc_distance(self, k: int, p: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distance (mm) of points p (K, 2) in disc k's profile frame to its boundary, and normals."""
-        d, _, n = self.geom.profiles[k].boundary_distance(p, t0)
+        """Signed distance (mm) of points p (K, 2) in disc k's profile frame to its boundary, and normals.
+
+        The foot-point Newton starts from the previous call's foot parameters where they lie within
+        an eighth of a lobe pitch of ``t0`` (the solver's outer iterations revisit the same pins).
+        """
+        prof = self.geom.profiles[k]
+        start = np.asarray(t0, dtype=float)
+        last = self._last_t.get(k)
+        if last is not None and last.shape == start.shape:
+            near = np.abs(last - start) < 0.25 * np.pi / prof.z_lobes
+            start = np.where(near, last, start)
+        d, t, n = prof.boundary_distance(p, start)
+        self._last_t[k] = t
         return d, n
 
     def stage1_gaps(self, theta_in: np.ndarray, theta_out: np.ndarray, psi: np.ndarray,

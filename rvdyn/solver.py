@@ -239,14 +239,17 @@ class QuasiStaticSolver:
             return ContactLaw(self.law.K, self.law.n, rigid=True)
         return self.law
 
-    def _inner(self, th_in, x0, G, J, b, law: ContactLaw, max_iter: int = 200) -> np.ndarray:
-        """Minimise the linearised potential around x0; returns the step (N, ndof)."""
+    def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200) -> np.ndarray:
+        """Minimise the linearised potential around x0; returns the step (N, ndof).
+
+        ``mu`` (N,) is the Levenberg-Marquardt damping, updated in place so that the next outer
+        iteration starts from where this one ended.
+        """
         N, M, D = J.shape
         step = np.zeros((N, D))
         # damping floor: about a quarter of the contacts at 1 um of penetration (typical working stiffness)
         floor_k = law.stiffness(np.array(1e-3)) if not law.rigid else law.k_eff
         floor = float(floor_k) * max(1.0, M / 4.0) * np.ones(D)
-        mu = np.full(N, 1.0)
         eye = np.eye(D)
 
         def energy(s):
@@ -255,6 +258,7 @@ class QuasiStaticSolver:
             return law.energy(delta).sum(axis=1) + s @ b + Eb
 
         E0 = energy(step)
+        Jnorm = np.linalg.norm(J, axis=2)
         tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
         active = np.ones(N, dtype=bool)
         for _ in range(max_iter):
@@ -296,7 +300,7 @@ class QuasiStaticSolver:
             E0[idx] = best_E
             mu[idx] = np.where(accepted_full, np.maximum(mu[idx] / 10.0, 1e-12), np.minimum(mu[idx] * 10.0, 1e12))
             # stationarity of the potential relative to the forces in play, plus a settled step
-            scale = np.linalg.norm(b) + np.einsum("nm,nm->n", np.abs(f), np.linalg.norm(J[idx], axis=2))
+            scale = np.linalg.norm(b) + np.einsum("nm,nm->n", np.abs(f), Jnorm[idx])
             done = (moved < tol_mm) & (np.linalg.norm(grad, axis=1) <= 1e-7 * scale)
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False
@@ -335,6 +339,8 @@ class QuasiStaticSolver:
         x = np.zeros((N, self.ndof)) if x_init is None else np.array(x_init, dtype=float)
         chunk = N if chunk is None else max(1, int(chunk))
         tol_mm = self.tol.solver_angle_rad * self.Rp
+        G_all = np.empty((N, self.nd * self.zp + self.nc))
+        mu_all = np.ones(N)
         iters = 0
         prev: np.ndarray | None = None
         for s0 in range(0, N, chunk):
@@ -344,10 +350,15 @@ class QuasiStaticSolver:
                 xs[:] = prev
             for it in range(self.tol.solver_max_iter):
                 G, J = self._linearise(th[sl], xs, direction)
-                dx = self._inner(th[sl], xs, G, J, b, law)
+                mu = mu_all[sl]
+                dx = self._inner(th[sl], xs, G, J, b, law, mu)
+                mu_all[sl] = np.minimum(mu, 1e-2)
                 xs += dx
                 iters = max(iters, it + 1)
                 if np.abs(dx).max() < tol_mm:
+                    # the step is below the tolerance: the linearised gaps at the new state are exact
+                    # to O(dx^2 / rho), far below 1e-12 mm
+                    G_all[sl] = G + np.einsum("nmd,nd->nm", J, dx)
                     break
             else:
                 self._check_penetration(th[sl], xs, direction, law)  # an overlap is the usual cause
@@ -356,11 +367,12 @@ class QuasiStaticSolver:
                     f"(last change {np.abs(dx).max():.3e} mm)")
             x[sl] = xs
             prev = xs[-1].copy()
-        return self._finish(th, x, direction, load_Nm, law, iters)
+        return self._finish(th, x, direction, load_Nm, law, iters, G_all)
 
-    def _check_penetration(self, th, x, direction, law) -> np.ndarray:
+    def _check_penetration(self, th, x, direction, law, G: np.ndarray | None = None) -> np.ndarray:
         """Gaps at the states x; raise InterferenceError if an overlap exceeds what the law allows."""
-        G, _ = self._linearise(th, x, direction)
+        if G is None:
+            G, _ = self._linearise(th, x, direction)
         pen = np.maximum(-G, 0.0).max(axis=1)
         limit = self.tol.interference_mm if law.rigid else MAX_ELASTIC_PENETRATION_MM
         if np.any(pen > limit):
@@ -372,8 +384,8 @@ class QuasiStaticSolver:
                 "close the clearance or use the elastic contact law")
         return G
 
-    def _finish(self, th, x, direction, load_Nm, law, iters) -> Solution:
-        G = self._check_penetration(th, x, direction, law)
+    def _finish(self, th, x, direction, load_Nm, law, iters, G: np.ndarray) -> Solution:
+        G = self._check_penetration(th, x, direction, law, G)
         delta = -G
         pen = np.maximum(delta, 0.0).max(axis=1)
         to, ps, _, _ = self._unpack(th, x)

@@ -1,0 +1,57 @@
+"""Benchmark of the TE solvers: one output revolution at 720 steps, two discs, one core.
+
+Run: ``python benchmarks/bench_te.py [--solver analytic fcl] [--steps 720]``. Prints seconds per
+revolution (best of --repeat), outer iterations, peak resident memory, and for fcl the agreement
+with the analytic solver (RMS and max TE difference, arcsec) on the nominal case and on each Table 4
+error at its paper value.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
+from rvdyn.te import run_te  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--solver", nargs="+", default=["analytic", "fcl"])
+    ap.add_argument("--steps", type=int, default=720)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--compare", action="store_true", help="fcl vs analytic on every Table 4 error")
+    a = ap.parse_args()
+    cases = {"nominal": Case.from_dict({"name": "nominal"}),
+             "pin_pitch 0.01 deg": Case.from_dict({"errors": {"pin_pitch": 0.01}})}
+    for solver in a.solver:
+        for name, case in cases.items():
+            best = cpu = np.inf
+            for _ in range(a.repeat):
+                t, c = time.perf_counter(), time.process_time()
+                r = run_te(case, solver, a.steps)
+                best = min(best, time.perf_counter() - t)
+                cpu = min(cpu, time.process_time() - c)
+            print(f"{solver:8s} {name:20s} {a.steps} steps: {best:6.3f} s/rev wall, {cpu:6.3f} s CPU  pp {r.stats['pp']:8.4f} arcsec  "
+                  f"mean {r.stats['mean']:9.4f} arcsec")
+    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+    if a.compare and "fcl" in a.solver:
+        print("fcl vs analytic, TE difference (arcsec):")
+        all_cases = {"nominal": {}} | {k: {k: et.paper_value} for k, et in ERROR_TYPES.items()}
+        for name, errs in all_cases.items():
+            c = Case.from_dict({"errors": errs})
+            ra = run_te(c, "analytic", a.steps)
+            rf = run_te(c, "fcl", a.steps)
+            d = rf.table["te_arcsec"].to_numpy() - ra.table["te_arcsec"].to_numpy()
+            print(f"  {name:28s} rms {np.sqrt(np.mean(d ** 2)):.4f}  max {np.abs(d).max():.4f}  "
+                  f"(analytic pp {ra.stats['pp']:.3f}, fcl {rf.stats['seconds']:.2f} s)")
+
+
+if __name__ == "__main__":
+    main()
