@@ -29,7 +29,8 @@ def main() -> None:
     levels = rsm.Levels.from_csv(DATA / "paper_table5_levels.csv")
     factors = ["EA", "EB", "EC", "ED"]
     res = rsm.fit(runs, factors, "te_arcmin", levels=levels)
-    _time("fit full quadratic, Table 6 (27 runs, 15 terms)", lambda: rsm.fit(runs, factors, "te_arcmin", levels=levels))
+    _time("fit full quadratic, Table 6 (27 runs, 15 terms)",
+          lambda: rsm.fit(runs, factors, "te_arcmin", levels=levels))
     _time("backward elimination (hierarchical)", lambda: rsm.backward_elimination(res))
     _time("compare_reductions", lambda: rsm.compare_reductions(res))
     new = pd.DataFrame(np.random.default_rng(0).uniform(-1, 1, size=(10_000, 4)), columns=factors)
@@ -38,7 +39,8 @@ def main() -> None:
     d7 = rsm.box_behnken(7, center=6).coded
     d7["y"] = np.random.default_rng(1).normal(size=len(d7))
     names = [f"x{i + 1}" for i in range(7)]
-    _time("BBD k=7 design + quadratic fit (62 runs, 36 terms)", lambda: rsm.fit(rsm.box_behnken(7, 6).coded.assign(y=d7["y"]), names, "y"))
+    _time("BBD k=7 design + quadratic fit (62 runs, 36 terms)",
+          lambda: rsm.fit(rsm.box_behnken(7, 6).coded.assign(y=d7["y"]), names, "y"))
 
 
 if __name__ == "__main__":

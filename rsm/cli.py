@@ -114,6 +114,11 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _clean(value: float, scale: float) -> float:
+    """Round-off (below 1e-12 of ``scale``) to exactly zero, for printing."""
+    return 0.0 if abs(value) <= 1e-12 * scale else value
+
+
 def _results_block(res) -> dict:
     d = res.to_dict()
     return {k: d[k] for k in ("terms", "anova", "r2", "r2_adj", "r2_pred", "press",
@@ -169,7 +174,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         text += ["", "Reduction comparison on the fitted runs (sse = residual SS, rmse = sqrt(sse/n))",
                  tab[["n_terms", "sse", "rmse", "r2", "max_abs_resid", "refitted"]].to_string(
                      float_format=lambda v: f"{v:.6g}"),
-                 f"cost of not refitting the paper's terms: +{comp.shortcut_cost:.6g} residual SS"]
+                 f"cost of not refitting the paper's terms: +{_clean(comp.shortcut_cost, res.ss_total):.6g}"
+                 " residual SS"]
     if args.validate:
         vpath = Path(args.validate)
         if not vpath.is_file():

@@ -21,6 +21,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -28,6 +29,9 @@ from scipy import linalg
 
 from .coding import Levels
 from .terms import Monomial, model_matrix, parse_terms, term_name, validate_factor_names
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .results import RSMResults
 
 __all__ = ["ResponseSurfaceModel", "ZeroPureErrorWarning", "fit", "check_numeric_column"]
 
@@ -194,7 +198,9 @@ class ResponseSurfaceModel:
                                     self.levels, self.units)
 
     @classmethod
-    def from_csv(cls, path: str | Path, factors: Sequence[str], response: str, **kwargs) -> "ResponseSurfaceModel":
+    def from_csv(
+        cls, path: str | Path, factors: Sequence[str], response: str, **kwargs
+    ) -> "ResponseSurfaceModel":
         """Read the data from a CSV file (``.`` decimal point, header row)."""
         path = Path(path)
         if not path.is_file():

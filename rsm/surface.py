@@ -386,21 +386,26 @@ class PolynomialSurface:
             nature=nature, inside_design=inside, B=B, b=b,
         )
 
+    def _exponents(self) -> tuple[np.ndarray, np.ndarray]:
+        """Exponent matrix ``E`` (p, k) and derivative exponents ``D`` (k, p, k)."""
+        E = np.array(self.monomials, dtype=float).reshape(len(self.monomials), len(self.factors))
+        D = np.repeat(E[None, :, :], E.shape[1], axis=0)
+        for i in range(E.shape[1]):
+            D[i, :, i] = np.maximum(E[:, i] - 1, 0)
+        return E, D
+
+    def value_and_gradient(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """Value and gradient with respect to the coded factors at one point."""
+        x = np.asarray(x, dtype=float)
+        E, D = self._exponents()
+        value = float(np.prod(x**E, axis=1) @ self.coefs)
+        terms = np.prod(x[None, None, :] ** D, axis=2)  # (k, p)
+        grad = (terms * (self.coefs[None, :] * E.T)).sum(axis=1)
+        return value, grad
+
     def gradient_coded(self, x: np.ndarray) -> np.ndarray:
         """Gradient with respect to the coded factors at one point."""
-        x = np.asarray(x, dtype=float)
-        g = np.zeros(len(self.factors))
-        for m, c in zip(self.monomials, self.coefs):
-            for i, p in enumerate(m):
-                if p == 0:
-                    continue
-                d = c * p
-                for j, q in enumerate(m):
-                    e = q - 1 if j == i else q
-                    if e:
-                        d = d * x[j] ** e
-                g[i] += d
-        return g
+        return self.value_and_gradient(x)[1]
 
     def optimize(
         self,
@@ -417,7 +422,7 @@ class PolynomialSurface:
         bounds : sequence of (low, high), optional
             Coded bounds; default ``[-1, 1]`` per factor.
         n_random : int
-            Random starts in addition to the centre, the corners (up to 2^7) and the
+            Random starts in addition to the centre, the corners (for up to 5 factors) and the
             stationary point of a second-order model.
         seed : int, optional
             Seed for the random starts.
@@ -432,14 +437,16 @@ class PolynomialSurface:
         hi = np.array([b[1] for b in bounds])
         sign = 1.0 if goal == "min" else -1.0
 
-        def f(x: np.ndarray) -> float:
-            return sign * float(self.predict_coded(x[None, :])[0])
+        E, D = self._exponents()
+        cE = self.coefs[None, :] * E.T
 
-        def g(x: np.ndarray) -> np.ndarray:
-            return sign * self.gradient_coded(x)
+        def fg(x: np.ndarray) -> tuple[float, np.ndarray]:
+            value = float(np.prod(x**E, axis=1) @ self.coefs)
+            grad = (np.prod(x[None, None, :] ** D, axis=2) * cE).sum(axis=1)
+            return sign * value, sign * grad
 
         starts = [0.5 * (lo + hi)]
-        if k <= 7:
+        if k <= 5:
             starts += [np.array(c) for c in itertools.product(*zip(lo, hi))]
         rng = np.random.default_rng(seed)
         starts += list(lo + (hi - lo) * rng.random((n_random, k)))
@@ -452,7 +459,7 @@ class PolynomialSurface:
                 pass
         best = None
         for x0 in starts:
-            r = optimize.minimize(f, x0, jac=g, method="L-BFGS-B", bounds=bounds)
+            r = optimize.minimize(fg, x0, jac=True, method="L-BFGS-B", bounds=bounds)
             if best is None or r.fun < best.fun:
                 best = r
         x = np.clip(best.x, lo, hi)

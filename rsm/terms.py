@@ -329,7 +329,8 @@ def affine_transform_matrix(
                     new[key] = new.get(key, 0.0) + coef * c
             terms = new
         expansions.append(terms)
-    extra = sorted({mono for e in expansions for mono in e} - set(target), key=lambda m: (sum(m), tuple(-p for p in m)))
+    extra = sorted({mono for e in expansions for mono in e} - set(target),
+                   key=lambda m: (sum(m), tuple(-p for p in m)))
     target.extend(extra)
     pos = {m: r for r, m in enumerate(target)}
     T = np.zeros((len(target), len(monomials)))

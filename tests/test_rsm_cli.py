@@ -72,9 +72,11 @@ def test_fit_human_summary(capsys):
 
 
 def test_fit_plots_option(capsys, tmp_path):
-    assert main(["design", "ccd", "--factors", "2", "--names", "EA", "EB", "--out", str(tmp_path / "two.csv")]) == 0
+    two = str(tmp_path / "two.csv")
+    assert main(["design", "ccd", "--factors", "2", "--names", "EA", "EB", "--out", two]) == 0
     d = pd.read_csv(tmp_path / "two.csv")
-    d["te_arcmin"] = 0.2 + d["EA"] ** 2 + 0.1 * d["EB"] + np.random.default_rng(1).normal(scale=0.05, size=len(d))
+    noise = np.random.default_rng(1).normal(scale=0.05, size=len(d))
+    d["te_arcmin"] = 0.2 + d["EA"] ** 2 + 0.1 * d["EB"] + noise
     d.to_csv(tmp_path / "two.csv", index=False)
     capsys.readouterr()
     figs = tmp_path / "figs"

@@ -110,7 +110,8 @@ def test_zero_pure_error_is_detected_and_lack_of_fit_skipped():
 
 def test_noisy_replicates_keep_the_lack_of_fit_test():
     d = rsm.box_behnken(3, center=3).coded
-    d["y"] = _simulator(d[["x1", "x2", "x3"]].to_numpy()) + np.random.default_rng(0).normal(scale=0.01, size=len(d))
+    noise = np.random.default_rng(0).normal(scale=0.01, size=len(d))
+    d["y"] = _simulator(d[["x1", "x2", "x3"]].to_numpy()) + noise
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         res = rsm.fit(d, ["x1", "x2", "x3"], "y")

@@ -22,7 +22,8 @@ def paper_fit() -> rsm.RSMResults:
 
 
 def _truth(x: np.ndarray) -> np.ndarray:
-    return 2.0 + 1.5 * x[:, 0] - 0.8 * x[:, 1] + 0.6 * x[:, 0] * x[:, 2] + 1.2 * x[:, 0] ** 2 + 0.7 * x[:, 2] ** 2
+    return (2.0 + 1.5 * x[:, 0] - 0.8 * x[:, 1] + 0.6 * x[:, 0] * x[:, 2]
+            + 1.2 * x[:, 0] ** 2 + 0.7 * x[:, 2] ** 2)
 
 
 def _noisy_bbd_fit(sigma: float, seed: int) -> rsm.RSMResults:
@@ -103,7 +104,8 @@ def test_canonical_analysis_of_known_minimum():
     d = rsm.central_composite(3, center=4).coded
     x = d[["x1", "x2", "x3"]].to_numpy()
     dx = x - xs
-    d["y"] = 5.0 + np.einsum("ij,jk,ik->i", dx, A, dx) + np.random.default_rng(0).normal(scale=1e-4, size=len(d))
+    noise = np.random.default_rng(0).normal(scale=1e-4, size=len(d))
+    d["y"] = 5.0 + np.einsum("ij,jk,ik->i", dx, A, dx) + noise
     res = rsm.fit(d, ["x1", "x2", "x3"], "y")
     ca = res.canonical()
     assert ca.nature == "minimum" and ca.inside_design

@@ -116,3 +116,17 @@ def test_prediction_intervals_match_statsmodels():
     sf = ref.get_prediction(new).summary_frame(alpha=0.1)
     for col in ["mean", "mean_se", "mean_ci_lower", "mean_ci_upper", "obs_ci_lower", "obs_ci_upper"]:
         assert ours[col].to_numpy() == pytest.approx(sf[col].to_numpy(), rel=1e-8), col
+
+
+def test_r2_pred_and_adequate_precision_from_statsmodels_quantities():
+    data = pd.read_csv(DATA / "paper_table6_bbd_runs.csv")
+    res = rsm.fit(data, ["EA", "EB", "EC", "ED"], "te_arcmin")
+    ref = smf.ols("te_arcmin ~ (EA + EB + EC + ED)**2 + I(EA ** 2) + I(EB ** 2) + I(EC ** 2) + I(ED ** 2)",
+                  data).fit()
+    press = np.sum(ref.get_influence().resid_press ** 2)
+    assert res.r2_pred == pytest.approx(1 - press / ref.centered_tss, rel=1e-10)
+    # Design-Expert: range of predictions over the mean prediction standard error at the runs
+    se_mean = ref.get_prediction(data).se_mean
+    adeq = np.ptp(ref.fittedvalues) / np.sqrt(np.mean(se_mean**2))
+    assert res.adeq_precision == pytest.approx(adeq, rel=1e-10)
+    assert res.adeq_precision > 4  # the paper's model is adequate by the usual rule

@@ -78,7 +78,8 @@ def test_actual_coefficients_equal_a_fit_in_actual_units_with_offset_centres():
     d = rsm.box_behnken(3, center=3, levels=levels)
     act = d.actual()
     rng = np.random.default_rng(4)
-    act["y"] = 0.01 * act["p"] + 0.3 * act["q"] * act["r"] + 0.2 * act["r"] ** 2 + rng.normal(scale=0.1, size=len(act))
+    act["y"] = (0.01 * act["p"] + 0.3 * act["q"] * act["r"] + 0.2 * act["r"] ** 2
+                + rng.normal(scale=0.1, size=len(act)))
     res = rsm.fit(act, ["p", "q", "r"], "y", levels=levels, units="actual")
     ref = smf.ols("y ~ p + q + r + p:q + p:r + q:r + I(p ** 2) + I(q ** 2) + I(r ** 2)", act).fit()
     tab = res.coefficients("actual")
@@ -90,3 +91,17 @@ def test_actual_coefficients_equal_a_fit_in_actual_units_with_offset_centres():
     assert res.anova.loc["q:r", "F"] == pytest.approx(ref.tvalues["q:r"] ** 2, rel=1e-7)
     assert res.pvalues["r^2"] == pytest.approx(ref.pvalues["I(r ** 2)"], rel=1e-6)
     assert res.predict(act.iloc[:4])["mean"].to_numpy() == pytest.approx(ref.predict(act.iloc[:4]).to_numpy())
+
+
+def test_surface_gradient_matches_finite_differences():
+    rng = np.random.default_rng(9)
+    factors = ["a", "b", "c"]
+    monos = parse_terms(["quadratic", "a^3", "a:b:c", "a^2:b"], factors)
+    surf = PolynomialSurface(factors, monos, rng.normal(size=len(monos)))
+    for x in rng.uniform(-1, 1, size=(5, 3)):
+        value, grad = surf.value_and_gradient(x)
+        assert value == pytest.approx(surf.predict_coded(x[None, :])[0])
+        h = 1e-6
+        f = surf.predict_coded
+        fd = [(f((x + h * e)[None, :])[0] - f((x - h * e)[None, :])[0]) / (2 * h) for e in np.eye(3)]
+        assert grad == pytest.approx(np.array(fd), rel=1e-6, abs=1e-8)
