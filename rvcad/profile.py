@@ -22,11 +22,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.optimize import brentq
 
 from rvcad.tolerances import TOL, Tolerances
+
+
+#: Distance from the pin-centre curve (mm) beyond which the foot point is also searched globally
+#: (the concave radius of curvature of the roots is 0.071 mm by default).
+FAR_FOOT_MM = 0.05
 
 
 def _u(a: np.ndarray) -> np.ndarray:
@@ -174,14 +180,14 @@ class CycloidProfile:
     def root_radius(self) -> float:
         return self.pin_circle_radius - self.eccentricity - self.pin_radius
 
-    @property
+    @cached_property
     def min_convex_radius(self) -> float:
         t = np.linspace(self.root_t(), self.tip_t(), 40001)
         k = self.curvature(t)
         k = k[k > 0]
         return float(1.0 / k.max()) if k.size else math.inf
 
-    @property
+    @cached_property
     def trim_t(self) -> tuple[float, float] | None:
         """Trim interval (t1, t2) of the swallowtail on the rising half of lobe 0, or ``None``.
 
@@ -331,9 +337,28 @@ class CycloidProfile:
         t : (K,) foot parameters, rad
         n : (K, 2) outward unit normals at the foot points
         """
+        p = np.asarray(p, dtype=float)
         t = self.foot_point(p, t0)
         n = self.normal(t)
-        sd = np.einsum("...i,...i->...", np.asarray(p) - self.q(t), n)
+        sd = np.einsum("...i,...i->...", p - self.q(t), n)
+        # Newton from t0 finds the nearest foot for points closer than the roots' concave radius
+        # of curvature (~0.07 mm on the pin-centre curve); farther out a second local foot can
+        # exist: search a lobe pitch either side on a grid and keep the nearer foot.
+        far = np.abs(sd) > FAR_FOOT_MM
+        if np.any(far):
+            pf = p[far]
+            grid = np.linspace(-1.0, 1.0, 129) * (2.0 * math.pi / self.z_lobes)
+            tg = t[far][:, None] + grid[None, :]
+            dist2 = ((self.q(tg) - pf[:, None, :]) ** 2).sum(axis=-1)
+            t2 = self.foot_point(pf, tg[np.arange(len(pf)), np.argmin(dist2, axis=1)])
+            d_old = np.linalg.norm(pf - self.q(t[far]), axis=-1)
+            d_new = np.linalg.norm(pf - self.q(t2), axis=-1)
+            better = d_new < d_old - 1e-12
+            if np.any(better):
+                idx = np.nonzero(far)[0][better]
+                t[idx] = t2[better]
+                n[idx] = self.normal(t[idx])
+                sd[idx] = np.einsum("...i,...i->...", p[idx] - self.q(t[idx]), n[idx])
         return sd, t, n
 
     def boundary_distance(self, p: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
