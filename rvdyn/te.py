@@ -25,6 +25,10 @@ from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver
 
 SOLVERS = ("analytic", "fcl")
 
+#: Steps the fcl provider solves together (each chunk starts from the previous chunk's last state):
+#: measured 4.0 s CPU per 720-step revolution against 4.9 s for one batch and 4.5 s for chunks of 30.
+FCL_CHUNK = 120
+
 #: Light load (N m) at which lost motion is evaluated by default (conventions: "the same light load").
 LIGHT_LOAD_NM = 0.0
 
@@ -134,7 +138,7 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     th = input_angles(g.ratio, steps, revolutions, d)
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, make_contacts(g, solver), law)
-    sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else 1)
+    sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else FCL_CHUNK)
     secs = time.perf_counter() - t0
     te = sol.te_rad * ARCSEC_PER_RAD
     table = pd.DataFrame({
