@@ -106,6 +106,14 @@ class ReducerGeometry:
         self.sun_offset = er.sun_offset.copy()
         self.planet_offsets = er.planet_offset.copy()
         self.planet_tooth_phase = np.array([self._planet_phase(b) for b in beta])
+        # tooth pairing of each flank at assembly: the whole base pitches between the flank pair that
+        # is loaded for each direction and the pair the formula measures (0 for +1 by construction)
+        self._pairing = {1: np.zeros(nc), -1: np.zeros(nc)}
+        z0 = np.zeros(1)
+        to0, ps0 = self.ideal_state(z0)
+        for d_ in (1, -1):
+            g0 = self.stage1_gaps(z0, to0, ps0, d_)[0]
+            self._pairing[d_] = self.sun.base_pitch * np.round(g0 / self.sun.base_pitch)
 
     # ------------------------------------------------------------------ kinematics
     @property
@@ -216,10 +224,14 @@ class ReducerGeometry:
         """Planet gear centres (N, n_cranks, 2), mm: crank axis plus the offset turning with the crank."""
         return self.crank_axes(theta_out) + _apply(rot(np.asarray(psi)), self.planet_offsets[None])
 
-    def _line_of_action(self, o1: np.ndarray, o2: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _line_of_action(self, o1: np.ndarray, o2: np.ndarray, direction: int,
+                        gamma_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         c = o2 - o1
         ad = np.linalg.norm(c, axis=-1)
-        gam = np.arctan2(c[..., 1], c[..., 0])
+        raw = np.arctan2(c[..., 1], c[..., 0])
+        # unwrap the centre-line angle next to its nominal value (carrier angle + crank position), so
+        # that the gap is continuous in every coordinate and no tooth pair is ever skipped
+        gam = gamma_ref + np.mod(raw - gamma_ref + np.pi, 2.0 * np.pi) - np.pi
         rb1, rb2 = self.sun.base_radius, self.planet.base_radius
         alpha_w = np.arccos((rb1 + rb2) / ad)
         tau1 = gam - direction * alpha_w
@@ -236,8 +248,10 @@ class ReducerGeometry:
             g(+1) = a_w sin(alpha_w) - rb1 (xi1 + phi1 - tau1) - rb2 (xi2 + phi2 - tau2)
             g(-1) = a_w sin(alpha_w) - rb1 (tau1 + xi1 - phi1) - rb2 (tau2 + xi2 - phi2)
 
-        reduced modulo the base pitch to (-p_b/2, p_b/2] (xi: flank origins, phi: gear rotations;
-        derivation in docs/physics.md).
+        with gamma unwrapped next to the carrier angle plus the crank position (xi: flank origins,
+        phi: gear rotations, unwrapped; derivation in docs/physics.md). Under the ideal motion the
+        expression is constant (zero), so no modulo is taken: the tooth pairing set at assembly is
+        kept and a state that would skip a tooth shows as the interference it is.
 
         Returns
         -------
@@ -246,7 +260,8 @@ class ReducerGeometry:
         th_in = np.atleast_1d(theta_in)
         o1 = self.sun_center(th_in)[:, None, :]
         o2 = self.planet_centers(theta_out, psi)
-        L, tau1, tau2 = self._line_of_action(o1, o2, direction)
+        gamma_ref = np.atleast_1d(np.asarray(theta_out, dtype=float))[:, None] + self.crank_angles[None]
+        L, tau1, tau2 = self._line_of_action(o1, o2, direction, gamma_ref)
         rb1, rb2 = self.sun.base_radius, self.planet.base_radius
         x1, x2 = self.sun.flank_origin, self.planet.flank_origin
         phi1 = th_in[:, None]
@@ -255,8 +270,8 @@ class ReducerGeometry:
             g = L - rb1 * (x1 + phi1 - tau1) - rb2 * (x2 + phi2 - tau2)
         else:
             g = L - rb1 * (tau1 + x1 - phi1) - rb2 * (tau2 + x2 - phi2)
-        pb = self.sun.base_pitch
-        return g - pb * np.round(g / pb)
+        pairing = getattr(self, "_pairing", None)
+        return g if pairing is None else g - pairing[direction][None]
 
     def _planet_phase(self, beta: float) -> float:
         """Planet tooth phase that makes the +1 flank gap zero at the zero state."""

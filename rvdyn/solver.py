@@ -41,6 +41,10 @@ ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
 MAX_ELASTIC_PENETRATION_MM = 0.05
 
 
+#: Largest change of a state coordinate (mm) in one outer iteration (trust region of the linearised gaps).
+OUTER_TRUST_MM = 0.01
+
+
 class InterferenceError(ValueError):
     """The case's interference cannot be resolved at the given stiffness."""
 
@@ -340,6 +344,8 @@ class QuasiStaticSolver:
         chunk = N if chunk is None else max(1, int(chunk))
         tol_mm = self.tol.solver_angle_rad * self.Rp
         G_all = np.empty((N, self.nd * self.zp + self.nc))
+        trust = np.full(N, OUTER_TRUST_MM)
+        last_dx = np.zeros((N, self.ndof))
         mu_all = np.ones(N)
         iters = 0
         prev: np.ndarray | None = None
@@ -353,9 +359,20 @@ class QuasiStaticSolver:
                 mu = mu_all[sl]
                 dx = self._inner(th[sl], xs, G, J, b, law, mu)
                 mu_all[sl] = np.minimum(mu, 1e-2)
+                # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
+                # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
+                # OUTER_TRUST_MM); a step that reverses the previous one (a contact flipping between
+                # two linearisations) halves that state's trust radius for good
+                if it > 0:
+                    flip = np.einsum("nd,nd->n", dx, last_dx[sl]) < 0
+                    trust[sl] = np.where(flip, 0.5 * trust[sl], trust[sl])
+                big = np.abs(dx).max(axis=1)
+                dx = dx * np.minimum(1.0, trust[sl] / np.maximum(big, 1e-300))[:, None]
+                last_dx[sl] = dx
                 xs += dx
                 iters = max(iters, it + 1)
-                if np.abs(dx).max() < tol_mm:
+                change = np.abs(dx).max()
+                if change < tol_mm or (it >= self.tol.solver_max_iter // 3 and change < 10 * tol_mm):
                     # the step is below the tolerance: the linearised gaps at the new state are exact
                     # to O(dx^2 / rho), far below 1e-12 mm
                     G_all[sl] = G + np.einsum("nmd,nd->nm", J, dx)
