@@ -10,7 +10,7 @@ Model (derivation and assumptions in docs/physics.md):
   cranks is resolved there; the two cranks share the load through the pin contacts of both discs
   and through their own sun-planet meshes.
 - Contacts: every pin with both discs (exact signed gap, two-sided by geometry) and the sun with
-  each planet on the loaded flank (single flank; the coast flank is clear).
+  each planet on both flanks (the coast flank is open by the stage I backlash, zero by default).
   Each carries ``F = K delta**n``; stored energy ``K delta**(n+1)/(n+1)``.
 - Load: the output torque T resists the motion, potential ``direction * T * theta_out``.
 - Equilibrium = minimum of the total potential (convex in the linearised gaps). It is found by
@@ -184,18 +184,28 @@ class QuasiStaticSolver:
         return self.geom.stage1_gaps(th_in, to, ps, direction)
 
     def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray]:
-        """Gaps (N, M) mm and their Jacobians (N, M, ndof) mm/mm at the states x."""
+        """Gaps (N, M) mm and their Jacobians (N, M, ndof) mm/mm at the states x.
+
+        Columns: the 2 x Zp pin gaps, then the stage I flank gaps of each planet, loaded flank
+        (``direction``) first, coast flank (``-direction``, open by the stage I backlash) second.
+        The stage I Jacobians are central differences of the closed-form involute gap (the
+        kinematic derivative; the provider only supplies the gap value).
+        """
         N = x.shape[0]
         h = 1e-6
         gaps, jac = self._pin_gaps(th_in, x)
-        g1 = self._stage1(th_in, x, direction, provider=True)
-        j1 = np.empty((N, self.nc, self.ndof))
-        j1[:] = 0.0
-        for i in range(1 + self.nc):
-            xp, xm = x.copy(), x.copy()
-            xp[:, i] += h
-            xm[:, i] -= h
-            j1[..., i] = (self._stage1(th_in, xp, direction, False) - self._stage1(th_in, xm, direction, False)) / (2 * h)
+        g1_parts, j1_parts = [], []
+        for flank in (direction, -direction):
+            g1_parts.append(self._stage1(th_in, x, flank, provider=True))
+            j1 = np.zeros((N, self.nc, self.ndof))
+            for i in range(1 + self.nc):
+                xp, xm = x.copy(), x.copy()
+                xp[:, i] += h
+                xm[:, i] -= h
+                j1[..., i] = (self._stage1(th_in, xp, flank, False) - self._stage1(th_in, xm, flank, False)) / (2 * h)
+            j1_parts.append(j1)
+        g1 = np.concatenate(g1_parts, axis=1)
+        j1 = np.concatenate(j1_parts, axis=1)
         G = np.concatenate([gaps.reshape(N, -1), g1], axis=1)
         J = np.concatenate([jac.reshape(N, -1, self.ndof), j1], axis=1)
         return G, J
@@ -343,7 +353,7 @@ class QuasiStaticSolver:
         x = np.zeros((N, self.ndof)) if x_init is None else np.array(x_init, dtype=float)
         chunk = N if chunk is None else max(1, int(chunk))
         tol_mm = self.tol.solver_angle_rad * self.Rp
-        G_all = np.empty((N, self.nd * self.zp + self.nc))
+        G_all = np.empty((N, self.nd * self.zp + 2 * self.nc))
         trust = np.full(N, OUTER_TRUST_MM)
         last_dx = np.zeros((N, self.ndof))
         mu_all = np.ones(N)
@@ -417,7 +427,7 @@ class QuasiStaticSolver:
             n_contacts=(delta > (1e-12 if not law.rigid else 0.0)).sum(axis=1),
             peak_force_N=np.full(th.size, np.nan) if nan else F.max(axis=1),
             max_penetration_mm=pen,
-            stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:],
+            stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:n1 + self.nc],
             iterations=iters, x=x)
 
 
