@@ -289,8 +289,8 @@ class ReducerGeometry:
         """Planar placement ``(x mm, y mm, rotation deg)`` of every moving part at one state.
 
         Default state: the ideal kinematics at ``theta_in`` (rad). Keys: ``sun``, ``carrier``,
-        ``crank{j}``, ``planet{j}``, ``disc{k}`` (disc frame origin = profile centre, rotation
-        includes the profile rotation K), ``pins`` and ``housing`` are fixed.
+        ``crank{j}``, ``planet{j}``, ``disc{k}`` (rotation of the disc's crank-hole frame; the
+        profile is turned by ``disc_profile_rotation`` within it); pins and housing are fixed.
         """
         to, ps = self.ideal_state(np.array([theta_in]))
         if theta_out is not None:

@@ -344,13 +344,20 @@ class CycloidProfile:
         # Newton from t0 finds the nearest foot for points closer than the roots' concave radius
         # of curvature (~0.07 mm on the pin-centre curve); farther out a second local foot can
         # exist: search a lobe pitch either side on a grid and keep the nearer foot.
+        # (both sides: a pin with clearance stands outside; a point of an undercut envelope inside
+        # can have its Newton foot on the trimmed swallowtail)
         far = np.abs(sd) > FAR_FOOT_MM
         if np.any(far):
             pf = p[far]
             grid = np.linspace(-1.0, 1.0, 129) * (2.0 * math.pi / self.z_lobes)
-            tg = t[far][:, None] + grid[None, :]
-            dist2 = ((self.q(tg) - pf[:, None, :]) ** 2).sum(axis=-1)
-            t2 = self.foot_point(pf, tg[np.arange(len(pf)), np.argmin(dist2, axis=1)])
+            tf = t[far]
+            start = np.empty_like(tf)
+            for c0 in range(0, len(pf), 4096):  # bounded memory: 4096 x 129 grid points at a time
+                sl = slice(c0, c0 + 4096)
+                tg = tf[sl, None] + grid[None, :]
+                dist2 = ((self.q(tg) - pf[sl, None, :]) ** 2).sum(axis=-1)
+                start[sl] = tg[np.arange(tg.shape[0]), np.argmin(dist2, axis=1)]
+            t2 = self.foot_point(pf, start)
             d_old = np.linalg.norm(pf - self.q(t[far]), axis=-1)
             d_new = np.linalg.norm(pf - self.q(t2), axis=-1)
             better = d_new < d_old - 1e-12

@@ -1,0 +1,475 @@
+"""Export of one case: a STEP and an STL file per part, the assembly, and a manifest.
+
+Layout of the output folder (``rvcad export --out DIR``)::
+
+    DIR/sun.step  sun.stl         stage I sun gear          (own frame, see below)
+    DIR/planet0.* planet1.*       planet gears              (own frames)
+    DIR/crank0.*  crank1.*        crankshafts               (own frames)
+    DIR/flange.*  carrier.*       flange and carrier plates (own frame: main axis, output angle 0)
+    DIR/disc0.*   disc1.*         cycloid discs             (own frames)
+    DIR/housing.* pin00..pin39.*  pin housing and pins      (world frame, fixed)
+    DIR/assembly.step             every part placed at the input angle, labelled by part name
+    DIR/assembly.stl              every part placed at the input angle, one mesh
+    DIR/case.json                 the validated case that was exported
+    DIR/manifest.json             content key and size of every file (for the rerun cache)
+
+Own frame: the frame that :meth:`rvcad.geometry.ReducerGeometry.placement` moves (rotate about +z
+by the placement angle, then translate); z is already the assembly's axial position. Fixed parts
+are in the world frame. Placing the own-frame files with the placements gives the assembly files.
+
+Every file is written to a temporary file in the same folder and renamed (``os.replace``), so an
+interrupted export never leaves a half-written file under a final name. A rerun skips every file
+whose content key (case key, tolerance, format, input angle for the assembly, exporter version) is
+unchanged and whose size matches the manifest.
+"""
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import json
+import math
+import os
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from rvcad.errors import Case
+from rvcad.parts import Assembly, Part
+from rvcad.tessellate import stl_bytes
+
+#: Default tolerance of the export, um: chord sagitta of the STL and budget of the STEP B-splines.
+DEFAULT_TOLERANCE_UM = 0.1
+
+#: Accepted tolerance range, um (below 0.01 um float32 STL rounding dominates; above 100 um the
+#: parts are no longer the analysed geometry).
+TOLERANCE_RANGE_UM = (0.01, 100.0)
+
+#: File formats.
+FORMATS = ("step", "stl")
+
+#: Version of the exported content; bump when the geometry or file layout changes so that cached
+#: files are rewritten.
+EXPORT_VERSION = "1"
+
+#: Name of the cache manifest in the output folder.
+MANIFEST = "manifest.json"
+
+#: Fixed STEP header time stamp: identical input gives byte-identical STEP files.
+STEP_TIMESTAMP = "2000-01-01T00:00:00"
+
+
+@dataclass
+class ExportedFile:
+    """One output file.
+
+    Attributes
+    ----------
+    file : str
+        File name inside the output folder.
+    part : str
+        Part name (``assembly`` for the assembly files, ``case`` for case.json).
+    format : str
+        ``step``, ``stl`` or ``json``.
+    bytes : int
+        File size.
+    seconds : float
+        Time spent building and writing it (0 when skipped).
+    skipped : bool
+        True when the manifest showed it up to date.
+    faces : int or None
+        B-rep faces (STEP) or triangles (STL).
+    max_deviation_um : float or None
+        Largest distance of the exact-curve outline (cycloid envelope, involute flanks) from the
+        exact curve: STL vertices and chord midpoints after float32 rounding, STEP B-splines of
+        each distinct curve piece sampled 32 times per knot span; 0 for parts made of lines and
+        circles only (exact in STEP, chords within the sagitta in STL).
+    """
+
+    file: str
+    part: str
+    format: str
+    bytes: int = 0
+    seconds: float = 0.0
+    skipped: bool = False
+    faces: int | None = None
+    max_deviation_um: float | None = None
+
+
+@dataclass
+class ExportReport:
+    """What an export did (the ``--json`` object of ``rvcad export``)."""
+
+    out_dir: str
+    case_name: str
+    case_key: str
+    tolerance_um: float
+    theta_in_deg: float
+    formats: list[str]
+    files: list[ExportedFile] = field(default_factory=list)
+    seconds: float = 0.0
+    design_check: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["written"] = sum(1 for f in self.files if not f.skipped)
+        d["skipped"] = sum(1 for f in self.files if f.skipped)
+        d["total_bytes"] = sum(f.bytes for f in self.files)
+        return d
+
+    def summary(self) -> str:
+        """Human summary (several lines)."""
+        w = [f for f in self.files if not f.skipped]
+        s = [f for f in self.files if f.skipped]
+        tot = sum(f.bytes for f in self.files)
+        dev = [f.max_deviation_um for f in self.files if f.max_deviation_um]
+        lines = [f"rvcad export: case {self.case_name!r} (key {self.case_key}) -> {self.out_dir}",
+                 f"  {len(w)} file(s) written, {len(s)} up to date, {tot / 1e6:.1f} MB, {self.seconds:.1f} s; "
+                 f"formats {','.join(self.formats)}, tolerance {self.tolerance_um:g} um, "
+                 f"input angle {self.theta_in_deg:g} deg"]
+        if dev:
+            lines.append(f"  largest exact-curve deviation {max(dev):.4f} um (cycloid envelope, involute flanks)")
+        dc = self.design_check
+        if dc:
+            lines.append(f"  design check: {'ok' if dc.get('ok') else 'PROBLEMS'}; undercut: "
+                         f"{'yes' if dc.get('undercut') else 'no'}; min pin gap {dc['pins']['min_gap_mm']:.4f} mm; "
+                         f"disc tip to housing bore {dc['disc_tip_to_housing_bore_mm']:.4f} mm")
+            for m in dc.get("messages", []):
+                lines.append(f"    {m}")
+        big = sorted(w, key=lambda f: -f.seconds)[:5]
+        if big:
+            lines.append("  slowest: " + ", ".join(f"{f.file} {f.seconds:.2f} s" for f in big))
+        return "\n".join(lines)
+
+
+def _atomic_write(path: Path, writer: Callable[[Path], None]) -> int:
+    """Run ``writer(tmp)`` on a temporary file in the same folder, then rename it to ``path``."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    tmp_p = Path(tmp)
+    try:
+        writer(tmp_p)
+        size = tmp_p.stat().st_size
+        if size == 0:
+            raise RuntimeError(f"writing {path.name} produced an empty file")
+        os.replace(tmp_p, path)
+    except BaseException:
+        tmp_p.unlink(missing_ok=True)
+        raise
+    return size
+
+
+def _write_bytes(data: bytes) -> Callable[[Path], None]:
+    def w(p: Path) -> None:
+        with open(p, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+    return w
+
+
+def _step_writer(items: Sequence[tuple[str, Any, tuple[float, float, float] | None]],
+                 name: str) -> Callable[[Path], None]:
+    """Writer of a STEP file (AP214, mm) through the OCP XCAF document, without build123d.
+
+    ``items`` are (label, TopoDS_Shape, placement or None). One item without placement is written
+    as a single named part; otherwise an assembly ``name`` whose components are the named parts
+    placed by (x mm, y mm, rotation deg about +z).
+    """
+    def w(p: Path) -> None:
+        from OCP.APIHeaderSection import APIHeaderSection_MakeHeader
+        from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Trsf, gp_Vec
+        from OCP.IFSelect import IFSelect_ReturnStatus
+        from OCP.Interface import Interface_Static
+        from OCP.Message import Message, Message_Gravity
+        from OCP.STEPCAFControl import STEPCAFControl_Controller, STEPCAFControl_Writer
+        from OCP.STEPControl import STEPControl_Controller, STEPControl_StepModelType
+        from OCP.TCollection import TCollection_ExtendedString, TCollection_HAsciiString
+        from OCP.TDataStd import TDataStd_Name
+        from OCP.TDocStd import TDocStd_Document
+        from OCP.TopLoc import TopLoc_Location
+        from OCP.XCAFApp import XCAFApp_Application
+        from OCP.XCAFDoc import XCAFDoc_DocumentTool
+        from OCP.XSControl import XSControl_WorkSession
+
+        doc = TDocStd_Document(TCollection_ExtendedString("XmlOcaf"))
+        app = XCAFApp_Application.GetApplication_s()
+        app.NewDocument(TCollection_ExtendedString("MDTV-XCAF"), doc)
+        app.InitDocument(doc)
+        XCAFDoc_DocumentTool.SetLengthUnit_s(doc, 0.001)
+        tool = XCAFDoc_DocumentTool.ShapeTool_s(doc.Main())
+        tool.SetAutoNaming_s(False)
+
+        def named(label: Any, text: str) -> Any:
+            TDataStd_Name.Set_s(label, TCollection_ExtendedString(text))
+            return label
+
+        if len(items) == 1 and items[0][2] is None:
+            named(tool.AddShape(items[0][1], False), items[0][0])
+        else:
+            asm = named(tool.NewShape(), name)
+            for label, shape, pl in items:
+                part = named(tool.AddShape(shape, False), label)
+                x, y, r = pl if pl is not None else (0.0, 0.0, 0.0)
+                tr = gp_Trsf()
+                tr.SetRotation(gp_Ax1(gp_Pnt(0.0, 0.0, 0.0), gp_Dir(0.0, 0.0, 1.0)), math.radians(r))
+                tt = gp_Trsf()
+                tt.SetTranslation(gp_Vec(float(x), float(y), 0.0))
+                comp = tool.AddComponent(asm, part, TopLoc_Location(tt.Multiplied(tr)))
+                named(comp, label)
+            tool.UpdateAssemblies()
+        for printer in Message.DefaultMessenger_s().Printers():
+            printer.SetTraceLevel(Message_Gravity.Message_Fail)
+        STEPCAFControl_Controller.Init_s()
+        STEPControl_Controller.Init_s()
+        writer = STEPCAFControl_Writer(XSControl_WorkSession(), False)
+        writer.SetNameMode(True)
+        header = APIHeaderSection_MakeHeader(writer.Writer().Model())
+        if not header.IsDone():
+            header = APIHeaderSection_MakeHeader(0)
+            header.Apply(writer.Writer().Model())
+        header.SetName(TCollection_HAsciiString(name))
+        header.SetTimeStamp(TCollection_HAsciiString(STEP_TIMESTAMP))
+        header.SetOriginatingSystem(TCollection_HAsciiString("rvcad"))
+        Interface_Static.SetIVal_s("write.surfacecurve.mode", 1)
+        Interface_Static.SetIVal_s("write.precision.mode", 0)
+        if not writer.Transfer(doc, STEPControl_StepModelType.STEPControl_AsIs):
+            raise RuntimeError(f"OpenCASCADE could not transfer {name} to STEP")
+        if writer.Write(str(p)) != IFSelect_ReturnStatus.IFSelect_RetDone:
+            raise RuntimeError(f"OpenCASCADE could not write {p}")
+    return w
+
+
+def read_step(path: str | Path) -> Any:
+    """Read a STEP file back as one OCP ``TopoDS_Shape`` (for checks); raises ``ValueError``."""
+    from OCP.IFSelect import IFSelect_ReturnStatus
+    from OCP.STEPControl import STEPControl_Reader
+
+    r = STEPControl_Reader()
+    if r.ReadFile(str(path)) != IFSelect_ReturnStatus.IFSelect_RetDone:
+        raise ValueError(f"{path} is not a readable STEP file")
+    r.TransferRoots()
+    return r.OneShape()
+
+
+def edge_samples(shape: Any, per_edge: int = 400, kinds: Sequence[str] | None = None) -> list[tuple[str, np.ndarray]]:
+    """Points sampled along every edge of an OCP shape: (curve type, (per_edge, 3) mm).
+
+    The curve type is the OpenCASCADE ``GeomAbs_CurveType`` name without prefix (``Line``,
+    ``Circle``, ``BSplineCurve``, ...). Parameters are spaced uniformly over each edge's range;
+    edge locations (assembly placements) are applied. ``kinds`` keeps only those curve types.
+    """
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    out: list[tuple[str, np.ndarray]] = []
+    ex = TopExp_Explorer(shape, TopAbs_EDGE)
+    while ex.More():
+        a = BRepAdaptor_Curve(TopoDS.Edge(ex.Current()))
+        kind = a.GetType().name.replace("GeomAbs_", "")
+        if kinds is not None and kind not in kinds:
+            ex.Next()
+            continue
+        u = np.linspace(a.FirstParameter(), a.LastParameter(), per_edge)
+        pts = np.empty((per_edge, 3))
+        for i, uu in enumerate(u):
+            p = a.Value(float(uu))
+            pts[i] = (p.X(), p.Y(), p.Z())
+        out.append((kind, pts))
+        ex.Next()
+    return out
+
+
+def count_faces(shape: Any) -> int:
+    """Number of faces of an OCP shape."""
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+
+    ex, n = TopExp_Explorer(shape, TopAbs_FACE), 0
+    while ex.More():
+        n += 1
+        ex.Next()
+    return n
+
+
+def content_key(case: Case, tolerance_um: float, fmt: str, file: str, theta_in_deg: float | None = None) -> str:
+    """Cache key of one file: sha256 of case key, tolerance, format, file, input angle, version."""
+    d = {"case": case.key(), "tolerance_um": float(tolerance_um), "format": fmt, "file": file,
+         "theta_in_deg": theta_in_deg, "version": EXPORT_VERSION}
+    return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:24]
+
+
+def _load_manifest(out: Path) -> dict[str, Any]:
+    p = out / MANIFEST
+    try:
+        m = json.loads(p.read_text(encoding="utf-8"))
+        if isinstance(m, dict) and isinstance(m.get("files"), dict):
+            return m
+    except (OSError, ValueError):
+        pass
+    return {"files": {}}
+
+
+def select_parts(assembly: Assembly, patterns: Sequence[str] | None) -> list[str]:
+    """Part names matching any of the shell patterns (``disc*``, ``pin0?``), plus ``assembly``.
+
+    ``None`` selects everything. Raises ``ValueError`` for a pattern that matches nothing.
+    """
+    names = list(assembly.parts) + ["assembly"]
+    if not patterns:
+        return names
+    out: list[str] = []
+    for pat in patterns:
+        hit = [n for n in names if fnmatch.fnmatchcase(n, pat)]
+        if not hit:
+            raise ValueError(f"--parts pattern {pat!r} matches no part; parts are: {', '.join(names[:12])}, ... "
+                             f"pin00..pin{len(assembly.geometry.pin_centers) - 1:02d}, assembly")
+        out += [h for h in hit if h not in out]
+    return [n for n in names if n in out]
+
+
+def check_tolerance(tolerance_um: float) -> float:
+    """Validate the export tolerance (um); returns it as float."""
+    lo, hi = TOLERANCE_RANGE_UM
+    if isinstance(tolerance_um, bool) or not isinstance(tolerance_um, (int, float)) \
+            or not math.isfinite(tolerance_um) or not lo <= tolerance_um <= hi:
+        raise ValueError(f"tolerance {tolerance_um!r} um must be a number in [{lo}, {hi}] um")
+    return float(tolerance_um)
+
+
+def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] = FORMATS,
+                tolerance_um: float = DEFAULT_TOLERANCE_UM, theta_in_deg: float = 0.0,
+                parts: Sequence[str] | None = None, force: bool = False,
+                progress: Callable[[ExportedFile], None] | None = None) -> ExportReport:
+    """Write the STEP and STL files of every part and of the assembly.
+
+    Parameters
+    ----------
+    case : Case or None
+        Validated case (``None``: nominal design).
+    out_dir : str or Path
+        Output folder (created if missing).
+    formats : sequence of {"step", "stl"}
+        Formats to write.
+    tolerance_um : float
+        Largest deviation of the exported geometry from the exact one, um (default 0.1): chord
+        sagitta of the STL, fit budget of the STEP B-splines (lines and circles are exact in STEP).
+    theta_in_deg : float
+        Input angle at which the assembly files place the moving parts, degrees.
+    parts : sequence of str or None
+        Shell patterns of the parts to write (``disc*``, ``pin00``, ``assembly``); default all.
+    force : bool
+        Rewrite files even when the manifest shows them up to date.
+    progress : callable or None
+        Called with each :class:`ExportedFile` when it is done.
+
+    Returns
+    -------
+    ExportReport
+
+    Raises
+    ------
+    ValueError
+        Bad format, tolerance, angle or part pattern (the message names it).
+    OSError
+        The output folder cannot be created or written.
+    """
+    t_start = time.perf_counter()
+    case = case if case is not None else Case.from_dict({"name": "nominal"})
+    fmts = [f.strip().lower() for f in formats]
+    for f in fmts:
+        if f not in FORMATS:
+            raise ValueError(f"format {f!r} is unknown; allowed: {', '.join(FORMATS)}")
+    if not fmts:
+        raise ValueError("no format given; allowed: step, stl")
+    fmts = [f for f in FORMATS if f in fmts]
+    tol_um = check_tolerance(tolerance_um)
+    if isinstance(theta_in_deg, bool) or not isinstance(theta_in_deg, (int, float)) or not math.isfinite(theta_in_deg):
+        raise ValueError(f"theta_in_deg {theta_in_deg!r} must be a finite number of degrees")
+    tol = tol_um * 1e-3
+    asm = Assembly(case, float(theta_in_deg))
+    names = select_parts(asm, parts)
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {str(out)!r} exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = _load_manifest(out)
+    if manifest.get("version") != EXPORT_VERSION:
+        manifest = {"files": {}}
+    report = ExportReport(out_dir=str(out), case_name=case.name, case_key=case.key(), tolerance_um=tol_um,
+                          theta_in_deg=float(theta_in_deg), formats=fmts, design_check=asm.design_check())
+
+    def save_manifest() -> None:
+        manifest.update({"version": EXPORT_VERSION, "case_name": case.name, "case_key": case.key(),
+                         "tolerance_um": tol_um, "theta_in_deg": float(theta_in_deg)})
+        data = json.dumps(manifest, indent=1, sort_keys=True).encode()
+        _atomic_write(out / MANIFEST, _write_bytes(data))
+
+    def emit(fname: str, part: str, fmt: str, key: str,
+             build: Callable[[], tuple[Callable[[Path], None], int | None, float | None]]) -> None:
+        path = out / fname
+        entry = manifest["files"].get(fname)
+        if (not force and entry and entry.get("key") == key and path.is_file()
+                and path.stat().st_size == entry.get("bytes")):
+            ef = ExportedFile(fname, part, fmt, bytes=int(entry["bytes"]), skipped=True,
+                              faces=entry.get("faces"), max_deviation_um=entry.get("max_deviation_um"))
+        else:
+            t0 = time.perf_counter()
+            writer, faces, dev = build()
+            size = _atomic_write(path, writer)
+            ef = ExportedFile(fname, part, fmt, bytes=size, seconds=time.perf_counter() - t0, faces=faces,
+                              max_deviation_um=dev)
+            manifest["files"][fname] = {"key": key, "bytes": size, "faces": faces, "max_deviation_um": dev}
+            save_manifest()
+        report.files.append(ef)
+        if progress is not None:
+            progress(ef)
+
+    case_json = json.dumps(case.to_dict(), indent=1, sort_keys=True).encode()
+    emit("case.json", "case", "json", content_key(case, tol_um, "json", "case.json"),
+         lambda: (_write_bytes(case_json), None, None))
+
+    for name in names:
+        if name == "assembly":
+            continue
+        part: Part = asm[name]
+        if "step" in fmts:
+            def build_step(part: Part = part) -> tuple[Callable[[Path], None], int | None, float | None]:
+                s = part.shape(tol)
+                return _step_writer([(part.name, s, None)], part.name), count_faces(s), part.spline_deviation(tol) * 1e3
+            emit(f"{name}.step", name, "step", content_key(case, tol_um, "step", f"{name}.step"), build_step)
+        if "stl" in fmts:
+            def build_stl(part: Part = part) -> tuple[Callable[[Path], None], int | None, float | None]:
+                m = part.mesh(tol)
+                dev = part.outline_deviation(tol) * 1e3
+                return _write_bytes(stl_bytes(m, f"rvcad {case.name} {part.name} own frame mm")), len(m.faces), dev
+            emit(f"{name}.stl", name, "stl", content_key(case, tol_um, "stl", f"{name}.stl"), build_stl)
+
+    if "assembly" in names:
+        th = float(theta_in_deg)
+        if "step" in fmts:
+            def build_asm_step() -> tuple[Callable[[Path], None], int | None, float | None]:
+                items = asm.shapes(tol)
+                return (_step_writer(items, f"rv-reducer {case.name}"), sum(count_faces(s) for _, s, _ in items),
+                        None)
+            emit("assembly.step", "assembly", "step", content_key(case, tol_um, "step", "assembly.step", th),
+                 build_asm_step)
+        if "stl" in fmts:
+            def build_asm_stl() -> tuple[Callable[[Path], None], int | None, float | None]:
+                m = asm.mesh(tol)
+                return (_write_bytes(stl_bytes(m, f"rvcad {case.name} assembly theta_in {th:g} deg mm")),
+                        len(m.faces), None)
+            emit("assembly.stl", "assembly", "stl", content_key(case, tol_um, "stl", "assembly.stl", th),
+                 build_asm_stl)
+
+    report.seconds = time.perf_counter() - t_start
+    return report
+
+
+__all__ = ["DEFAULT_TOLERANCE_UM", "EXPORT_VERSION", "FORMATS", "ExportReport", "ExportedFile", "content_key",
+           "edge_samples", "export_case", "read_step", "select_parts"]
