@@ -267,7 +267,7 @@ class QuasiStaticSolver:
         eye = np.eye(D)
 
         def energy(s):
-            delta = -(G + np.einsum("nmd,nd->nm", J, s))
+            delta = -(G + _jdot(J, s))
             Eb = self._bearing(th_in, x0 + s)[0] if self.float_discs else 0.0
             return law.energy(delta).sum(axis=1) + s @ b + Eb
 
@@ -280,11 +280,12 @@ class QuasiStaticSolver:
             if idx.size == 0:
                 break
             s = step[idx]
-            delta = -(G[idx] + np.einsum("nmd,nd->nm", J[idx], s))
+            delta = -(G[idx] + _jdot(J[idx], s))
             f = law.force(delta)
             k = law.stiffness(delta)
-            grad = -np.einsum("nm,nmd->nd", f, J[idx]) + b[None]
-            H = np.einsum("nm,nmd,nme->nde", k, J[idx], J[idx])
+            Ji = J[idx]
+            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + b[None]
+            H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
             if self.float_discs:
                 _, gb, Hb = self._bearing(th_in[idx], x0[idx] + s)
                 grad = grad + gb
@@ -385,7 +386,7 @@ class QuasiStaticSolver:
                 if change < tol_mm or (it >= self.tol.solver_max_iter // 3 and change < 10 * tol_mm):
                     # the step is below the tolerance: the linearised gaps at the new state are exact
                     # to O(dx^2 / rho), far below 1e-12 mm
-                    G_all[sl] = G + np.einsum("nmd,nd->nm", J, dx)
+                    G_all[sl] = G + _jdot(J, dx)
                     break
             else:
                 self._check_penetration(th[sl], xs, direction, law)  # an overlap is the usual cause
@@ -431,9 +432,14 @@ class QuasiStaticSolver:
             iterations=iters, x=x)
 
 
+def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Batched J @ s: (N, M, D) x (N, D) -> (N, M)."""
+    return np.matmul(J, s[:, :, None])[:, :, 0]
+
+
 def energy_sub(solver: QuasiStaticSolver, th_in, x0, G, J, b, law: ContactLaw, s: np.ndarray) -> np.ndarray:
     """Linearised potential of the states x0 + s (N,), N mm."""
-    delta = -(G + np.einsum("nmd,nd->nm", J, s))
+    delta = -(G + _jdot(J, s))
     E = law.energy(delta).sum(axis=1) + s @ b
     if solver.float_discs:
         E = E + solver._bearing(th_in, x0 + s)[0]
