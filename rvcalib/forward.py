@@ -1,0 +1,182 @@
+"""The forward model of a measured run: rvdyn TE on a uniform grid, interpolated to the readings.
+
+For each run the model TE is solved by :func:`rvdyn.te.run_te` (analytic contacts) on a uniform
+grid of ``steps`` input angles over one output revolution (TE is periodic in one output
+revolution: input 121 turns, cranks 40, sun relative to the carrier 120) and evaluated at the
+measured input angles by periodic cubic-spline interpolation in the input angle (exact at the grid
+nodes; a record sampled on the same grid is evaluated without interpolation error). Solutions are
+cached by the case's content hash, the grid, the load and the direction, so identical conditions
+(and repeated trial values) are solved once per process.
+
+The measurement effects (encoder eccentricities) and empirical harmonic terms are not physics of
+the reducer; they are added to the model TE here as reading errors, see :mod:`rvcalib.effects`.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from collections import OrderedDict
+from typing import Any
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from rvcad.errors import Case
+from rvdyn.te import run_te
+
+from rvcalib.dataset import PERIOD_DEG, RATIO, RunRecord
+
+#: Maximum number of cached grid solutions (each a few kB).
+CACHE_SIZE = 20000
+
+_CACHE: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+_STATS = {"solves": 0, "hits": 0, "seconds": 0.0}
+
+
+class ModelEvaluationError(ValueError):
+    """The reducer model cannot be evaluated at these parameters (interference, no convergence)."""
+
+
+def cache_stats() -> dict[str, float]:
+    """Solver calls, cache hits and solver seconds of this process."""
+    return dict(_STATS)
+
+
+def clear_cache() -> None:
+    """Forget all cached grid solutions."""
+    _CACHE.clear()
+
+
+def grid_angles_deg(steps: int) -> np.ndarray:
+    """Input angles of the uniform grid over one output revolution, deg (``k * 121 * 360 / steps``)."""
+    return np.arange(steps) * (PERIOD_DEG / steps)
+
+
+def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> np.ndarray:
+    """Model TE (arcsec) on the uniform grid of one output revolution, ascending input angle.
+
+    Parameters
+    ----------
+    case_dict : dict
+        Case JSON (``errors``, ``model``, ``load_Nm``, ``direction``).
+    steps : int
+        Grid points per output revolution.
+    solver : str
+        rvdyn contact provider.
+
+    Raises
+    ------
+    ModelEvaluationError
+        If rvdyn refuses the case (interference beyond the contact law) or does not converge.
+    """
+    import time
+
+    try:
+        case = Case.from_dict(case_dict)
+    except ValueError as exc:
+        raise ModelEvaluationError(str(exc)) from None
+    key = (case.key(), int(steps), solver)
+    hit = _CACHE.get(key)
+    if hit is not None:
+        _CACHE.move_to_end(key)
+        _STATS["hits"] += 1
+        return hit
+    t0 = time.perf_counter()
+    try:
+        res = run_te(case, solver=solver, steps=int(steps), revolutions=1.0)
+    except (ValueError, RuntimeError) as exc:
+        raise ModelEvaluationError(f"rvdyn could not evaluate the case: {exc}") from None
+    _STATS["solves"] += 1
+    _STATS["seconds"] += time.perf_counter() - t0
+    tab = res.table
+    order = np.argsort(tab["input_deg"].to_numpy())
+    te = tab["te_arcsec"].to_numpy()[order].copy()
+    te.setflags(write=False)
+    _CACHE[key] = te
+    if len(_CACHE) > CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return te
+
+
+def periodic_interp(grid_values: np.ndarray, input_deg: np.ndarray) -> np.ndarray:
+    """Periodic cubic-spline interpolation of grid values at input angles (deg, any revolution)."""
+    n = grid_values.size
+    x = np.append(grid_angles_deg(n), PERIOD_DEG)
+    y = np.append(grid_values, grid_values[0])
+    xq = np.mod(np.asarray(input_deg, dtype=float), PERIOD_DEG)
+    # exact at the nodes (avoid round-off of the spline at node angles)
+    k = xq / (PERIOD_DEG / n)
+    kr = np.rint(k)
+    on = np.abs(k - kr) < 1e-9
+    outv = np.empty_like(xq)
+    if np.any(~on):
+        outv[~on] = CubicSpline(x, y, bc_type="periodic")(xq[~on])
+    outv[on] = grid_values[(kr[on].astype(int)) % n]
+    return outv
+
+
+def merge_case(base: dict[str, Any], errors: list[tuple[str, dict]] | None = None,
+               model: dict[str, float] | None = None) -> dict[str, Any]:
+    """A copy of a case JSON with additional error instances and model options.
+
+    Parameters
+    ----------
+    base : dict
+        Case JSON; its ``errors`` values may be numbers (default instance), objects or lists.
+    errors : list of (key, item)
+        Error instances to add, each an object ``{"value": v, <instance keys>, "angle_deg": a}``.
+    model : dict
+        Model options to set (they replace the base's).
+    """
+    d = copy.deepcopy(base)
+    errs: dict[str, Any] = d.setdefault("errors", {})
+    for key, item in errors or []:
+        cur = errs.get(key)
+        if cur is None:
+            errs[key] = [item]
+            continue
+        if isinstance(cur, list) and cur and not isinstance(cur[0], dict):
+            # pin-wise list of numbers: add to the right pin(s)
+            cur = list(cur)
+            pins = range(len(cur)) if item.get("pin") is None else [item["pin"]]
+            for p in pins:
+                cur[p] = float(cur[p]) + float(item["value"])
+            errs[key] = cur
+            continue
+        items = cur if isinstance(cur, list) else [cur]
+        items = [x if isinstance(x, dict) else {"value": x} for x in items]
+        errs[key] = items + [item]
+    if model:
+        m = d.setdefault("model", {})
+        m.update(model)
+    return d
+
+
+def run_grid_values(values: np.ndarray, run: RunRecord) -> np.ndarray:
+    """Values of a one-revolution grid signal at the run's input readings."""
+    return periodic_interp(values, run.input_deg)
+
+
+def output_angle_rad(input_deg: np.ndarray) -> np.ndarray:
+    """Ideal output angle for input readings, rad (``input / 121``)."""
+    return np.radians(np.asarray(input_deg, dtype=float) / RATIO)
+
+
+def coarse_stride(steps: int, target: int = 120) -> int:
+    """Stride that takes a grid of ``steps`` (a multiple of 40) to the screening grid.
+
+    The screening grid has at most ``target`` points per revolution and stays a multiple of 40
+    (pin-wise signatures are the pin-0 signature shifted by whole pin pitches).
+    """
+    for s in range(1, steps + 1):
+        if steps % s == 0 and (steps // s) % 40 == 0 and steps // s <= target:
+            return s
+    return 1
+
+
+def fmt_angle(deg: float) -> float:
+    """An angle wrapped to (-180, 180] deg."""
+    a = math.fmod(deg + 180.0, 360.0)
+    if a <= 0:
+        a += 360.0
+    return a - 180.0

@@ -1,0 +1,249 @@
+"""Simulator of measured datasets, to test the loop on data whose truth is known.
+
+:func:`simulate_dataset` writes a dataset folder (``runs.csv``, ``samples.csv``) as a test rig
+would record it, and the truth into a separate answer file (``answer.json`` outside the dataset
+folder by default): the hidden effects never enter the dataset, which only declares what the
+runs' ``declared`` errors say.
+
+What the "rig" does, per run:
+
+1. True TE: rvdyn (analytic contacts) on a uniform grid of ``samples_per_rev`` input angles per
+   output revolution, for the declared plus the hidden errors and model options; the record
+   repeats it periodically (TE is periodic in one output revolution).
+2. Encoders: the input reading is ``theta_in + (eps_in / R_in) sin(theta_in + phi_in) + noise``,
+   the output reading ``theta_out + (eps_out / R_out) sin(theta_out + phi_out) + noise`` (radii of
+   :mod:`rvcalib.effects`), Gaussian noise in arcsec of each encoder.
+3. Hidden effects outside the library: harmonics of the output angle added to the output reading
+   (``amplitude * cos(k theta_out + phase)``, arcsec).
+4. A start-up transient ``A exp(-i / tau)`` (arcsec, sample i) added to the output reading of the
+   first samples of chosen runs; such runs are recorded ``extra_revolutions`` longer.
+5. Duplicated samples (a row written twice) at random places.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from rvcad.errors import ERROR_TYPES, MODEL_OPTIONS, Case
+
+from rvcalib.dataset import PERIOD_DEG, RATIO
+from rvcalib.effects import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM
+from rvcalib.forward import grid_te, merge_case, periodic_interp
+
+MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg",
+                    "input_encoder_eccentricity_um", "input_encoder_phase_deg")
+
+
+def _write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            df.to_csv(fh, index=False, float_format="%.10f")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
+    """The effects the loop should find for a ``hidden`` specification (names as in the library).
+
+    Returns
+    -------
+    list of dict
+        ``name, key, value, unit`` (magnitude for two-component effects, with ``angle_deg``).
+    """
+    out: list[dict[str, Any]] = []
+    for key, spec in (hidden.get("errors") or {}).items():
+        et = ERROR_TYPES[key]
+        items = spec if isinstance(spec, list) else [spec]
+        for item in items:
+            if not isinstance(item, dict):
+                item = {"value": item}
+            inst = {k: item[k] for k in et.instance_keys if k in item}
+            if et.pinwise and "pin" not in inst and key == "pin_pitch":
+                inst = {"pin": 0}
+            if key in ("cam_phase", "cam_eccentricity", "planet_eccentricity", "carrier_hole_eccentricity",
+                       "disc_hole_eccentricity", "disc_phase"):
+                inst = {k: item.get(k, et.defaults[k]) for k in et.instance_keys}
+            name = key + ("[" + ",".join(f"{k}={v}" for k, v in inst.items()) + "]" if inst else "")
+            d = {"name": name, "key": key, "value": float(item["value"]), "unit": et.unit}
+            if et.has_angle:
+                d["angle_deg"] = float(item.get("angle_deg", 0.0))
+            out.append(d)
+    model = hidden.get("model") or {}
+    for key, v in model.items():
+        if key in ("pin_circle_ovality_angle_deg", "temperature_C", "cam_bearing_stiffness_N_per_um"):
+            continue
+        d = {"name": key, "key": key, "value": float(v), "unit": MODEL_OPTIONS[key].unit}
+        if key == "pin_circle_ovality_um":
+            d["angle_deg"] = float(model.get("pin_circle_ovality_angle_deg", 0.0))
+        out.append(d)
+    meas = hidden.get("measurement") or {}
+    for which in ("output", "input"):
+        eps = float(meas.get(f"{which}_encoder_eccentricity_um", 0.0))
+        if eps:
+            out.append({"name": f"{which}_encoder_eccentricity", "key": f"{which}_encoder_eccentricity",
+                        "value": eps, "unit": "um", "angle_deg": float(meas.get(f"{which}_encoder_phase_deg", 0.0))})
+    return out
+
+
+def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: dict[str, Any] | None = None,
+                     noise_arcsec: float = 0.15, input_noise_arcsec: float = 2.0, samples_per_rev: int = 240,
+                     revolutions: float = 1.0, transient: dict[str, Any] | None = None, duplicates: int = 0,
+                     seed: int = 0, answer_path: str | Path | None = None, speed_rpm: float | None = None) -> Path:
+    """Write a simulated measured dataset and its answer file.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Dataset folder to create (``runs.csv``, ``samples.csv``).
+    runs : list of dict
+        Each ``{"run", "load_Nm", "direction"}`` plus optional ``"declared": {error key: value}``
+        (default instance, written to runs.csv and used in the truth) and ``"temperature_C"``.
+    hidden : dict or None
+        The truth the dataset does not declare: ``"errors"`` (case JSON errors, any instance),
+        ``"model"`` (rvdyn model options), ``"measurement"`` (``output_encoder_eccentricity_um``,
+        ``output_encoder_phase_deg``, ``input_encoder_eccentricity_um``, ``input_encoder_phase_deg``)
+        and ``"harmonics"`` (list of ``{"order", "amplitude_arcsec", "phase_deg"}``, outside the
+        library).
+    noise_arcsec : float
+        Output encoder noise (standard deviation), arcsec.
+    input_noise_arcsec : float
+        Input encoder noise, arcsec (enters the TE divided by 121).
+    samples_per_rev : int
+        Samples per output revolution (also the truth's grid).
+    revolutions : float
+        Output revolutions recorded per run (>= 1).
+    transient : dict or None
+        ``{"runs": [ids] or "all", "amplitude_arcsec", "tau_samples", "extra_revolutions"}``.
+    duplicates : int
+        Rows written twice, spread at random over the file.
+    seed : int
+        Random seed.
+    answer_path : str, Path or None
+        Where the answer goes (default ``<out_dir>.answer.json`` beside the folder).
+    speed_rpm : float or None
+        Written to runs.csv if given (informative).
+
+    Returns
+    -------
+    Path
+        The answer file.
+    """
+    hidden = dict(hidden or {})
+    for k in hidden:
+        if k not in ("errors", "model", "measurement", "harmonics"):
+            raise ValueError(f"hidden key {k!r} is unknown; allowed: errors, model, measurement, harmonics")
+    meas = dict(hidden.get("measurement") or {})
+    for k in meas:
+        if k not in MEASUREMENT_KEYS:
+            raise ValueError(f"hidden.measurement key {k!r} is unknown; allowed: {list(MEASUREMENT_KEYS)}")
+    if revolutions < 1.0:
+        raise ValueError(f"revolutions {revolutions} must be >= 1 (the format needs one output revolution)")
+    if not runs:
+        raise ValueError("runs must list at least one run")
+    rng = np.random.default_rng(seed)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    N = int(samples_per_rev)
+    step = PERIOD_DEG / N
+    tr = dict(transient or {})
+    tr_runs = tr.get("runs", "all")
+    declared_keys = sorted({k for r in runs for k in (r.get("declared") or {})})
+    for k in declared_keys:
+        if k not in ERROR_TYPES:
+            raise ValueError(f"runs[].declared key {k!r} is unknown; allowed: {sorted(ERROR_TYPES)}")
+    rows, samples = [], []
+    for r in runs:
+        rid = str(r["run"])
+        d = int(r.get("direction", 1))
+        load = float(r.get("load_Nm", 20.0))
+        decl = dict(r.get("declared") or {})
+        base: dict[str, Any] = {"errors": dict(decl), "load_Nm": load, "direction": d}
+        if "temperature_C" in r:
+            base["model"] = {"temperature_C": float(r["temperature_C"])}
+        errs = []
+        for key, spec in (hidden.get("errors") or {}).items():
+            for item in (spec if isinstance(spec, list) else [spec]):
+                errs.append((key, item if isinstance(item, dict) else {"value": item}))
+        truth = merge_case(base, errs, dict(hidden.get("model") or {}))
+        Case.from_dict(truth)  # validate (names the field)
+        g = grid_te(truth, N)
+        has_tr = bool(tr) and (tr_runs == "all" or rid in [str(x) for x in tr_runs])
+        revs = revolutions + (float(tr.get("extra_revolutions", 0.1)) if has_tr else 0.0)
+        M = int(math.ceil(revs * N - 1e-9))
+        k = np.arange(M)
+        th_in = d * k * step
+        te = periodic_interp(g, th_in)
+        th_out = th_in / RATIO + te / 3600.0
+        for h in hidden.get("harmonics") or []:
+            te_h = float(h["amplitude_arcsec"]) * np.cos(int(h["order"]) * np.radians(th_out)
+                                                          + math.radians(float(h.get("phase_deg", 0.0))))
+            th_out = th_out + te_h / 3600.0
+        if has_tr:
+            th_out = th_out + float(tr.get("amplitude_arcsec", 20.0)) * np.exp(
+                -k / float(tr.get("tau_samples", 5.0))) / 3600.0
+        eo = float(meas.get("output_encoder_eccentricity_um", 0.0))
+        po = math.radians(float(meas.get("output_encoder_phase_deg", 0.0)))
+        ei = float(meas.get("input_encoder_eccentricity_um", 0.0))
+        pi_ = math.radians(float(meas.get("input_encoder_phase_deg", 0.0)))
+        out_read = th_out + np.degrees(eo * 1e-3 / OUTPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_out) + po))
+        in_read = th_in + np.degrees(ei * 1e-3 / INPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_in) + pi_))
+        out_read = out_read + rng.normal(0.0, noise_arcsec, M) / 3600.0
+        in_read = in_read + rng.normal(0.0, input_noise_arcsec, M) / 3600.0
+        t = k * 0.01
+        samples.append(pd.DataFrame({"run": rid, "input_deg": in_read, "output_deg": out_read, "time_s": t}))
+        row: dict[str, Any] = {"run": rid, "load_Nm": load, "direction": d}
+        for key in declared_keys:
+            row[key] = float(decl.get(key, 0.0))
+        if "temperature_C" in r:
+            row["temperature_C"] = float(r["temperature_C"])
+        if speed_rpm is not None:
+            row["speed_rpm"] = float(speed_rpm)
+        rows.append(row)
+    sdf = pd.concat(samples, ignore_index=True)
+    if duplicates:
+        idx = np.sort(rng.choice(len(sdf), size=int(duplicates), replace=False))
+        sdf = pd.concat([sdf, sdf.iloc[idx]]).sort_index(kind="stable").reset_index(drop=True)
+    rdf = pd.DataFrame(rows)
+    if any("temperature_C" in r for r in runs):
+        rdf["temperature_C"] = rdf["temperature_C"].fillna(20.0)
+    _write_csv_atomic(rdf, out / "runs.csv")
+    _write_csv_atomic(sdf, out / "samples.csv")
+    te_noise = math.sqrt(noise_arcsec ** 2 + (input_noise_arcsec / RATIO) ** 2)
+    answer = {"dataset": str(out), "hidden": hidden, "expected_effects": expected_effects(hidden),
+              "noise_te_arcsec": te_noise, "noise_output_arcsec": noise_arcsec,
+              "noise_input_arcsec": input_noise_arcsec, "samples_per_rev": N, "revolutions": revolutions,
+              "transient": tr or None, "duplicates": int(duplicates), "seed": seed,
+              "encoder_radii_mm": {"output": OUTPUT_ENCODER_RADIUS_MM, "input": INPUT_ENCODER_RADIUS_MM}}
+    ap = Path(answer_path) if answer_path is not None else out.parent / f"{out.name}.answer.json"
+    ap.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{ap.name}.", suffix=".tmp", dir=ap.parent)
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        json.dump(answer, fh, indent=2)
+    os.replace(tmp, ap)
+    return ap
+
+
+def standard_runs(loads: tuple[float, ...] = (10.0, 30.0), directions: tuple[int, ...] = (1, -1),
+                  declared: dict[str, float] | None = None) -> list[dict[str, Any]]:
+    """Runs at every load and direction (ids 1, 2, ...), all with the same declared errors."""
+    out = []
+    i = 1
+    for L in loads:
+        for d in directions:
+            r: dict[str, Any] = {"run": str(i), "load_Nm": float(L), "direction": int(d)}
+            if declared:
+                r["declared"] = dict(declared)
+            out.append(r)
+            i += 1
+    return out

@@ -1,0 +1,200 @@
+"""Content-keyed cache of solved cases, written atomically and verified on read.
+
+A *job* is one quasi-static TE solve: a case (:class:`rvcad.errors.Case`), the contact provider
+(``solver``), the number of ``steps`` per output revolution, the ``revolutions`` and the contact
+``law`` (K, n, rigid). Its key is the sha256 of ``Case.key()`` (design, errors, load, direction,
+model options), those settings and a fingerprint of the physics source files
+(:func:`code_fingerprint`), so a changed solver never serves stale numbers.
+
+Each entry is one JSON file ``<dir>/<key[:2]>/<key>.json`` holding the statistics, the TE curve
+(arcsec) and a sha256 checksum of its payload. Entries are written to a temporary file in the same
+folder, flushed, fsynced and renamed with :func:`os.replace`, so a killed run leaves either the
+whole entry or none. An entry that does not parse, lacks a field, has another key or fails its
+checksum is ignored (and overwritten when the case is recomputed).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from rvcad.errors import Case
+from rvdyn.contacts import ContactLaw
+
+#: Bump when the entry layout changes.
+CACHE_VERSION = 1
+
+#: Modules whose source decides the numbers of a solve (their bytes enter every key).
+PHYSICS_MODULES = ("rvcad.params", "rvcad.errors", "rvcad.profile", "rvcad.geometry", "rvcad.tolerances",
+                   "rvdyn.contacts", "rvdyn.solver", "rvdyn.te")
+#: Added to the fingerprint of fcl jobs.
+FCL_MODULES = ("rvcad.collision", "rvdyn.fcl_contacts")
+
+
+@lru_cache(maxsize=4)
+def code_fingerprint(solver: str = "analytic") -> str:
+    """sha256 (16 hex) of the source of :data:`PHYSICS_MODULES` (and :data:`FCL_MODULES` for fcl).
+
+    A module that cannot be found contributes its name only.
+    """
+    import importlib.util
+
+    h = hashlib.sha256()
+    mods = PHYSICS_MODULES + (FCL_MODULES if solver == "fcl" else ())
+    for m in mods:
+        h.update(m.encode())
+        try:
+            spec = importlib.util.find_spec(m)
+        except (ImportError, ValueError):
+            spec = None
+        if spec is not None and spec.origin and os.path.exists(spec.origin):
+            h.update(Path(spec.origin).read_bytes())
+    return h.hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class Job:
+    """One TE solve.
+
+    Attributes
+    ----------
+    case : Case
+    solver : str
+        ``analytic`` or ``fcl``.
+    steps : int
+        Steps per ``revolutions`` output turns.
+    revolutions : float
+        Output revolutions (default 1).
+    law : ContactLaw
+        Contact law (K in N/mm^n, exponent n, rigid flag).
+    """
+
+    case: Case
+    solver: str
+    steps: int
+    revolutions: float = 1.0
+    law: ContactLaw = field(default_factory=ContactLaw)
+
+    def settings(self) -> dict[str, Any]:
+        """Solver settings that enter the key (besides the case)."""
+        return {"solver": self.solver, "steps": int(self.steps), "revolutions": float(self.revolutions),
+                "law": {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}}
+
+    def key(self) -> str:
+        """Cache key: sha256 (32 hex) of the case key, the settings, the code fingerprint and the version."""
+        d = {"case": self.case.key(), **self.settings(), "code": code_fingerprint(self.solver),
+             "version": CACHE_VERSION}
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:32]
+
+    def to_payload(self) -> dict[str, Any]:
+        """Picklable, JSON-ready description for a worker (see :func:`rvstudy.executor.solve_job`)."""
+        return {"case": self.case.to_dict(), **self.settings(), "key": self.key()}
+
+
+def _checksum(payload: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, allow_nan=True).encode()).hexdigest()
+
+
+def write_bytes_atomic(data: bytes, path: str | Path, fsync: bool = True) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and :func:`os.replace`."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            if fsync:
+                os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def write_text_atomic(text: str, path: str | Path) -> Path:
+    """UTF-8 text, atomically (see :func:`write_bytes_atomic`)."""
+    return write_bytes_atomic(text.encode("utf-8"), path, fsync=False)
+
+
+class CaseCache:
+    """Directory of finished solves keyed by :meth:`Job.key`.
+
+    Parameters
+    ----------
+    root : str or Path or None
+        Cache folder (created on first write). ``None`` disables the cache (every lookup misses,
+        nothing is written).
+
+    Attributes
+    ----------
+    hits, misses, writes, rejected : int
+        Counters since construction; ``rejected`` counts corrupt or partial entries ignored.
+    """
+
+    def __init__(self, root: str | Path | None) -> None:
+        self.root = None if root is None else Path(root)
+        self.hits = self.misses = self.writes = self.rejected = 0
+
+    def path(self, key: str) -> Path:
+        """File of an entry."""
+        if self.root is None:
+            raise ValueError("the cache is disabled")
+        return self.root / key[:2] / f"{key}.json"
+
+    def get(self, key: str) -> dict[str, Any] | None:
+        """The stored result of a key, or None if absent, unreadable, partial or corrupt."""
+        if self.root is None:
+            self.misses += 1
+            return None
+        p = self.path(key)
+        try:
+            doc = json.loads(p.read_text(encoding="utf-8"))
+            payload = doc["payload"]
+            ok = (doc.get("version") == CACHE_VERSION and payload.get("key") == key
+                  and doc.get("sha256") == _checksum(payload) and isinstance(payload.get("stats"), dict)
+                  and payload.get("status") in ("ok", "failed"))
+            if ok and payload["status"] == "ok":
+                st = payload["stats"]
+                ok = all(isinstance(st.get(k), (int, float)) and math.isfinite(st[k])
+                         for k in ("pp", "mean", "mean_abs", "rms"))
+        except FileNotFoundError:
+            self.misses += 1
+            return None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            ok = False
+        if not ok:
+            self.rejected += 1
+            self.misses += 1
+            return None
+        self.hits += 1
+        return payload
+
+    def put(self, key: str, payload: dict[str, Any]) -> Path | None:
+        """Store a result (``payload['key']`` must equal ``key``); atomic. No-op when disabled."""
+        if self.root is None:
+            return None
+        if payload.get("key") != key:
+            raise ValueError(f"cache entry key {payload.get('key')!r} does not match {key!r}")
+        doc = {"version": CACHE_VERSION, "sha256": _checksum(payload), "payload": payload}
+        p = write_bytes_atomic(json.dumps(doc, allow_nan=True).encode("utf-8"), self.path(key))
+        self.writes += 1
+        return p
+
+    def entries(self) -> list[Path]:
+        """All entry files (valid or not)."""
+        if self.root is None or not self.root.is_dir():
+            return []
+        return sorted(self.root.glob("*/*.json"))
+
+    def counters(self) -> dict[str, int]:
+        """``hits, misses, writes, rejected``."""
+        return {"hits": self.hits, "misses": self.misses, "writes": self.writes, "rejected": self.rejected}

@@ -1,0 +1,299 @@
+"""Monte Carlo tolerance stack-up: tolerance distributions, sampling, yield and variance shares.
+
+Default tolerances (documented in the README and the report): every Table 4 error type is normal
+with mean 0 and standard deviation = its paper value / 3 (``ERROR_TYPES[key].paper_value``: 10 um
+for B..I, 5 um for J, 0.1 deg for K, 0.01 deg for L), applied to its default instance (sun; crank 0;
+crank 0 / disc 0; disc 0 / hole 0; all pins for I and J; pin 0 for L), i.e. the paper value is the
+3-sigma limit.
+
+A tolerance is written ``KEY=DIST:PARAMS`` (``--tolerance``) or as a CSV row ``error,dist,p1,p2,p3``
+(``--tolerances FILE``):
+
+* ``normal:SIGMA[:MEAN]`` -- normal, standard deviation SIGMA, mean MEAN (default 0);
+* ``uniform:LOW:HIGH`` -- uniform on [LOW, HIGH];
+* ``triangular:LOW:MODE:HIGH``;
+* ``fixed:VALUE`` -- a constant;
+* ``none`` -- the error is absent (0).
+
+Values are in the error's unit (um or deg, ``ERROR_TYPES[key].unit``).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from rvcad.errors import ERROR_TYPES
+
+DISTRIBUTIONS = ("normal", "uniform", "triangular", "fixed", "none")
+_NPARAMS = {"normal": (1, 2), "uniform": (2, 2), "triangular": (3, 3), "fixed": (1, 1), "none": (0, 0)}
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """Distribution of one error type's value (in its unit).
+
+    Attributes
+    ----------
+    error : str
+        ``ERROR_TYPES`` key.
+    dist : str
+        One of :data:`DISTRIBUTIONS`.
+    params : tuple of float
+        See the module docstring.
+    """
+
+    error: str
+    dist: str
+    params: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        where = f"tolerance {self.error}"
+        if self.error not in ERROR_TYPES:
+            raise ValueError(f"{where}: error key {self.error!r} is unknown; allowed: {sorted(ERROR_TYPES)}")
+        if self.dist not in DISTRIBUTIONS:
+            raise ValueError(f"{where}: distribution {self.dist!r} is unknown; allowed: {list(DISTRIBUTIONS)}")
+        lo, hi = _NPARAMS[self.dist]
+        if not lo <= len(self.params) <= hi:
+            raise ValueError(f"{where}: {self.dist} takes {lo}..{hi} parameters, got {len(self.params)}")
+        if not all(math.isfinite(p) for p in self.params):
+            raise ValueError(f"{where}: parameters must be finite numbers, got {self.params}")
+        p = self.params
+        if self.dist == "normal" and p[0] < 0:
+            raise ValueError(f"{where}: normal SIGMA {p[0]} must be >= 0")
+        if self.dist == "uniform" and not p[0] <= p[1]:
+            raise ValueError(f"{where}: uniform needs LOW <= HIGH, got {p[0]} > {p[1]}")
+        if self.dist == "triangular" and not p[0] <= p[1] <= p[2]:
+            raise ValueError(f"{where}: triangular needs LOW <= MODE <= HIGH, got {p}")
+
+    @property
+    def unit(self) -> str:
+        """Unit of the values (``um`` or ``deg``)."""
+        return ERROR_TYPES[self.error].unit
+
+    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """``n`` values (float64, in :attr:`unit`)."""
+        p = self.params
+        if self.dist == "normal":
+            return rng.normal(p[1] if len(p) > 1 else 0.0, p[0], n)
+        if self.dist == "uniform":
+            return rng.uniform(p[0], p[1], n)
+        if self.dist == "triangular":
+            if p[0] == p[2]:
+                return np.full(n, p[0])
+            return rng.triangular(p[0], p[1], p[2], n)
+        if self.dist == "fixed":
+            return np.full(n, p[0])
+        return np.zeros(n)
+
+    @property
+    def std(self) -> float:
+        """Standard deviation of the distribution (unit of the error)."""
+        p = self.params
+        if self.dist == "normal":
+            return p[0]
+        if self.dist == "uniform":
+            return (p[1] - p[0]) / math.sqrt(12)
+        if self.dist == "triangular":
+            a, c, b = p
+            return math.sqrt((a * a + b * b + c * c - a * b - a * c - b * c) / 18)
+        return 0.0
+
+    def describe(self) -> str:
+        """``normal(sigma=3.333 um)``-style text."""
+        p, u = self.params, self.unit
+        if self.dist == "normal":
+            m = f", mean={p[1]:g} {u}" if len(p) > 1 and p[1] else ""
+            return f"normal(sigma={p[0]:.4g} {u}{m})"
+        if self.dist == "uniform":
+            return f"uniform({p[0]:g}..{p[1]:g} {u})"
+        if self.dist == "triangular":
+            return f"triangular({p[0]:g}, {p[1]:g}, {p[2]:g} {u})"
+        if self.dist == "fixed":
+            return f"fixed({p[0]:g} {u})"
+        return "none"
+
+
+def default_tolerances() -> dict[str, Tolerance]:
+    """Every Table 4 error type normal(0, paper value / 3)."""
+    return {k: Tolerance(k, "normal", (e.paper_value / 3.0,)) for k, e in ERROR_TYPES.items()}
+
+
+def parse_tolerance(text: str) -> Tolerance:
+    """Parse ``KEY=DIST:P1:P2...`` (e.g. ``pin_pitch=normal:0.005``); ValueError names the option."""
+    if "=" not in text:
+        raise ValueError(f"--tolerance {text!r} must look like KEY=DIST:PARAMS, e.g. pin_radius=normal:1.5")
+    key, spec = text.split("=", 1)
+    return _parse_spec(key.strip(), spec.strip(), f"--tolerance {text!r}")
+
+
+def _parse_spec(key: str, spec: str, where: str) -> Tolerance:
+    parts = [s for s in spec.split(":")]
+    dist = parts[0].strip().lower()
+    try:
+        params = tuple(float(s) for s in parts[1:] if s.strip() != "")
+    except ValueError:
+        raise ValueError(f"{where}: parameters must be numbers, got {spec!r}") from None
+    try:
+        return Tolerance(key, dist, params)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def load_tolerances(path: str | Path) -> dict[str, Tolerance]:
+    """Read a tolerance file: CSV ``error,dist,p1[,p2[,p3]]`` or JSON ``{key: "dist:p1:p2"}``."""
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"--tolerances file {str(p)!r} does not exist")
+    out: dict[str, Tolerance] = {}
+    if p.suffix.lower() == ".json":
+        import json
+
+        try:
+            d = json.loads(p.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"--tolerances file {str(p)!r} is not valid JSON: {exc}") from None
+        if not isinstance(d, dict):
+            raise ValueError(f"--tolerances file {str(p)!r} must hold an object {{error: 'dist:params'}}")
+        for k, v in d.items():
+            out[k] = _parse_spec(k, str(v), f"--tolerances {p.name} key {k!r}")
+        return out
+    df = pd.read_csv(p, dtype=str).fillna("")
+    for c in ("error", "dist"):
+        if c not in df.columns:
+            raise ValueError(f"--tolerances file {str(p)!r} needs columns error,dist,p1..p3; '{c}' is missing")
+    for i, r in df.iterrows():
+        spec = ":".join([r["dist"]] + [r[c] for c in ("p1", "p2", "p3") if c in df.columns and r[c] != ""])
+        out[r["error"]] = _parse_spec(r["error"], spec, f"--tolerances {p.name} row {i + 1}")
+    return out
+
+
+def tolerance_table(tols: Mapping[str, Tolerance]) -> pd.DataFrame:
+    """One row per error type: ``letter, error, unit, distribution, std, paper_value``."""
+    rows = []
+    for k, et in ERROR_TYPES.items():
+        t = tols.get(k, Tolerance(k, "none"))
+        rows.append({"letter": et.letter, "error": k, "unit": et.unit, "distribution": t.describe(),
+                     "std": t.std, "paper_value": et.paper_value})
+    return pd.DataFrame(rows)
+
+
+def sample_errors(tols: Mapping[str, Tolerance], n: int, rng: np.random.Generator,
+                  keys: list[str] | None = None) -> pd.DataFrame:
+    """``n`` independent draws of every error type (columns in :data:`ERROR_TYPES` order)."""
+    keys = list(ERROR_TYPES) if keys is None else keys
+    return pd.DataFrame({k: (tols[k].sample(rng, n) if k in tols else np.zeros(n)) for k in keys})
+
+
+def sobol_indices(f: Callable[[pd.DataFrame], np.ndarray], tols: Mapping[str, Tolerance], keys: list[str],
+                  n: int, rng: np.random.Generator) -> pd.DataFrame:
+    """First-order and total Sobol indices of ``f`` over independent inputs ``keys``.
+
+    Saltelli (2010) estimator for the first order, Jansen (1999) for the total effect, from two
+    independent sample matrices A, B of ``n`` rows and the ``k`` matrices A with column i from B
+    (``n (k + 2)`` evaluations of ``f``).
+
+    Returns
+    -------
+    DataFrame
+        ``error, S1, ST, variance`` (variance of ``f``, response units squared).
+    """
+    A = sample_errors(tols, n, rng, keys)
+    B = sample_errors(tols, n, rng, keys)
+    fA, fB = np.asarray(f(A), float), np.asarray(f(B), float)
+    var = float(np.var(np.r_[fA, fB]))
+    rows = []
+    for k in keys:
+        AB = A.copy()
+        AB[k] = B[k].to_numpy()
+        fAB = np.asarray(f(AB), float)
+        if var > 0:
+            s1 = float(np.mean(fB * (fAB - fA)) / var)
+            st = float(0.5 * np.mean((fA - fAB) ** 2) / var)
+        else:
+            s1 = st = float("nan")
+        rows.append({"error": k, "S1": s1, "ST": st, "variance": var})
+    return pd.DataFrame(rows)
+
+
+def piecewise_linear(x_nodes: np.ndarray, y_nodes: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """Piecewise-linear interpolant through the nodes, extended linearly beyond the end nodes."""
+    o = np.argsort(x_nodes)
+    xs, ys = np.asarray(x_nodes, float)[o], np.asarray(y_nodes, float)[o]
+    xs, idx = np.unique(xs, return_index=True)
+    ys = ys[idx]
+
+    def g(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, float)
+        y = np.interp(x, xs, ys)
+        if xs.size >= 2:
+            lo, hi = x < xs[0], x > xs[-1]
+            y[lo] = ys[0] + (x[lo] - xs[0]) * (ys[1] - ys[0]) / (xs[1] - xs[0])
+            y[hi] = ys[-1] + (x[hi] - xs[-1]) * (ys[-1] - ys[-2]) / (xs[-1] - xs[-2])
+        return y
+
+    return g
+
+
+def oat_variance_shares(nodes: Mapping[str, tuple[np.ndarray, np.ndarray]], samples: pd.DataFrame) -> pd.DataFrame:
+    """One-at-a-time variance of each error's single-factor response under its tolerance.
+
+    Parameters
+    ----------
+    nodes : mapping
+        ``{error: (values, responses)}`` from single-factor solver runs (including 0 = case A).
+    samples : DataFrame
+        Draws of every error (from :func:`sample_errors`).
+
+    Returns
+    -------
+    DataFrame
+        ``error, variance, share`` (share of the summed one-at-a-time variances; interactions are
+        not represented).
+    """
+    rows = []
+    for k, (x, y) in nodes.items():
+        g = piecewise_linear(np.asarray(x), np.asarray(y))
+        v = float(np.var(g(samples[k].to_numpy()))) if k in samples else 0.0
+        rows.append({"error": k, "variance": v})
+    df = pd.DataFrame(rows)
+    tot = df["variance"].sum()
+    df["share"] = df["variance"] / tot if tot > 0 else np.nan
+    return df
+
+
+def yield_estimate(values: np.ndarray, spec: float) -> dict[str, float]:
+    """Fraction of ``values <= spec`` with its 95 % Wilson interval.
+
+    Returns
+    -------
+    dict
+        ``yield, lower, upper, n``.
+    """
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    n = v.size
+    if n == 0:
+        return {"yield": float("nan"), "lower": float("nan"), "upper": float("nan"), "n": 0}
+    p = float(np.mean(v <= spec))
+    z = float(stats.norm.ppf(0.975))
+    den = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / den
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return {"yield": p, "lower": max(0.0, c - h), "upper": min(1.0, c + h), "n": int(n)}
+
+
+def percentiles(values: np.ndarray, qs: tuple[float, ...] = (1, 5, 50, 95, 99)) -> dict[str, float]:
+    """``mean, std`` and the given percentiles of the finite values."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    out = {"mean": float(v.mean()) if v.size else float("nan"),
+           "std": float(v.std(ddof=1)) if v.size > 1 else float("nan")}
+    for q in qs:
+        out[f"p{q:g}"] = float(np.percentile(v, q)) if v.size else float("nan")
+    return out

@@ -1,0 +1,144 @@
+"""Single-factor screen and factor sweeps (rvdyn.screen, ``rvdyn screen``)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from rvcad.errors import ERROR_TYPES
+from rvdyn import cli
+from rvdyn.screen import (
+    RSM_FACTORS,
+    STAGE,
+    TABLE5_HALF_RANGE,
+    rank_errors,
+    run_screen,
+    screen_cases,
+    stage_check,
+    sweep_cases,
+)
+
+STEPS = 24
+
+
+def test_screen_cases_are_table4_at_paper_values():
+    sc = screen_cases(20.0)
+    assert list(sc["letter"]) == ["A"] + [e.letter for e in ERROR_TYPES.values()]
+    for r in sc.itertuples():
+        if r.letter == "A":
+            assert r.case.raw_errors == {}
+            continue
+        et = ERROR_TYPES[r.error]
+        assert r.value == et.paper_value and r.unit == et.unit
+        assert r.case.raw_errors == {r.error: et.paper_value}
+        assert r.case.load_Nm == 20.0
+    both = screen_cases(20.0, both_signs=True)
+    assert len(both) == 23 and len({c.key() for c in both["case"]}) == 23
+    assert set(both.loc[both["sign"] == -1, "value"]) == {-e.paper_value for e in ERROR_TYPES.values()}
+    assert STAGE["B"] == STAGE["C"] == "I" and all(STAGE[L] == "II" for L in "DEFGHIJKL")
+
+
+def test_sweep_cases_span_table5_and_centre_is_case_a():
+    sw = sweep_cases(7)
+    assert len(sw) == 28
+    a = screen_cases()["case"].iloc[0].key()
+    for f, key in RSM_FACTORS.items():
+        d = sw[sw["factor"] == f]
+        assert list(d["error"].unique()) == [key]
+        assert d["value"].min() == -TABLE5_HALF_RANGE[f] and d["value"].max() == TABLE5_HALF_RANGE[f]
+        centre = d[d["value"] == 0.0]["case"].iloc[0]
+        assert centre.key() == a  # zero errors are dropped, so the centre is the error-free case
+    with pytest.raises(ValueError, match="sweep points"):
+        sweep_cases(1)
+
+
+def _fake_runner(values: dict[str, tuple[float, float]]):
+    """Runner returning given (pp, mean_abs) per error key; counts calls."""
+    calls = []
+
+    def run(cases, desc="x"):
+        out = []
+        for c in cases:
+            calls.append(c.key())
+            key = next(iter(c.raw_errors), "none")
+            pp, ma = values.get(key, (0.0, 9.0))
+            out.append({"stats": {"pp": pp, "mean": -ma, "mean_abs": ma, "rms": ma, "seconds": 0.0},
+                        "te_arcsec": np.full(8, -ma), "key": c.key(), "cached": False})
+        return out
+
+    run.calls = calls
+    return run
+
+
+def test_ranking_and_stage_check_on_given_numbers():
+    vals = {k: (float(i + 1), 9.0 + i) for i, k in enumerate(ERROR_TYPES)}  # B smallest ... L largest
+    vals["sun_eccentricity"] = (0.01, 9.0)
+    vals["planet_eccentricity"] = (0.02, 9.01)
+    r = run_screen(runner=_fake_runner(vals), sweeps=False)
+    s = r.screen.set_index("letter")
+    assert s.loc["L", "rank_pp"] == 1 and s.loc["B", "rank_pp"] == 11 and s.loc["C", "rank_pp"] == 10
+    assert r.stage_check["pp"]["reproduced"] and r.stage_check["pp"]["below_rsm_factors"]
+    # make a stage II error smaller than C: no longer reproduced, and it is named
+    vals["cam_phase"] = (0.015, 9.0)
+    r = run_screen(runner=_fake_runner(vals), sweeps=False)
+    assert not r.stage_check["pp"]["reproduced"]
+    assert r.stage_check["pp"]["stage2_below_stage1"] == ["D"]
+
+
+def test_rank_needs_case_a():
+    df = pd.DataFrame({"letter": ["B"], "sign": [1], "pp_arcsec": [1.0], "mean_abs_arcsec": [1.0]})
+    with pytest.raises(ValueError, match="case A"):
+        rank_errors(df)
+
+
+def test_real_screen_small_steps():
+    """The analytic solver at a few steps: stage I errors change the TE ripple far less than cam and hole errors."""
+    r = run_screen("analytic", STEPS, 3, 20.0, progress=False)
+    s = r.screen.set_index("letter")
+    assert np.isfinite(s["pp_arcsec"]).all()
+    assert s.loc["A", "pp_arcsec"] < 1e-3  # error-free: a constant elastic wind-up only
+    assert s.loc["A", "mean_abs_arcsec"] > 1.0  # ... of several arcsec at 20 N m
+    for stage1 in ("B", "C"):
+        for big in ("D", "E", "G"):
+            assert s.loc[stage1, "d_pp_arcsec"] < s.loc[big, "d_pp_arcsec"]
+    assert len(r.sweeps) == 12 and set(r.sweeps["factor"]) == set(RSM_FACTORS)
+    assert set(r.stage_check) == {"pp", "mean_abs"}
+
+
+def test_screen_command_writes_tables_plots_and_json(tmp_path, capsys):
+    rc = cli.main(["screen", "--out", str(tmp_path), "--solver", "analytic", "--steps", str(STEPS),
+                   "--sweep-points", "2", "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"screen", "sweeps", "stage_check", "files"} <= set(out)
+    for name in ("screen.csv", "sweeps.csv", "screen.png", "sweeps.png", "te_curves.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert not list(tmp_path.glob(".*"))  # no temporary files left
+    tab = pd.read_csv(tmp_path / "screen.csv")
+    assert len(tab) == 12 and tab["rank_pp"].notna().sum() == 11
+    assert [r["letter"] for r in out["screen"]][0] == "A"
+
+
+def test_screen_command_human_summary(tmp_path, capsys, monkeypatch):
+    import rvdyn.screen as screen
+
+    vals = {k: (float(i + 1), 9.0 + i) for i, k in enumerate(ERROR_TYPES)}
+    monkeypatch.setattr(screen, "serial_runner", lambda *a, **k: _fake_runner(vals))
+    monkeypatch.setattr(screen, "write_screen_outputs", lambda result, out: {"screen_csv": str(out)})
+    assert cli.main(["screen", "--out", str(tmp_path), "--solver", "analytic", "--steps", str(STEPS),
+                     "--sweep-points", "2"]) == 0
+    text = capsys.readouterr().out
+    assert "stage I" in text and "pin_pitch" in text and "reproduced" in text
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--steps", "1"], "--steps"),
+    (["--sweep-points", "1"], "--sweep-points"),
+    (["--load-Nm", "-3"], "--load-Nm"),
+])
+def test_screen_bad_options_exit_2(tmp_path, capsys, argv, needle):
+    rc = cli.main(["screen", "--out", str(tmp_path), "--solver", "analytic", *argv])
+    assert rc == 2
+    assert needle in capsys.readouterr().err

@@ -1,0 +1,274 @@
+"""rv-stackup: cache reuse, resume after interruption, corrupt entries, report from the run, bad options.
+
+All runs use the analytic solver at a few steps so that the whole file stays quick.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import rvstudy.executor as executor_mod
+from rvstudy import cli, paper
+from rvstudy.cache import CaseCache, Job
+from rvstudy.montecarlo import (
+    Tolerance,
+    load_tolerances,
+    parse_tolerance,
+    piecewise_linear,
+    sobol_indices,
+    yield_estimate,
+)
+from rvstudy.study import StudyConfig, run_study
+
+STEPS = 24
+ROOT = Path(__file__).resolve().parents[1]
+# the design stage alone: 27 runs, 25 unique cases
+DOE = ["--solver", "analytic", "--steps", str(STEPS), "--workers", "1", "--stages", "doe", "--no-progress",
+       "--no-figures"]
+
+
+def _cfg(out: Path, **kw) -> StudyConfig:
+    base = dict(out=out, solver="analytic", steps=STEPS, workers=1, stages=("doe",), progress=False, figures=False)
+    base.update(kw)
+    return StudyConfig(**base)
+
+
+def _design_numbers(out: Path) -> pd.DataFrame:
+    d = pd.read_csv(out / "tables" / "design_runs.csv")
+    return d[["run", "mean_abs_arcmin", "pp_arcmin", "status"]]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> Path:
+    """One uninterrupted design-stage run (the numbers every other run must reproduce)."""
+    out = tmp_path_factory.mktemp("reference")
+    assert cli.main(["--out", str(out), *DOE, "--json"]) == 0
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- paper data
+def test_embedded_paper_tables_equal_shared_csvs(shared_data):
+    t5 = pd.read_csv(shared_data / "paper_table5_levels.csv")
+    pd.testing.assert_frame_equal(paper.table5_levels().drop(columns="error"), t5)
+    pd.testing.assert_frame_equal(paper.table6_runs(), pd.read_csv(shared_data / "paper_table6_bbd_runs.csv"))
+    t7 = pd.read_csv(shared_data / "paper_table7_anova.csv", dtype={"p": str}).set_index("source")
+    pd.testing.assert_frame_equal(paper.table7_anova(), t7)
+    e8 = pd.read_csv(shared_data / "paper_eq8_coefficients_actual_units.csv").set_index("term")["coefficient"]
+    pd.testing.assert_series_equal(paper.eq8_coefficients(), e8)
+
+
+# ---------------------------------------------------------------------------------------------- cache
+def test_rerun_reuses_every_case(reference, tmp_path, capsys, monkeypatch):
+    out = tmp_path / "run"
+    assert cli.main(["--out", str(out), *DOE, "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert first["cases"]["computed"] == 25 and first["cases"]["reused"] == 0
+    calls = []
+    real = executor_mod.run_te
+    monkeypatch.setattr(executor_mod, "run_te", lambda *a, **k: calls.append(1) or real(*a, **k))
+    assert cli.main(["--out", str(out), *DOE, "--json"]) == 0
+    second = json.loads(capsys.readouterr().out)
+    assert second["cases"]["computed"] == 0 and second["cases"]["reused"] == 25 and calls == []
+    pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
+    # the cache key follows the physics: another load is another case
+    assert cli.main(["--out", str(out), *DOE, "--load-Nm", "10", "--json"]) == 0
+    third = json.loads(capsys.readouterr().out)
+    assert third["cases"]["computed"] == 25
+
+
+def test_interrupted_run_resumes_without_loss(reference, tmp_path):
+    out = tmp_path / "run"
+    k = 7
+    done = []
+
+    def dying(payload):
+        if len(done) == k:
+            raise KeyboardInterrupt("simulated kill")
+        done.append(payload["key"])
+        return executor_mod.solve_job(payload)
+
+    with pytest.raises(KeyboardInterrupt):
+        run_study(_cfg(out), solve_fn=dying)
+    cache = CaseCache(out / "cache")
+    entries = cache.entries()
+    assert len(entries) == k
+    assert all(cache.get(p.stem) is not None for p in entries)  # every entry complete and valid
+    res = run_study(_cfg(out))
+    assert res.counters["reused"] == k and res.counters["computed"] == 25 - k
+    from rvstudy.report import write_report
+
+    write_report(res)
+    pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
+
+
+def test_killed_subprocess_resumes_and_corrupts_nothing(reference, tmp_path):
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "rvstudy", "--out", str(out), *DOE]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    cache = CaseCache(out / "cache")
+    t0 = time.time()
+    while len(cache.entries()) < 5 and time.time() - t0 < 120 and proc.poll() is None:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    n = len(cache.entries())
+    assert 0 < n < 25, "the kill should land mid-run"
+    assert all(cache.get(p.stem) is not None for p in cache.entries())
+    r = subprocess.run(cmd + ["--json"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert s["cases"]["reused"] >= n and s["cases"]["computed"] + s["cases"]["reused"] == 25
+    pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
+
+
+def test_corrupt_and_partial_entries_are_recomputed(reference, tmp_path):
+    out = tmp_path / "run"
+    run_study(_cfg(out))
+    cache = CaseCache(out / "cache")
+    entries = cache.entries()
+    entries[0].write_text(entries[0].read_text()[:50])  # partial (truncated) file
+    doc = json.loads(entries[1].read_text())
+    doc["payload"]["stats"]["pp"] = 123.0  # tampered: checksum no longer matches
+    entries[1].write_text(json.dumps(doc))
+    entries[2].write_text("not json at all")
+    res = run_study(_cfg(out))
+    assert res.counters["computed"] == 3 and res.cache_counters["rejected"] == 3
+    assert all(cache.get(p.stem) is not None for p in cache.entries())
+    from rvstudy.report import write_report
+
+    write_report(res)
+    pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
+
+
+def test_job_key_covers_solver_steps_and_law():
+    from rvcad.errors import Case
+    from rvdyn.contacts import ContactLaw
+
+    c = Case.from_dict({"errors": {"pin_pitch": 0.01}})
+    k = Job(c, "analytic", 24).key()
+    assert Job(Case.from_dict({"name": "other", "errors": {"pin_pitch": 0.01}}), "analytic", 24).key() == k
+    assert Job(c, "fcl", 24).key() != k
+    assert Job(c, "analytic", 48).key() != k
+    assert Job(c, "analytic", 24, law=ContactLaw(K=1e5)).key() != k
+    assert Job(c.with_errors({"pin_pitch": 0.02}), "analytic", 24).key() != k
+
+
+# ---------------------------------------------------------------------------------------------- report
+def test_report_tables_come_from_the_run(reference, tmp_path):
+    t6 = pd.read_csv(reference / "tables" / "table6_compare.csv")
+    design = pd.read_csv(reference / "tables" / "design_runs.csv")
+    np.testing.assert_array_equal(t6["mean_abs_arcmin"], design["mean_abs_arcmin"])
+    assert list(t6["paper_te_arcmin"]) == list(paper.table6_runs()["te_arcmin"])
+    report = (reference / "report.md").read_text()
+    st = pd.read_csv(reference / "tables" / "fit_statistics.csv").set_index("response")
+    assert f"{st.loc['mean_abs_arcmin', 'r2']:.4f}" in report
+    # change an input (the levels): the tables change with it
+    lv = paper.table5_levels().drop(columns="error")
+    lv.loc[lv["factor"] == "EC", ["low", "high"]] = [-3.0, 3.0]
+    lv.to_csv(tmp_path / "levels.csv", index=False)
+    out = tmp_path / "run"
+    assert cli.main(["--out", str(out), *DOE, "--levels", str(tmp_path / "levels.csv")]) == 0
+    d2 = pd.read_csv(out / "tables" / "design_runs.csv")
+    assert set(d2["EC_actual"]) == {-3.0, 0.0, 3.0}
+    assert not np.allclose(d2["mean_abs_arcmin"].fillna(-1), design["mean_abs_arcmin"].fillna(-1))
+    st2 = pd.read_csv(out / "tables" / "fit_statistics.csv").set_index("response")
+    assert f"{st2.loc['mean_abs_arcmin', 'r2']:.4f}" in (out / "report.md").read_text()
+    assert st2.loc["mean_abs_arcmin", "r2"] != st.loc["mean_abs_arcmin", "r2"]
+    # the levels moved away from the paper's: no paper columns are claimed
+    assert "paper_te_arcmin" not in pd.read_csv(out / "tables" / "table6_compare.csv")
+
+
+def test_full_pipeline_small(tmp_path, capsys):
+    """Every stage with small counts, figures included; the report sets ours beside the paper's."""
+    out = tmp_path / "run"
+    rc = cli.main(["--out", str(out), "--solver", "analytic", "--steps", str(STEPS), "--workers", "1",
+                   "--sweep-points", "3", "--validation-cases", "4", "--mc-check", "2", "--mc-samples", "500",
+                   "--no-progress"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert text.strip().splitlines()[-1] == f"report: {out / 'report.md'}"
+    rep = (out / "report.md").read_text()
+    for section in ("Single-factor screen", "Factor sweeps", "Table 6", "Table 7", "Eq. 8", "Eq. 9",
+                    "Fig. 12", "Fig. 13", "Monte Carlo", "reproduced or not"):
+        assert section in rep, section
+    for name in ("screen", "sweeps", "table6_compare", "table7_compare_mean_abs_arcmin", "eq8_compare_mean_abs_arcmin",
+                 "eq9_compare_mean_abs_arcmin", "validation_metrics", "mc_distribution", "mc_yield", "mc_sobol",
+                 "mc_oat_shares", "conclusions"):
+        assert (out / "tables" / f"{name}.csv").is_file(), name
+        assert (out / "tables" / f"{name}.parquet").is_file(), name
+    for link in [line.split("](")[1].rstrip(")") for line in rep.splitlines() if line.startswith("![")]:
+        assert (out / link).is_file(), link
+    s = json.loads((out / "summary.json").read_text())
+    assert s["monte_carlo"]["yield_surface"]["n"] == 500
+    cc = pd.read_csv(out / "tables" / "conclusions.csv")
+    assert set(cc["reproduced"]) <= {"yes", "no", "partly", "untestable"}
+    assert "lack_of_fit_ns" in set(cc["claim"])
+    assert not [p for p in out.rglob(".*") if p.is_file()]  # no temporary files left
+
+
+# ---------------------------------------------------------------------------------------------- options
+@pytest.mark.parametrize("argv, needle", [
+    (["--steps", "1"], "--steps"),
+    (["--workers", "0"], "--workers"),
+    (["--tolerance", "bogus=normal:1"], "bogus"),
+    (["--tolerance", "pin_pitch=normal:-1"], "SIGMA"),
+    (["--tolerance", "pin_pitch"], "--tolerance"),
+    (["--tolerance", "pin_pitch=gamma:1"], "distribution"),
+    (["--levels", "/nonexistent/levels.csv"], "--levels"),
+    (["--factors", "EA", "EZ", "EC"], "--factors"),
+    (["--stages", "doe,bogus"], "--stages"),
+    (["--load-Nm", "-1"], "--load-Nm"),
+    (["--spec-arcmin", "0"], "--spec-arcmin"),
+    (["--mc-samples", "5"], "--mc-samples"),
+    (["--design", "plackett"], "--design"),
+    (["--solver", "magic"], "--solver"),
+    (["--steps", "many"], "--steps"),
+    (["--K", "-5"], "K"),
+    (["--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "1"], "--scheduler"),
+    (["--scheduler-timeout", "0"], "--scheduler-timeout"),
+])
+def test_bad_options_exit_2_naming_the_option(tmp_path, capsys, argv, needle):
+    try:
+        rc = cli.main(["--out", str(tmp_path), "--solver", "analytic", "--no-progress", *argv])
+    except SystemExit as exc:  # argparse: type and choice errors
+        rc = exc.code
+    assert rc == 2
+    assert needle in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------- Monte Carlo parts
+def test_tolerance_parsing_and_files(tmp_path):
+    t = parse_tolerance("pin_radius=uniform:-2:2")
+    assert t.dist == "uniform" and t.params == (-2.0, 2.0) and abs(t.std - 4 / np.sqrt(12)) < 1e-12
+    assert parse_tolerance("disc_phase=none").sample(np.random.default_rng(0), 3).tolist() == [0, 0, 0]
+    (tmp_path / "t.csv").write_text("error,dist,p1,p2\npin_pitch,normal,0.002,\ncam_phase,uniform,-1,1\n")
+    d = load_tolerances(tmp_path / "t.csv")
+    assert d["pin_pitch"] == Tolerance("pin_pitch", "normal", (0.002,))
+    (tmp_path / "t.json").write_text(json.dumps({"sun_eccentricity": "triangular:-1:0:1"}))
+    assert load_tolerances(tmp_path / "t.json")["sun_eccentricity"].dist == "triangular"
+
+
+def test_sobol_of_additive_function_and_yield():
+    tols = {"a": None}
+    from rvstudy.montecarlo import default_tolerances
+
+    tols = default_tolerances()
+    keys = ["sun_eccentricity", "cam_phase"]  # both normal sigma 10/3
+    f = lambda D: 1.0 * D["sun_eccentricity"].to_numpy() + 2.0 * D["cam_phase"].to_numpy()  # noqa: E731
+    s = sobol_indices(f, tols, keys, 20000, np.random.default_rng(1)).set_index("error")
+    assert abs(s.loc["sun_eccentricity", "S1"] - 0.2) < 0.03 and abs(s.loc["cam_phase", "S1"] - 0.8) < 0.03
+    assert abs(s.loc["cam_phase", "ST"] - 0.8) < 0.03
+    y = yield_estimate(np.array([0.5, 0.9, 1.5, 2.0]), 1.0)
+    assert y["yield"] == 0.5 and y["lower"] < 0.5 < y["upper"]
+    g = piecewise_linear(np.array([-1.0, 0.0, 1.0]), np.array([1.0, 0.0, 2.0]))
+    np.testing.assert_allclose(g(np.array([-2.0, -0.5, 0.5, 3.0])), [2.0, 0.5, 1.0, 6.0])
