@@ -28,6 +28,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from rvcad.atomic import atomic_path
 import numpy as np
 import pandas as pd
 
@@ -42,15 +43,9 @@ MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg"
 
 
 def _write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
             df.to_csv(fh, index=False, float_format="%.10f")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:

@@ -8,8 +8,6 @@ TE = theta_out - theta_in / ratio, in arcsec, positive when the output leads.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from rvcad.atomic import atomic_path
 from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvdyn.contacts import AnalyticContacts, ContactLaw
@@ -80,16 +79,9 @@ class TEResult:
 def write_table_atomic(df: pd.DataFrame, path: str | Path) -> Path:
     """Write a CSV so that no half-written file is ever left at ``path``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
             df.to_csv(fh, index=False, float_format="%.10g")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return path
 
 

@@ -18,11 +18,11 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from rvcad.atomic import atomic_path
 import numpy as np
 import pandas as pd
 
@@ -47,34 +47,19 @@ def write_table(df: pd.DataFrame, tables: Path, name: str) -> dict[str, str]:
     """Write ``name.csv`` and ``name.parquet`` atomically; returns their paths."""
     csv = write_table_atomic(df, tables / f"{name}.csv")
     pq = tables / f"{name}.parquet"
-    fd, tmp = tempfile.mkstemp(prefix=f".{pq.name}.", suffix=".tmp", dir=tables)
-    os.close(fd)
-    try:
-        clean = df.copy()
-        for c in clean.columns:
-            if clean[c].dtype == object:
-                clean[c] = clean[c].map(lambda v: v if v is None or isinstance(v, str) else str(v))
+    clean = df.copy()
+    for c in clean.columns:
+        if clean[c].dtype == object:
+            clean[c] = clean[c].map(lambda v: v if v is None or isinstance(v, str) else str(v))
+    with atomic_path(pq) as tmp:
         clean.to_parquet(tmp, index=False)
-        os.replace(tmp, pq)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return {"csv": str(csv), "parquet": str(pq)}
 
 
 def _atomic_plot(fn: Callable[[Path], Any], path: Path) -> Path:
     """Call ``fn(tmp_path)`` (a plot function that writes a PNG) and move the file to ``path`` atomically."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        fn(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_path(path, suffix=path.suffix) as tmp:
+        fn(tmp)
     return path
 
 
