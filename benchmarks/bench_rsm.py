@@ -12,8 +12,9 @@ import numpy as np
 import pandas as pd
 
 import rsm
+from rvstudy.paper import DATA_DIR as PAPER_DATA
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+DATA = PAPER_DATA
 
 
 def _time(label: str, fn, repeat: int = 5) -> None:

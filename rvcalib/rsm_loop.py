@@ -345,5 +345,6 @@ def format_result(res: RSMLoopResult, top: int = 8) -> str:
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    here = Path(__file__).resolve().parents[2] / "shared" / "data"
-    print(format_result(table6_loop(sys.argv[1] if len(sys.argv) > 1 else here)))
+    from rvstudy.paper import DATA_DIR
+
+    print(format_result(table6_loop(sys.argv[1] if len(sys.argv) > 1 else DATA_DIR)))

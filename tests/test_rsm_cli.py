@@ -12,9 +12,10 @@ import pandas as pd
 import pytest
 
 from rsm.cli import main
+from rvstudy.paper import DATA_DIR as PAPER_DATA
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data"
+DATA = PAPER_DATA
 RUNS = str(DATA / "paper_table6_bbd_runs.csv")
 LEVELS = str(DATA / "paper_table5_levels.csv")
 FIT = ["fit", RUNS, "--factors", "EA", "EB", "EC", "ED", "--response", "te_arcmin"]

@@ -12,8 +12,9 @@ import pytest
 import rsm
 from rsm.design import BBD_BLOCKS
 from rsm.terms import model_matrix, parse_terms
+from rvstudy.paper import DATA_DIR as PAPER_DATA
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+DATA = PAPER_DATA
 BBD_RUNS = {3: 12, 4: 24, 5: 40, 6: 48, 7: 56}
 
 

@@ -10,8 +10,9 @@ import pandas as pd
 import pytest
 
 import rsm
+from rvstudy.paper import DATA_DIR as PAPER_DATA
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+DATA = PAPER_DATA
 FACTORS = ["EA", "EB", "EC", "ED"]
 
 

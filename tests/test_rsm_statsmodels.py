@@ -11,8 +11,9 @@ import statsmodels.api as sm
 import statsmodels.formula.api as smf
 
 import rsm
+from rvstudy.paper import DATA_DIR as PAPER_DATA
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+DATA = PAPER_DATA
 
 
 def _sm_name(term: str) -> str:
