@@ -12,7 +12,7 @@ from pathlib import Path
 
 
 @contextmanager
-def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
+def atomic_path(path: str | Path, suffix: str = ".tmp", fsync: bool = False) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on normal exit it replaces ``path``.
 
     Parameters
@@ -21,6 +21,9 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
         Final file (its folder is created).
     suffix : str
         Suffix of the temporary name (e.g. ``".png"`` where a writer infers the format from it).
+    fsync : bool
+        Flush the temporary file to disk before the rename (a crash then leaves the old or the new
+        file, never an empty one; costs a disk sync per file).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -28,6 +31,9 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
+        if fsync:
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -29,7 +29,6 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -37,6 +36,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from rvcad.atomic import atomic_path
 from rvcad.errors import Case
 from rvcad.parts import Assembly, Part
 from rvcad.tessellate import stl_bytes
@@ -147,18 +147,11 @@ class ExportReport:
 
 def _atomic_write(path: Path, writer: Callable[[Path], None]) -> int:
     """Run ``writer(tmp)`` on a temporary file in the same folder, then rename it to ``path``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp_p = Path(tmp)
-    try:
-        writer(tmp_p)
-        size = tmp_p.stat().st_size
+    with atomic_path(path) as tmp:
+        writer(tmp)
+        size = tmp.stat().st_size
         if size == 0:
             raise RuntimeError(f"writing {path.name} produced an empty file")
-        os.replace(tmp_p, path)
-    except BaseException:
-        tmp_p.unlink(missing_ok=True)
-        raise
     return size
 
 

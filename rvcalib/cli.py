@@ -18,9 +18,10 @@ from rvcalib.dataset import MeasuredDataset, read_dataset
 
 
 def auto_steps(ds: MeasuredDataset) -> int:
-    """Model grid for a dataset: its samples per output revolution when every run is sampled on the
-    same uniform grid of a multiple of 40 points (then the model is evaluated exactly at the
-    samples), else 360."""
+    """Model grid for a dataset (screening and grid fits): its samples per output revolution when
+    every run is sampled on the same uniform grid of a multiple of 40 points (then the screening
+    sees every sample), else 360. Residuals and final fits solve the model at every reading
+    whatever the grid."""
     per = set()
     for r in ds.runs:
         n = r.n / max(r.revolutions, 1e-12)

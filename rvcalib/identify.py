@@ -27,8 +27,8 @@ Algorithm (:func:`calibrate`)
    harmonic-only model is not clearly better (BIC lower by more than 2). If the harmonic-only
    model is better, what is left is reported as *unexplained* (its order and size) and absorbed by
    a labelled empirical harmonic term; it is never named as a physical effect.
-5. Estimation: all added parameters are re-fitted jointly through the full nonlinear model on the
-   model grid at every sample (``least_squares``; empirical terms are projected out linearly) and
+5. Estimation: all added parameters are re-fitted jointly through the full nonlinear model
+   solved exactly at every reading (``least_squares``; empirical terms are projected out linearly) and
    the F test and BIC are confirmed on all samples.
 6. Repeat until nothing passes; then confidence intervals from the Jacobian (forward differences)
    and the residual variance, widened by ``sqrt((1 + rho) / (1 - rho))`` for a lag-1 residual
@@ -47,8 +47,7 @@ from scipy import optimize, stats
 
 from rvcalib.dataset import PERIOD_DEG, RATIO, MeasuredDataset, RunRecord
 from rvcalib.effects import Effect, Library, build_library, polar_to_xy, trial_points
-from rvcalib.forward import (ModelEvaluationError, cache_stats, coarse_stride, grid_te, merge_case,
-                             periodic_interp)
+from rvcalib.forward import ModelEvaluationError, cache_stats, coarse_stride, grid_te, merge_case, te_at
 from rvcalib.dataset import noise_estimate
 from rvcalib.residual import Diagnostics, diagnose, lag1_autocorr
 
@@ -365,6 +364,7 @@ class Calibrator:
                 keys[k] = len(self.cond_base)
                 self.cond_base.append(b)
             self.cond_of.append(keys[k])
+        self._cond_runs = [[i for i, c in enumerate(self.cond_of) if c == cc] for cc in range(len(self.cond_base))]
         self.y = [r.te_arcsec for r in self.runs]
         self.n = int(sum(v.size for v in self.y))
         self.yc = [_coarse_values(r, y, self.m) for r, y in zip(self.runs, self.y)]
@@ -402,10 +402,23 @@ class Calibrator:
         return out
 
     def predict(self, active: list[tuple[Effect, np.ndarray]]) -> list[np.ndarray]:
-        """Model TE (physics + measurement effects) at every sample of every run, arcsec."""
-        g = self._phys_grid(active, self.steps)
-        return [periodic_interp(g[self.cond_of[i]], r.input_deg) + self._meas(active, r.input_deg, r.output_deg)
-                for i, r in enumerate(self.runs)]
+        """Model TE (physics + measurement effects) at every sample of every run, arcsec.
+
+        The physics is solved exactly at the readings (:func:`rvcalib.forward.te_at`, one solve per
+        run condition over the union of its runs' readings), not interpolated from the model grid:
+        the TE has kinks and crank-order content that no practical grid resolves.
+        """
+        phys = [(e, p) for e, p in active if e.family != "measurement"]
+        out: list[np.ndarray] = [np.empty(0)] * len(self.runs)
+        for c, members in enumerate(self._cond_runs):
+            x = np.concatenate([self.runs[i].input_deg for i in members])
+            te = te_at(self._case(c, phys), x)
+            j = 0
+            for i in members:
+                r = self.runs[i]
+                out[i] = te[j:j + r.input_deg.size] + self._meas(active, r.input_deg, r.output_deg)
+                j += r.input_deg.size
+        return out
 
     def predict_grid(self, active, ms: int | None = None) -> list[np.ndarray]:
         """Model TE at the points of an ``ms``-point grid (default the coarse grid) for every run,

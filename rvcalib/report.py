@@ -144,7 +144,8 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
              f"{result.rms_after:.4g} arcsec (physical and measurement effects only: {result.after_physical.rms:.4g})")
     L.append(f"- noise estimate (second differences of the final residual): {result.noise_arcsec:.4g} arcsec; "
              f"final residual white (Ljung-Box): {'yes' if result.after.white else 'no'}")
-    L.append(f"- {len(ds.runs)} runs, {ds.n_samples} samples, model grid {result.steps} points per output revolution, "
+    L.append(f"- {len(ds.runs)} runs, {ds.n_samples} samples, screening grid {result.steps} points per output "
+             "revolution (the fits and the residuals solve the model at every reading), "
              f"{result.seconds:.1f} s ({result.solver_stats.get('solves', 0)} rvdyn solves)")
     L.append("")
     L.append("## Effects found")
@@ -276,8 +277,8 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
     L.append("")
     L.append(
         "Measured TE = output_deg - input_deg/121 (arcsec); model TE = rvdyn quasi-static TE (analytic contacts) of "
-        "each run's declared errors, load and direction on a uniform grid of one output revolution, interpolated "
-        "periodically to the measured input angles. Candidates: every Table 4 error and instance, the rvdyn model "
+        "each run's declared errors, load and direction, solved exactly at every measured input angle (modulo one "
+        "output revolution; no interpolation). Screening uses a uniform grid of one output revolution. Candidates: every Table 4 error and instance, the rvdyn model "
         "options (torsional compliance, output friction, cam-bearing clearance, thermal growth where the "
         "temperature varies, pin-circle ovality) and encoder eccentricities (assumed scale radii: output "
         f"{OUTPUT_ENCODER_RADIUS_MM:g} mm, input {INPUT_ENCODER_RADIUS_MM:g} mm; the eccentricity scales with the "

@@ -7,9 +7,9 @@ runs' ``declared`` errors say.
 
 What the "rig" does, per run:
 
-1. True TE: rvdyn (analytic contacts) on a uniform grid of ``samples_per_rev`` input angles per
-   output revolution, for the declared plus the hidden errors and model options; the record
-   repeats it periodically (TE is periodic in one output revolution).
+1. True TE: rvdyn (analytic contacts) solved exactly at every sample's input angle
+   (``samples_per_rev`` per output revolution from ``start_deg``), for the declared plus the
+   hidden errors and model options (TE is periodic in one output revolution).
 2. Encoders: the input reading is ``theta_in + (eps_in / R_in) sin(theta_in + phi_in) + noise``,
    the output reading ``theta_out + (eps_out / R_out) sin(theta_out + phi_out) + noise`` (radii of
    :mod:`rvcalib.effects`), Gaussian noise in arcsec of each encoder.
@@ -23,20 +23,18 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
-from rvcad.atomic import atomic_path
 import numpy as np
 import pandas as pd
 
+from rvcad.atomic import atomic_path
 from rvcad.errors import ERROR_TYPES, MODEL_OPTIONS, Case
 
 from rvcalib.dataset import PERIOD_DEG, RATIO
 from rvcalib.effects import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM
-from rvcalib.forward import grid_te, merge_case, periodic_interp
+from rvcalib.forward import merge_case, te_at
 
 MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg",
                     "input_encoder_eccentricity_um", "input_encoder_phase_deg")
@@ -94,7 +92,8 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
 def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: dict[str, Any] | None = None,
                      noise_arcsec: float = 0.15, input_noise_arcsec: float = 2.0, samples_per_rev: int = 240,
                      revolutions: float = 1.0, transient: dict[str, Any] | None = None, duplicates: int = 0,
-                     seed: int = 0, answer_path: str | Path | None = None, speed_rpm: float | None = None) -> Path:
+                     seed: int = 0, answer_path: str | Path | None = None, speed_rpm: float | None = None,
+                     start_deg: float = 0.0) -> Path:
     """Write a simulated measured dataset and its answer file.
 
     Parameters
@@ -115,7 +114,11 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     input_noise_arcsec : float
         Input encoder noise, arcsec (enters the TE divided by 121).
     samples_per_rev : int
-        Samples per output revolution (also the truth's grid).
+        Samples per output revolution (any count >= 40; the rig's sampling, not a model grid).
+    start_deg : float
+        Input angle of the first sample, deg. With 0 and a ``samples_per_rev`` that is a multiple
+        of 40 the samples sit on a model grid; any other start puts them off every grid, as on a
+        real rig.
     revolutions : float
         Output revolutions recorded per run (>= 1).
     transient : dict or None
@@ -150,6 +153,8 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     N = int(samples_per_rev)
+    if N < 40:
+        raise ValueError(f"samples_per_rev {samples_per_rev} must be >= 40")
     step = PERIOD_DEG / N
     tr = dict(transient or {})
     tr_runs = tr.get("runs", "all")
@@ -172,13 +177,12 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
                 errs.append((key, item if isinstance(item, dict) else {"value": item}))
         truth = merge_case(base, errs, dict(hidden.get("model") or {}))
         Case.from_dict(truth)  # validate (names the field)
-        g = grid_te(truth, N)
         has_tr = bool(tr) and (tr_runs == "all" or rid in [str(x) for x in tr_runs])
         revs = revolutions + (float(tr.get("extra_revolutions", 0.1)) if has_tr else 0.0)
         M = int(math.ceil(revs * N - 1e-9))
         k = np.arange(M)
-        th_in = d * k * step
-        te = periodic_interp(g, th_in)
+        th_in = float(start_deg) + d * k * step
+        te = te_at(truth, th_in)  # exact at every sample
         th_out = th_in / RATIO + te / 3600.0
         for h in hidden.get("harmonics") or []:
             te_h = float(h["amplitude_arcsec"]) * np.cos(int(h["order"]) * np.radians(th_out)
@@ -217,15 +221,15 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     te_noise = math.sqrt(noise_arcsec ** 2 + (input_noise_arcsec / RATIO) ** 2)
     answer = {"dataset": str(out), "hidden": hidden, "expected_effects": expected_effects(hidden),
               "noise_te_arcsec": te_noise, "noise_output_arcsec": noise_arcsec,
-              "noise_input_arcsec": input_noise_arcsec, "samples_per_rev": N, "revolutions": revolutions,
+              "noise_input_arcsec": input_noise_arcsec, "samples_per_rev": N,
+              "start_deg": float(start_deg), "revolutions": revolutions,
               "transient": tr or None, "duplicates": int(duplicates), "seed": seed,
               "encoder_radii_mm": {"output": OUTPUT_ENCODER_RADIUS_MM, "input": INPUT_ENCODER_RADIUS_MM}}
     ap = Path(answer_path) if answer_path is not None else out.parent / f"{out.name}.answer.json"
     ap.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{ap.name}.", suffix=".tmp", dir=ap.parent)
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        json.dump(answer, fh, indent=2)
-    os.replace(tmp, ap)
+    with atomic_path(ap) as tmp:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(answer, fh, indent=2)
     return ap
 
 

@@ -100,7 +100,7 @@ def input_angles(ratio: float, steps: int, revolutions: float, direction: int) -
 
 def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: float = 1.0,
            load_Nm: float | None = None, direction: int | None = None, law: ContactLaw | None = None,
-           geom: ReducerGeometry | None = None) -> TEResult:
+           geom: ReducerGeometry | None = None, theta_in_deg: np.ndarray | None = None) -> TEResult:
     """Quasi-static TE of a case.
 
     Parameters
@@ -119,6 +119,10 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
         Contact law (default K = 2e5 N/mm^1.5, n = 1.5).
     geom : ReducerGeometry or None
         Pre-built geometry of the case (saves rebuilding).
+    theta_in_deg : (N,) array or None
+        Explicit input angles, deg, in the order of motion (e.g. the readings of a test rig); they
+        replace ``steps`` and ``revolutions``. The analytic provider solves every angle on its own,
+        so the values do not depend on the order or the spacing.
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
@@ -127,7 +131,15 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     if d not in (1, -1):
         raise ValueError(f"direction {direction!r} must be +1 or -1")
     g = geom if geom is not None else ReducerGeometry(case)
-    th = input_angles(g.ratio, steps, revolutions, d)
+    if theta_in_deg is None:
+        th = input_angles(g.ratio, steps, revolutions, d)
+    else:
+        th = np.radians(np.asarray(theta_in_deg, dtype=float))
+        if th.ndim != 1 or th.size < 2 or not np.all(np.isfinite(th)):
+            raise ValueError(f"theta_in_deg must be a 1-D array of at least 2 finite angles (deg); got shape "
+                             f"{th.shape}")
+        steps = int(th.size)
+        revolutions = float(abs(th[-1] - th[0]) / (2.0 * math.pi * g.ratio))
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, make_contacts(g, solver), law)
     sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else FCL_CHUNK)

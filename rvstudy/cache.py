@@ -18,12 +18,12 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from rvcad.atomic import atomic_path
 from rvcad.errors import Case
 from rvdyn.contacts import ContactLaw
 
@@ -104,19 +104,8 @@ def _checksum(payload: dict[str, Any]) -> str:
 def write_bytes_atomic(data: bytes, path: str | Path, fsync: bool = True) -> Path:
     """Write ``data`` to ``path`` through a temporary file in the same folder and :func:`os.replace`."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            if fsync:
-                os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_path(path, fsync=fsync) as tmp:
+        tmp.write_bytes(data)
     return path
 
 
