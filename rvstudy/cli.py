@@ -56,8 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="random validation cases (default 15, as the paper)")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"seed of the random draws (default {DEFAULT_SEED})")
     p.add_argument("--mc-samples", type=int, default=20000, help="Monte Carlo draws through the surfaces (default 20000)")
-    p.add_argument("--mc-check", type=int, default=12,
-                   help="Monte Carlo draws through the full solver with all 11 errors (default 12)")
+    p.add_argument("--mc-check", type=int, default=100,
+                   help="Monte Carlo draws through the full solver with all 11 errors (default 100)")
     p.add_argument("--tolerance", action="append", default=[], metavar="KEY=DIST:PARAMS",
                    help="tolerance of one error type (repeatable); default every type normal(0, paper value/3)")
     p.add_argument("--tolerances", default=None, metavar="FILE",

@@ -145,7 +145,7 @@ class StudyConfig:
     n_validation: int = 15
     seed: int = DEFAULT_SEED
     mc_samples: int = 20000
-    mc_check: int = 12
+    mc_check: int = 100
     tolerances: dict[str, Tolerance] = field(default_factory=default_tolerances)
     spec_arcmin: float = 1.0
     cache_dir: Path | None = None
