@@ -18,6 +18,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import math
+import time
 from collections import OrderedDict
 from typing import Any
 
@@ -68,7 +69,8 @@ def grid_angles_deg(steps: int) -> np.ndarray:
 
 
 def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> np.ndarray:
-    """Model TE (arcsec) on the uniform grid of one output revolution, ascending input angle.
+    """Model TE (arcsec) on the uniform grid of one output revolution, ascending input angle
+    (:func:`te_at` at :func:`grid_angles_deg`).
 
     Parameters
     ----------
@@ -84,30 +86,7 @@ def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> 
     ModelEvaluationError
         If rvdyn refuses the case (interference beyond the contact law) or does not converge.
     """
-    import time
-
-    try:
-        case = Case.from_dict(case_dict)
-    except ValueError as exc:
-        raise ModelEvaluationError(str(exc)) from None
-    key = (case.key(), int(steps), solver)
-    hit = _CACHE.get(key)
-    if hit is not None:
-        _CACHE.move_to_end(key)
-        _STATS["hits"] += 1
-        return hit
-    t0 = time.perf_counter()
-    try:
-        res = run_te(case, solver=solver, steps=int(steps), revolutions=1.0)
-    except (ValueError, RuntimeError) as exc:
-        raise ModelEvaluationError(f"rvdyn could not evaluate the case: {exc}") from None
-    _STATS["solves"] += 1
-    _STATS["seconds"] += time.perf_counter() - t0
-    tab = res.table
-    order = np.argsort(tab["input_deg"].to_numpy())
-    te = tab["te_arcsec"].to_numpy()[order].copy()
-    _store(key, te)
-    return te
+    return te_at(case_dict, grid_angles_deg(int(steps)), solver)
 
 
 def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analytic") -> np.ndarray:
@@ -123,10 +102,8 @@ def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analy
     Raises
     ------
     ModelEvaluationError
-        As :func:`grid_te`.
+        If rvdyn refuses the case (interference beyond the contact law) or does not converge.
     """
-    import time
-
     try:
         case = Case.from_dict(case_dict)
     except ValueError as exc:
@@ -134,10 +111,7 @@ def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analy
     x = np.mod(np.asarray(input_deg, dtype=float), PERIOD_DEG)
     xr = np.round(x, 9)
     u, inv = np.unique(xr, return_inverse=True)
-    if case.direction == -1:
-        u_run = u[::-1]
-    else:
-        u_run = u
+    u_run = u[::-1] if case.direction == -1 else u  # in the order of motion
     key = (case.key(), "at", hashlib.blake2b(u.tobytes(), digest_size=16).hexdigest(), solver)
     hit = _CACHE.get(key)
     if hit is None:
