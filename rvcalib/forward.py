@@ -5,8 +5,7 @@ revolution (input 121 turns, cranks 40, sun relative to the carrier 120), so ang
 modulo it. :func:`grid_te` solves a uniform grid of ``steps`` input angles over one output
 revolution (the screening and the grid fits of :mod:`rvcalib.identify`, and readings that sit on
 the grid); :func:`te_at` solves exactly at given angles (readings off the grid: interpolating the
-grid is not exact, see there). :func:`periodic_interp` is the periodic cubic spline through grid
-values, for smooth grid signals. Solutions are cached by the case's content hash (which holds the
+grid is not exact, see there). Solutions are cached by the case's content hash (which holds the
 load and the direction) and the angles, so identical conditions and repeated trial values are
 solved once per process; the cache is bounded by :data:`CACHE_BYTES`.
 
@@ -23,12 +22,11 @@ from collections import OrderedDict
 from typing import Any
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from rvcad.errors import Case
 from rvdyn.te import run_te
 
-from rvcalib.dataset import PERIOD_DEG, RATIO, RunRecord
+from rvcalib.dataset import PERIOD_DEG, RATIO
 
 #: Maximum number of cached solutions.
 CACHE_SIZE = 20000
@@ -132,23 +130,6 @@ def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analy
     return hit[inv]
 
 
-def periodic_interp(grid_values: np.ndarray, input_deg: np.ndarray) -> np.ndarray:
-    """Periodic cubic-spline interpolation of grid values at input angles (deg, any revolution)."""
-    n = grid_values.size
-    x = np.append(grid_angles_deg(n), PERIOD_DEG)
-    y = np.append(grid_values, grid_values[0])
-    xq = np.mod(np.asarray(input_deg, dtype=float), PERIOD_DEG)
-    # exact at the nodes (avoid round-off of the spline at node angles)
-    k = xq / (PERIOD_DEG / n)
-    kr = np.rint(k)
-    on = np.abs(k - kr) < 1e-9
-    outv = np.empty_like(xq)
-    if np.any(~on):
-        outv[~on] = CubicSpline(x, y, bc_type="periodic")(xq[~on])
-    outv[on] = grid_values[(kr[on].astype(int)) % n]
-    return outv
-
-
 def merge_case(base: dict[str, Any], errors: list[tuple[str, dict]] | None = None,
                model: dict[str, float] | None = None) -> dict[str, Any]:
     """A copy of a case JSON with additional error instances and model options.
@@ -184,11 +165,6 @@ def merge_case(base: dict[str, Any], errors: list[tuple[str, dict]] | None = Non
         m = d.setdefault("model", {})
         m.update(model)
     return d
-
-
-def run_grid_values(values: np.ndarray, run: RunRecord) -> np.ndarray:
-    """Values of a one-revolution grid signal at the run's input readings."""
-    return periodic_interp(values, run.input_deg)
 
 
 def output_angle_rad(input_deg: np.ndarray) -> np.ndarray:

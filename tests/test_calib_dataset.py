@@ -11,7 +11,7 @@ import pytest
 from rvcalib.cli import main
 from rvcalib.dataset import PERIOD_DEG, RATIO, noise_estimate, read_dataset
 from rvcalib.effects import OUTPUT_ENCODER_RADIUS_MM, build_library
-from rvcalib.forward import coarse_stride, grid_angles_deg, merge_case, periodic_interp
+from rvcalib.forward import coarse_stride, merge_case
 
 
 def write(folder: Path, runs: pd.DataFrame, samples: pd.DataFrame) -> Path:
@@ -163,16 +163,10 @@ def test_cli_bad_input_exit_2(tmp_path, capsys):
     assert "--steps" in capsys.readouterr().err
 
 
-def test_noise_estimate_and_interpolation():
+def test_noise_estimate_and_coarse_stride():
     rng = np.random.default_rng(3)
     x = np.sin(np.linspace(0, 6, 2000)) + rng.normal(0, 0.2, 2000)
     assert abs(noise_estimate(x) - 0.2) < 0.02
-    g = np.sin(2 * np.pi * 3 * np.arange(120) / 120)
-    ang = grid_angles_deg(120)
-    assert np.allclose(periodic_interp(g, ang + 2 * PERIOD_DEG), g, atol=1e-12)
-    assert np.allclose(periodic_interp(g, -ang), g[(-np.arange(120)) % 120], atol=1e-12)
-    mid = ang[:-1] + PERIOD_DEG / 240
-    assert np.allclose(periodic_interp(g, mid), np.sin(2 * np.pi * 3 * (np.arange(119) + 0.5) / 120), atol=1e-4)
     assert coarse_stride(240) == 2 and coarse_stride(360) == 3 and coarse_stride(120) == 1
 
 
