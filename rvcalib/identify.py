@@ -90,6 +90,19 @@ class EmpiricalTerm:
         return "unexplained direction-dependent offset"
 
     @property
+    def note(self) -> str:
+        """What such a term can be, where the data cannot say more (empty for a harmonic)."""
+        if self.kind == "offset":
+            return ("the same constant in every run, load and direction: a zero offset between the input and "
+                    "output encoders, or a rotation of the whole pin housing (all 40 pins), which the TE cannot "
+                    "tell apart; not a clearance (that changes sign with the direction) or a compliance (that "
+                    "grows with the load)")
+        if self.kind == "direction_offset":
+            return ("a lost motion (sign follows the direction) that no clearance or friction of the library "
+                    "explains better")
+        return ""
+
+    @property
     def n_cols(self) -> int:
         """Columns it adds."""
         return 2 if self.kind == "harmonic" else 1
@@ -171,12 +184,13 @@ class Unexplained:
     phase_deg: float | None
     iteration: int
     explained_fraction: float
+    note: str = ""
 
     def to_dict(self) -> dict:
         """JSON-ready form."""
         return {"label": self.label, "kind": self.kind, "order": self.order,
                 "amplitude_arcsec": self.amplitude_arcsec, "phase_deg": self.phase_deg,
-                "iteration": self.iteration, "explained_fraction": self.explained_fraction}
+                "iteration": self.iteration, "explained_fraction": self.explained_fraction, "note": self.note}
 
 
 @dataclass
@@ -958,8 +972,15 @@ class Calibrator:
             log["harmonic_best"] = None if hbest is None else {
                 "label": hbest["term"].label, "F": Fh, "p": ph, "delta_bic": dbh,
                 "explained_fraction": hbest["explained"]}
+            # a constant (or direction-signed constant) that each adds to the other with the physical
+            # candidate goes first when it is clearly better by BIC: many library effects (pin circle
+            # diameter, pin radius, disc phase, clearances) shift the whole curve, so a constant such as
+            # an encoder zero offset is otherwise absorbed by a mixture of them. Harmonics keep the rule
+            # above (physical first when it adds), as physical signatures span several orders.
+            harm_first = (sig_h and harm_adds and hbest["term"].kind != "harmonic"
+                          and dbh < dbp - HARMONIC_BIC_MARGIN)
             dec = "stop"
-            if sig_p and (phys_adds or not harm_adds):
+            if sig_p and (phys_adds or not harm_adds) and not harm_first:
                 dec = "physical"
             elif sig_h:
                 dec = "empirical"
@@ -1297,7 +1318,7 @@ class Calibrator:
             else:
                 amp, phase = float(c[0]), None
             itn, frac = emp_iter.get(t, (0, float("nan")))
-            unexplained.append(Unexplained(t.label, t.kind, t.order, amp, phase, itn, frac))
+            unexplained.append(Unexplained(t.label, t.kind, t.order, amp, phase, itn, frac, t.note))
         after = diagnose(self.ds, r_all)
         after_phys = diagnose(self.ds, r_phys)
         noise = math.sqrt(sum(noise_estimate(r) ** 2 * r.size for r in r_all) / self.n)

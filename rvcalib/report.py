@@ -174,11 +174,11 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
     L.append("## Unexplained (outside the library)")
     L.append("")
     if result.unexplained:
-        L.append("| term | order | amplitude (arcsec) | phase (deg) | explained |")
-        L.append("|---|---|---|---|---|")
+        L.append("| term | order | amplitude (arcsec) | phase (deg) | explained | what it can be |")
+        L.append("|---|---|---|---|---|---|")
         for u in result.unexplained:
             L.append(f"| {u.label} | {u.order} | {abs(u.amplitude_arcsec):.4g} | {_fmt(u.phase_deg)} | "
-                     f"{u.explained_fraction:.3f} |")
+                     f"{u.explained_fraction:.3f} | {u.note or '-'} |")
         L.append("")
         L.append("These are labelled empirical terms (``A cos(k theta_out + phase)``, common to all runs): no physical "
                  "or measurement candidate explained this part of the residual better than a pure harmonic, so it "

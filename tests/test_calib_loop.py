@@ -133,6 +133,20 @@ def test_effect_outside_library_is_unexplained(workdir):
     assert abs(res.rms_after / ans["noise_te_arcsec"] - 1.0) <= 0.2
 
 
+def test_encoder_zero_offset_is_not_disguised_as_physics(workdir):
+    """A 30 arcsec zero offset between the encoders (on every run) beside a hidden torsional
+    compliance. Before the BIC tie-break, a disc phase error, a pin circle diameter error and a sun
+    eccentricity absorbed the constant and the compliance came out at 0.026 instead of 0.3."""
+    res, ans, _ = run_scenario(workdir, "zero-offset", {"model": {"torsional_compliance_arcsec_per_Nm": 0.3},
+                                                        "harmonics": [{"order": 0, "amplitude_arcsec": 30.0}]})
+    assert [e.name for e in res.effects] == ["torsional_compliance_arcsec_per_Nm"]
+    assert abs(res.effects[0].value - 0.3) <= 0.03
+    assert len(res.unexplained) == 1 and res.unexplained[0].kind == "offset"
+    assert abs(res.unexplained[0].amplitude_arcsec - 30.0) < 0.5 and "encoders" in res.unexplained[0].note
+    assert res.rms_before / res.rms_after >= 5.0
+    assert abs(res.rms_after / ans["noise_te_arcsec"] - 1.0) <= 0.2
+
+
 def test_clean_data_fits(workdir):
     res, ans, _ = run_scenario(workdir, "clean", {})
     assert res.effects == [] and res.unexplained == []
