@@ -83,14 +83,15 @@ def _clean(v: float) -> float:
     return 0.0 if v == 0 else v
 
 
-def make_case(errors: dict[str, float], name: str, load_Nm: float = 20.0, direction: int = 1,
+def make_case(errors: dict[str, float | list[float]], name: str, load_Nm: float = 20.0, direction: int = 1,
               base: dict[str, Any] | None = None) -> Case:
     """A case with the given default-instance error values (zeros dropped, so equal physics => equal key).
 
     Parameters
     ----------
     errors : dict
-        ``{error_key: value}`` in the error's unit (um or deg).
+        ``{error_key: value}`` in the error's unit (um or deg); a pin-wise error may also take the
+        list of its value at every pin.
     name : str
         Case name (not part of the cache key).
     load_Nm : float
@@ -104,7 +105,8 @@ def make_case(errors: dict[str, float], name: str, load_Nm: float = 20.0, direct
         for k in ("design", "model"):
             if base.get(k):
                 d[k] = base[k]
-    d["errors"] = {k: _clean(v) for k, v in errors.items() if _clean(v) != 0.0}
+    clean = {k: ([_clean(x) for x in v] if isinstance(v, (list, tuple)) else _clean(v)) for k, v in errors.items()}
+    d["errors"] = {k: v for k, v in clean.items() if (any(v) if isinstance(v, list) else v != 0.0)}
     return Case.from_dict(d)
 
 

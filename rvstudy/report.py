@@ -219,11 +219,14 @@ def _factor_strength_note(res: StudyResult, f: str) -> str:
     theirs = float(d.loc[edge, "paper_te_arcmin"].mean() - d.loc[centre, "paper_te_arcmin"].mean())
     key = res.factors.errors[f]
     et = ERROR_TYPES[key]
-    inst = ", ".join(f"{k} {v}" for k, v in et.defaults.items())
+    pattern = res.factors.patterns.get(f)
+    inst = (f"pattern {pattern}" if pattern else ", ".join(f"{k} {v}" for k, v in et.defaults.items()))
     return (f" Mean response of the runs at {f} = +-1 minus that at {f} = 0: paper {theirs:.3g} arcmin, ours "
-            f"{ours:.3g} arcmin. Our {f} is `{key}`: {et.meaning}" + (f" ({inst})" if inst else "")
-            + f"; the paper shows its {f} pattern only in a schematic (Fig. 10), not in the text, so a "
-            "pattern that moves more pins (a stronger, more nearly quadratic effect) cannot be ruled out.")
+            f"{ours:.3g} arcmin. Our {f} is `{res.factors.spec(f)}`: {et.meaning}" + (f" ({inst})" if inst else "")
+            + f"; the paper shows its {f} pattern only in a schematic (Fig. 10), not in the text. A pattern "
+            "that moves more pins acts more strongly: all 40 pins moved by EA rotate the pin ring and shift the "
+            "output by about EA itself, every other pin by about half of it (`--levels` with error "
+            "`pin_pitch[all]` or `pin_pitch[alternate]` runs these variants).")
 
 
 def conclusions(res: StudyResult) -> pd.DataFrame:
@@ -462,7 +465,7 @@ def write_report(res: StudyResult) -> Path:
         {"item": "contact law", "value": f"F = {cfg.K:g} delta^{cfg.n:g} (N, mm)"},
         {"item": "executor", "value": res.executor},
         {"item": "design / factors", "value": f"{res.design_kind or '-'} / " + ", ".join(
-            f"{f}={fs.errors[f]}" for f in fs.names)},
+            f"{f}={fs.spec(f)}" for f in fs.names)},
         {"item": "unique cases: solved now / reused from cache / failed",
          "value": f"{c.get('computed', 0)} / {c.get('reused', 0)} / {c.get('failed', 0)}"},
         {"item": "solver seconds per case (mean / median, computed cases)",

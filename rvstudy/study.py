@@ -204,19 +204,52 @@ class StudyConfig:
 
 
 # ---------------------------------------------------------------------------------------------- factors
+#: Pin patterns a factor of a pin-wise error (pin_pitch, pin_circle_diameter, pin_radius) can take,
+#: written ``key[pattern]`` in the levels table's ``error`` column: ``all`` = every pin gets the
+#: factor's value (for pin_pitch a rotation of the whole pin ring), ``alternate`` = the even pins
+#: 0, 2, ..., 38 get it and the odd pins none. Without a pattern the value goes to the error's
+#: default instance (pin_pitch: pin 0 only; the radius errors: all pins).
+PIN_PATTERNS = ("all", "alternate")
+
+
+def pattern_value(key: str, pattern: str | None, value: float, z_pins: int = 40) -> float | list[float]:
+    """The case-JSON value of a factor setting: the number itself, or the list of ``z_pins`` pin values
+    of a pin pattern (see :data:`PIN_PATTERNS`), in the error's unit."""
+    if pattern is None:
+        return value
+    if pattern == "all":
+        return [value] * z_pins
+    if pattern == "alternate":
+        return [value if i % 2 == 0 else 0.0 for i in range(z_pins)]
+    raise ValueError(f"pattern {pattern!r} of {key} is unknown; allowed: {list(PIN_PATTERNS)}")
+
+
 @dataclass
 class FactorSet:
-    """RSM factors: names, the error type of each, and the levels table (actual units = error units)."""
+    """RSM factors: names, the error type of each (and its pin pattern), and the levels table
+    (actual units = error units)."""
 
     names: list[str]
     errors: dict[str, str]
     levels: rsm.Levels
     table: pd.DataFrame
     is_paper: bool
+    patterns: dict[str, str | None] = field(default_factory=dict)
 
     @property
     def error_keys(self) -> list[str]:
         return [self.errors[f] for f in self.names]
+
+    def spec(self, f: str) -> str:
+        """``key`` or ``key[pattern]`` of factor ``f``."""
+        p = self.patterns.get(f)
+        return self.errors[f] + (f"[{p}]" if p else "")
+
+    def case_errors(self, values: dict[str, float]) -> dict[str, float | list[float]]:
+        """Case-JSON errors of error values keyed by error type: a factor's pattern is applied to its
+        error type's value; other error types keep their default instance."""
+        pat = {self.errors[f]: self.patterns.get(f) for f in self.names}
+        return {k: pattern_value(k, pat.get(k), float(v)) for k, v in values.items()}
 
 
 def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSet:
@@ -252,10 +285,21 @@ def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSe
     if not 3 <= len(names) <= 7:
         raise ValueError(f"--factors: the designs need 3 to 7 factors, got {len(names)} ({names})")
     errors: dict[str, str] = {}
+    patterns: dict[str, str | None] = {}
     for f in names:
         row = df[df["factor"].astype(str).str.strip() == f].iloc[0]
         key = str(row["error"]).strip() if "error" in df.columns and pd.notna(row.get("error")) else (
             RSM_FACTORS.get(f, f))
+        m = re.fullmatch(r"([A-Za-z_]+)\s*\[\s*([A-Za-z_]+)\s*\]", key)
+        pattern = None
+        if m:
+            key, pattern = m.group(1), m.group(2)
+            if pattern not in PIN_PATTERNS:
+                raise ValueError(f"--levels: factor {f!r} has pin pattern {pattern!r}; allowed: {list(PIN_PATTERNS)}")
+            if key in ERROR_TYPES and not ERROR_TYPES[key].pinwise:
+                raise ValueError(f"--levels: factor {f!r}: a pin pattern needs a pin-wise error "
+                                 f"({sorted(k for k, e in ERROR_TYPES.items() if e.pinwise)}), not {key!r}")
+        patterns[f] = pattern
         if key not in ERROR_TYPES:
             raise ValueError(f"--levels: factor {f!r} maps to no Table 4 error (error {key!r}); add an 'error' "
                              f"column with one of {sorted(ERROR_TYPES)}")
@@ -269,11 +313,12 @@ def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSe
     levels = levels.subset(names)
     ptab = paper.table5_levels().set_index("factor")
     is_paper = names == list(ptab.index) and all(
-        errors[f] == ptab.loc[f, "error"] and levels[f].low == ptab.loc[f, "low"]
+        errors[f] == ptab.loc[f, "error"] and patterns[f] is None and levels[f].low == ptab.loc[f, "low"]
         and levels[f].center == ptab.loc[f, "center"] and levels[f].high == ptab.loc[f, "high"] for f in names)
     table = levels.to_frame()
     table["error"] = [errors[f] for f in table["factor"]]
-    return FactorSet(names, errors, levels, table, is_paper)
+    table["pattern"] = [patterns[f] or "default instance" for f in table["factor"]]
+    return FactorSet(names, errors, levels, table, is_paper, patterns)
 
 
 # ---------------------------------------------------------------------------------------------- results
@@ -328,7 +373,7 @@ def _responses(results: list[dict[str, Any]]) -> pd.DataFrame:
 def _cases_for(fs: FactorSet, actual: np.ndarray, prefix: str, cfg: StudyConfig) -> list[Case]:
     out = []
     for i, row in enumerate(np.atleast_2d(actual)):
-        errs = {fs.errors[f]: float(v) for f, v in zip(fs.names, row)}
+        errs = fs.case_errors({fs.errors[f]: float(v) for f, v in zip(fs.names, row)})
         try:
             out.append(make_case(errs, f"{prefix}-{i + 1}", cfg.load_Nm))
         except ValueError as exc:
@@ -433,7 +478,7 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
         if "screen" in cfg.stages or "mc" in cfg.stages:
             t0 = time.perf_counter()
             half = {f: fs.levels[f].half_range for f in fs.names if f in RSM_FACTORS and fs.errors[f] == RSM_FACTORS[f]
-                    and fs.levels[f].center == 0}
+                    and fs.patterns.get(f) is None and fs.levels[f].center == 0}
             res.screen = run_screen(cfg.solver, cfg.steps, cfg.sweep_points, cfg.load_Nm, runner=runner,
                                     both_signs=True, half_range=half or None, progress=cfg.progress,
                                     sweeps="screen" in cfg.stages)
@@ -574,7 +619,7 @@ def _monte_carlo(cfg: StudyConfig, fs: FactorSet, runner: CachedRunner, res: Stu
         cases, valid = [], []
         for i, row in C.iterrows():
             try:
-                cases.append(make_case(row.to_dict(), f"mc-{i + 1}", cfg.load_Nm))
+                cases.append(make_case(fs.case_errors(row.to_dict()), f"mc-{i + 1}", cfg.load_Nm))
                 valid.append(i)
             except ValueError as exc:
                 res.notes.append(f"Monte Carlo check draw {i + 1} is not a valid case and is skipped: {exc}")

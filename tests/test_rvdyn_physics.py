@@ -94,6 +94,19 @@ def test_stage1_error_reduced_by_stage2_ratio() -> None:
     assert stage2.stats["pp"] > 3 * r.stats["pp"]
 
 
+@pytest.mark.parametrize("delta_deg", [0.06, -0.06])
+def test_pin_ring_rotation_shifts_te_by_120_over_121_of_it(delta_deg: float) -> None:
+    """Every pin moved by delta along the pin circle (pin_pitch on all 40 pins) is the pin ring
+    rotated by delta: the same as rotating everything but the sun by delta, so the output moves by
+    delta and the input sun, relative to the rest, by -delta: TE shifts by delta * (1 - 1/121),
+    uniformly (the curve keeps its shape)."""
+    nominal = run_te(Case.from_dict({"load_Nm": 20.0}), steps=120)
+    rotated = run_te(Case.from_dict({"load_Nm": 20.0, "errors": {"pin_pitch": [delta_deg] * 40}}), steps=120)
+    shift = rotated.table["te_arcsec"].to_numpy() - nominal.table["te_arcsec"].to_numpy()
+    expected = delta_deg * 3600.0 * 120.0 / 121.0
+    assert np.max(np.abs(shift - expected)) < 0.01, (shift.min(), shift.max(), expected)
+
+
 def test_unresolvable_interference_is_refused() -> None:
     case = Case.from_dict({"errors": {"pin_circle_diameter": -14}})
     g = ReducerGeometry(case)

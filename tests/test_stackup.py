@@ -275,3 +275,39 @@ def test_sobol_of_additive_function_and_yield():
     assert y["yield"] == 0.5 and y["lower"] < 0.5 < y["upper"]
     g = piecewise_linear(np.array([-1.0, 0.0, 1.0]), np.array([1.0, 0.0, 2.0]))
     np.testing.assert_allclose(g(np.array([-2.0, -0.5, 0.5, 3.0])), [2.0, 0.5, 1.0, 6.0])
+
+
+# ---------------------------------------------------------------------------------------------- pin patterns
+def _levels_with(tmp_path: Path, ea_error: str) -> Path:
+    lv = paper.table5_levels()
+    lv.loc[lv["factor"] == "EA", "error"] = ea_error
+    p = tmp_path / "levels.csv"
+    lv.to_csv(p, index=False)
+    return p
+
+
+@pytest.mark.parametrize("pattern, expect", [
+    ("all", [0.06] * 40),
+    ("alternate", [0.06 if i % 2 == 0 else 0.0 for i in range(40)]),
+])
+def test_pin_pattern_of_a_factor_reaches_the_case(tmp_path, pattern, expect):
+    from rvstudy.study import StudyConfig, _cases_for, load_factors
+    fs = load_factors(str(_levels_with(tmp_path, f"pin_pitch[{pattern}]")), None)
+    assert fs.errors["EA"] == "pin_pitch" and fs.patterns["EA"] == pattern and not fs.is_paper
+    assert fs.spec("EA") == f"pin_pitch[{pattern}]"
+    case = _cases_for(fs, np.array([[0.06, 0.0, 0.0, 0.0]]), "t", StudyConfig())[0]
+    assert case.to_dict()["errors"] == {"pin_pitch": expect}
+    # other error types (as in the Monte Carlo check) keep their default instance
+    assert fs.case_errors({"pin_pitch": 0.01, "pin_radius": 2.0}) == {
+        "pin_pitch": [v / 0.06 * 0.01 for v in expect], "pin_radius": 2.0}
+
+
+@pytest.mark.parametrize("error, needle", [
+    ("pin_pitch[every_third]", "pin pattern 'every_third'"),
+    ("disc_hole_eccentricity[all]", "needs a pin-wise error"),
+])
+def test_bad_pin_pattern_is_named(tmp_path, capsys, error, needle):
+    rc = cli.main(["--out", str(tmp_path / "o"), "--solver", "analytic", "--no-progress",
+                   "--levels", str(_levels_with(tmp_path, error))])
+    assert rc == 2
+    assert needle in capsys.readouterr().err
