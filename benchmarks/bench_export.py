@@ -8,6 +8,7 @@ envelope and involute flanks (um), next to the STL figure (vertices and chord mi
 """
 from __future__ import annotations
 
+import sys
 import argparse
 import resource
 import shutil
@@ -17,9 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rvcad.errors import load_case
-from rvcad.export import edge_samples, export_case, read_step
-from rvcad.parts import Assembly, CycloidDisc, _Gear
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
+
+from rvcad.errors import load_case  # noqa: E402
+from rvcad.export import edge_samples, export_case, read_step  # noqa: E402
+from rvcad.parts import Assembly, CycloidDisc, _Gear  # noqa: E402
 
 
 def main() -> None:

@@ -5,14 +5,17 @@ Prints one line per case: mean wall time over repeats. Not a test; no thresholds
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-import rsm
-from rvstudy.paper import DATA_DIR as PAPER_DATA
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
+
+import rsm  # noqa: E402
+from rvstudy.paper import DATA_DIR as PAPER_DATA  # noqa: E402
 
 DATA = PAPER_DATA
 

@@ -25,6 +25,10 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
+
 from rvdyn.screen import make_case  # noqa: E402
 from rvdyn.te import run_te  # noqa: E402
 
@@ -76,7 +80,7 @@ def full(solver: str | None, steps: int | None, workers: int) -> None:
         c = s["cases"]
         print(f"default study ({' '.join(cmd[3:])}): wall {wall:.1f} s (budget 600 s); CPU of all processes "
               f"{cpu:.1f} s (on an otherwise idle 2-core machine the wall time is about max(CPU / 2, serial parts))")
-        print(f"  stages [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in s["timings_s"].items()))
+        print("  stages [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in s["timings_s"].items()))
         print(f"  cases: {c['computed']} solved, {c['failed']} failed, solver s/case mean {c['solve_seconds_mean']:.2f}, "
               f"median {c['solve_seconds_median']:.2f}; report + imports {wall - s['timings_s']['total']:.1f} s")
 

@@ -17,6 +17,11 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
+
 from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
 from rvdyn.te import run_te  # noqa: E402
 
@@ -29,7 +34,8 @@ def main() -> None:
     ap.add_argument("--compare", action="store_true", help="fcl vs analytic on every Table 4 error")
     a = ap.parse_args()
     cases = {"nominal": Case.from_dict({"name": "nominal"}),
-             "pin_pitch 0.01 deg": Case.from_dict({"errors": {"pin_pitch": 0.01}})}
+             "pin_pitch 0.01 deg": Case.from_dict({"errors": {"pin_pitch": 0.01}}),
+             "cam clearance 6 um": Case.from_dict({"model": {"cam_bearing_clearance_um": 6.0}})}
     for solver in a.solver:
         for name, case in cases.items():
             best = cpu = np.inf

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rvcad.errors import model_value
-from rvcad.geometry import ReducerGeometry, rot
+from rvcad.geometry import ReducerGeometry
 from rvcad.tolerances import TOL, Tolerances
 from rvdyn.contacts import ContactLaw
 
@@ -213,35 +213,50 @@ class QuasiStaticSolver:
         return G, J
 
     # ------------------------------------------------------------------ bearings
-    def _bearing(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Energy (N,), gradient (N, ndof) and Gauss-Newton Hessian (N, ndof, ndof) of the cam bearings."""
-        N = x.shape[0]
-        E = np.zeros(N)
-        g = np.zeros((N, self.ndof))
-        H = np.zeros((N, self.ndof, self.ndof))
+    def _hole_arms(self, th_in: np.ndarray, x: np.ndarray) -> np.ndarray | None:
+        """Disc holes relative to their disc's centre, turned with the disc at the states x, divided
+        by the turn lever ``a``: (N, nd, nc, 2), or None without floating discs.
+
+        The inner solve takes them at its linearisation point (like the contact gaps): the hole
+        direction turns by the disc's rotation, microradians within a step, and the outer iteration
+        re-evaluates them, so the converged state is exact."""
         if not self.float_discs:
-            return E, g, H
+            return None
         to, ps, _, _ = self._unpack(th_in, x)
         _, ang = self.geom.disc_poses(to, ps)
-        for k in range(self.nd):
-            base = 1 + self.nc + 3 * k
-            for hidx in range(self.nc):
-                r = np.einsum("nij,j->ni", rot(ang[:, k]), self.geom.disc_holes[k, hidx])
-                # hole displacement s = shift + (turn*a/a) z x r ; d s / d(x) rows
-                B = np.zeros((N, 2, self.ndof))
-                B[:, 0, base] = 1.0
-                B[:, 1, base + 1] = 1.0
-                B[:, 0, base + 2] = -r[:, 1] / self.a
-                B[:, 1, base + 2] = r[:, 0] / self.a
-                s = np.einsum("nid,nd->ni", B, x)
-                sn = np.linalg.norm(s, axis=1)
-                over = np.maximum(sn - self.clearance, 0.0)
-                E += 0.5 * self.bearing_k * over ** 2
-                u = np.where(sn[:, None] > 0, s / np.maximum(sn, 1e-300)[:, None], 0.0)
-                Ju = np.einsum("ni,nid->nd", u, B)
-                g += (self.bearing_k * over)[:, None] * Ju
-                act = (over > 0).astype(float)
-                H += (self.bearing_k * act)[:, None, None] * np.einsum("nd,ne->nde", Ju, Ju)
+        c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]        # (N, nd, 1)
+        h = self.geom.disc_holes[None]                                    # (1, nd, nc, 2)
+        hx, hy = h[..., 0], h[..., 1]
+        return np.stack([c * hx - sn * hy, sn * hx + c * hy], axis=-1) / self.a
+
+    def _bearing(self, x: np.ndarray, arms: np.ndarray | None,
+                 derivs: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Energy (N,), gradient (N, ndof) and Gauss-Newton Hessian (N, ndof, ndof) of the cam bearings
+        (the derivatives None when ``derivs`` is False).
+
+        Each hole moves by ``s = shift + turn * (z x r) / a`` (disc shift and turn DOFs, r the hole's
+        arm of :meth:`_hole_arms`); its bearing is a spring ``bearing_k`` beyond the clearance."""
+        N = x.shape[0]
+        if arms is None:
+            return np.zeros(N), np.zeros((N, self.ndof)), np.zeros((N, self.ndof, self.ndof))
+        nd, nc, kb = self.nd, self.nc, self.bearing_k
+        blk = x[:, 1 + nc:].reshape(N, nd, 1, 3)                       # disc shift x, y and turn
+        perp = np.stack([-arms[..., 1], arms[..., 0]], axis=-1)        # d s / d turn, (N, nd, nc, 2)
+        s_ = blk[..., :2] + blk[..., 2:3] * perp
+        sn = np.sqrt(s_[..., 0] ** 2 + s_[..., 1] ** 2)
+        over = np.maximum(sn - self.clearance, 0.0)
+        E = 0.5 * kb * (over ** 2).sum(axis=(1, 2))
+        if not derivs:
+            return E, None, None
+        u = s_ / np.maximum(sn, 1e-300)[..., None]                     # over > 0 only where sn > 0
+        Ju = np.concatenate([u, (u * perp).sum(axis=-1, keepdims=True)], axis=-1)   # (N, nd, nc, 3)
+        g = np.zeros((N, self.ndof))
+        g[:, 1 + nc:] = ((kb * over)[..., None] * Ju).sum(axis=2).reshape(N, 3 * nd)
+        Hb = np.einsum("nkh,nkhi,nkhj->nkij", kb * (over > 0), Ju, Ju)
+        H = np.zeros((N, self.ndof, self.ndof))
+        for k in range(nd):
+            base = 1 + nc + 3 * k
+            H[:, base:base + 3, base:base + 3] = Hb[:, k]
         return E, g, H
 
     # ------------------------------------------------------------------ solve
@@ -268,10 +283,11 @@ class QuasiStaticSolver:
         floor = float(floor_k) * max(1.0, M / 4.0) * np.ones(D)
         eye = np.eye(D)
 
+        arms = self._hole_arms(th_in, x0)
+
         def energy(s):
             delta = -(G + _jdot(J, s))
-            Eb = self._bearing(th_in, x0 + s)[0] if self.float_discs else 0.0
-            return law.energy(delta).sum(axis=1) + s @ b + Eb
+            return law.energy(delta).sum(axis=1) + s @ b + self._bearing(x0 + s, arms, derivs=False)[0]
 
         E0 = energy(step)
         Jnorm = np.linalg.norm(J, axis=2)
@@ -288,8 +304,8 @@ class QuasiStaticSolver:
             Ji = J[idx]
             grad = -np.matmul(f[:, None, :], Ji)[:, 0] + b[None]
             H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
-            if self.float_discs:
-                _, gb, Hb = self._bearing(th_in[idx], x0[idx] + s)
+            if arms is not None:
+                _, gb, Hb = self._bearing(x0[idx] + s, arms[idx])
                 grad = grad + gb
                 H = H + Hb
             diag = np.einsum("ndd->nd", H) + floor[None]
@@ -305,7 +321,8 @@ class QuasiStaticSolver:
                 if w.size == 0:
                     break
                 cand = s[w] + alpha * dstep[w]
-                Ec = energy_sub(self, th_in[idx[w]], x0[idx[w]], G[idx[w]], J[idx[w]], b, law, cand)
+                Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], b, law, cand,
+                                None if arms is None else arms[idx[w]])
                 upd = Ec < best_E[w]
                 best_E[w[upd]] = Ec[upd]
                 best_s[w[upd]] = cand[upd]
@@ -439,10 +456,8 @@ def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.matmul(J, s[:, :, None])[:, :, 0]
 
 
-def energy_sub(solver: QuasiStaticSolver, th_in, x0, G, J, b, law: ContactLaw, s: np.ndarray) -> np.ndarray:
-    """Linearised potential of the states x0 + s (N,), N mm."""
+def energy_sub(solver: QuasiStaticSolver, x0, G, J, b, law: ContactLaw, s: np.ndarray,
+               arms: np.ndarray | None = None) -> np.ndarray:
+    """Linearised potential of the states x0 + s (N,), N mm (``arms``: hole arms at x0, floating discs)."""
     delta = -(G + _jdot(J, s))
-    E = law.energy(delta).sum(axis=1) + s @ b
-    if solver.float_discs:
-        E = E + solver._bearing(th_in, x0 + s)[0]
-    return E
+    return law.energy(delta).sum(axis=1) + s @ b + solver._bearing(x0 + s, arms, derivs=False)[0]

@@ -107,6 +107,41 @@ def test_pin_ring_rotation_shifts_te_by_120_over_121_of_it(delta_deg: float) -> 
     assert np.max(np.abs(shift - expected)) < 0.01, (shift.min(), shift.max(), expected)
 
 
+def test_cam_bearing_clearance_lost_motion_is_geometric_slack() -> None:
+    """At the rigid limit a cam-bearing clearance c is pure geometric slack: the lost motion is
+    symmetric (TE +-LM/2 in the two directions), proportional to c, zero without a clearance."""
+    lm = {c: lost_motion(Case.from_dict({"model": {"cam_bearing_clearance_um": c}} if c else {}), steps=60)
+          for c in (0.0, 2.0, 4.0)}
+    assert abs(lm[0.0]["lost_motion_arcsec"]) < 1e-6
+    for c in (2.0, 4.0):
+        assert lm[c]["te_plus_mean_arcsec"] == pytest.approx(-lm[c]["te_minus_mean_arcsec"], rel=1e-6)
+    assert lm[4.0]["lost_motion_arcsec"] == pytest.approx(2.0 * lm[2.0]["lost_motion_arcsec"], rel=1e-4)
+
+
+def test_cam_bearing_clearance_slack_between_its_closed_form_bounds() -> None:
+    """Output slack per side at fixed input (docs/physics.md, section 5): turning the output by d
+    moves cam h by ``a d t_h + e (1 + Z1/Z2) d t_chi`` (t: unit tangents of the hole arm and of the
+    eccentric); the disc may slide along its meshing family (centre e dx t_chi, turn -dx/Zc). The
+    bearing offset of hole h is then ``a (d + dx/Zc) t_h + e (k d - dx) t_chi``, k = 4/3, with t_h of
+    opposite sign for the two holes. With the tangents aligned the best dx = k d needs
+    ``a (1 + k/Zc) d <= c``: slack c / 31.03 mm = 6.648 arcsec/um, the least; orthogonal, the
+    sum of squares gives c (A^2 + Zc^2 e^2)^0.5 / ((Zc + k) a e): 7.725 arcsec/um, the most."""
+    from rvcad.params import Design
+
+    dsg = Design()
+    a = dsg.module_mm * (dsg.z_sun + dsg.z_planet) / 2.0       # crank circle = stage I centre distance, 30 mm
+    e, zc, k = dsg.eccentricity_mm, dsg.z_disc, 1.0 + dsg.z_sun / dsg.z_planet
+    lo = 1e-3 / (a * (1 + k / zc)) * ARCSEC_PER_RAD
+    hi = 1e-3 * math.sqrt(a ** 2 + zc ** 2 * e ** 2) / ((zc + k) * a * e) * ARCSEC_PER_RAD
+    c = 2.0
+    for d in (1, -1):
+        r = run_te(Case.from_dict({"model": {"cam_bearing_clearance_um": c}, "load_Nm": 0.0, "direction": d}),
+                   steps=240)
+        per_um = -d * r.table["te_arcsec"].to_numpy() / c
+        assert per_um.min() >= lo * (1 - 1e-4) and per_um.max() <= hi
+        assert per_um.min() == pytest.approx(lo, rel=1e-4)  # the aligned configuration occurs
+
+
 def test_unresolvable_interference_is_refused() -> None:
     case = Case.from_dict({"errors": {"pin_circle_diameter": -14}})
     g = ReducerGeometry(case)
