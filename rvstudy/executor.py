@@ -96,6 +96,26 @@ class SerialExecutor:
         return "serial (this process)"
 
 
+#: Seconds between a pool worker's checks that the process that started it is still alive.
+PARENT_POLL_S = 2.0
+
+
+def _exit_with_parent(parent_pid: int) -> None:
+    """Pool-worker initializer: a daemon thread ends the worker once its parent is gone (a parent
+    killed with SIGKILL cannot shut its pool down, and idle workers would wait for work forever)."""
+    import os
+    import threading
+    import time
+
+    def watch() -> None:
+        while True:
+            time.sleep(PARENT_POLL_S)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 class LocalPoolExecutor:
     """A local process pool (``spawn`` start method), created on first use and kept until :meth:`close`.
 
@@ -121,7 +141,8 @@ class LocalPoolExecutor:
             # one BLAS thread per worker: N workers on N cores must not oversubscribe (children inherit this)
             for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
                 os.environ.setdefault(var, "1")
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"),
+                                             initializer=_exit_with_parent, initargs=(os.getpid(),))
         return self._pool
 
     def run(self, fn: SolveFn, payloads: Sequence[dict[str, Any]]) -> Iterator[tuple[int, dict[str, Any]]]:

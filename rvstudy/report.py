@@ -689,8 +689,10 @@ def write_report(res: StudyResult) -> Path:
         add("## 10. The paper's conclusions: reproduced or not\n")
         add(md_table(cc) + "\n")
     add("## Files\n")
-    add("Tables in `tables/` (CSV and Parquet), figures in `figures/`, solved cases in the cache "
-        f"(`{cfg.cache_dir or Path(cfg.out) / 'cache'}`), key numbers in `summary.json`.\n")
+    cache_txt = (f"solved cases in the cache (`{cfg.cache_dir or Path(cfg.out) / 'cache'}`)" if cfg.use_cache
+                 else "no case cache (`--no-cache`)")
+    add(f"Tables in `tables/` (CSV and Parquet), figures in `figures/`, {cache_txt}, key numbers in "
+        "`summary.json`.\n")
     res.files = files
     cfg_path = write_text_atomic(json.dumps(res.config.to_dict(), indent=2, default=str), out / "config.json")
     files["config_json"] = str(cfg_path)

@@ -203,6 +203,9 @@ class StudyConfig:
         return d
 
 
+#: Steps per output revolution that sample the crank order 121 (one period per input turn) twice.
+MIN_RESOLVING_STEPS = 2 * 121
+
 # ---------------------------------------------------------------------------------------------- factors
 #: Pin patterns a factor of a pin-wise error (pin_pitch, pin_circle_diameter, pin_radius) can take,
 #: written ``key[pattern]`` in the levels table's ``error`` column: ``all`` = every pin gets the
@@ -474,6 +477,10 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
     kw = {} if solve_fn is None else {"solve_fn": solve_fn}
     runner = CachedRunner(ex, cache, cfg.solver, cfg.steps, ContactLaw(cfg.K, cfg.n), progress=cfg.progress, **kw)
     res = StudyResult(config=cfg, factors=fs, executor=getattr(ex, "describe", lambda: ex.name)())
+    if cfg.steps < MIN_RESOLVING_STEPS:
+        res.notes.append(f"--steps {cfg.steps} is below {MIN_RESOLVING_STEPS}: the TE has content at the crank "
+                         "order 121 (one period per input turn), which needs two steps a period, so peak-to-peak "
+                         "values are undersampled (the mean is less affected)")
     try:
         if "screen" in cfg.stages or "mc" in cfg.stages:
             t0 = time.perf_counter()

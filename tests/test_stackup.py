@@ -75,6 +75,7 @@ def test_rerun_reuses_every_case(reference, tmp_path, capsys, monkeypatch):
     assert cli.main(["--out", str(out), *DOE, "--json"]) == 0
     first = json.loads(capsys.readouterr().out)
     assert first["cases"]["computed"] == 25 and first["cases"]["reused"] == 0
+    assert any("undersampled" in n for n in first["notes"])  # STEPS is below 2 x 121
     calls = []
     real = executor_mod.run_te
     monkeypatch.setattr(executor_mod, "run_te", lambda *a, **k: calls.append(1) or real(*a, **k))
@@ -132,6 +133,47 @@ def test_killed_subprocess_resumes_and_corrupts_nothing(reference, tmp_path):
     s = json.loads(r.stdout)
     assert s["cases"]["reused"] >= n and s["cases"]["computed"] + s["cases"]["reused"] == 25
     pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
+
+
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (Linux /proc)."""
+    out = []
+    for st in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = st.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(st.parent.name))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to list child processes")
+def test_pool_workers_exit_when_the_run_is_killed(tmp_path):
+    """A SIGKILLed run cannot shut its pool down; its workers must not stay behind (they watch their parent)."""
+    from rvstudy.executor import PARENT_POLL_S
+
+    out = tmp_path / "run"
+    argv = [a if a != "1" else "2" for a in DOE]  # --workers 2: a real process pool
+    cmd = [sys.executable, "-m", "rvstudy", "--out", str(out), *argv]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    cache = CaseCache(out / "cache")
+    t0 = time.time()
+    while len(cache.entries()) < 2 and time.time() - t0 < 120 and proc.poll() is None:
+        time.sleep(0.05)
+    kids = _children(proc.pid)
+    assert kids, "the run should have started its pool"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    t1 = time.time()
+    while time.time() - t1 < 5 * PARENT_POLL_S + 10:
+        alive = [k for k in kids if Path(f"/proc/{k}").exists()
+                 and "Z" not in Path(f"/proc/{k}/stat").read_text().rsplit(")", 1)[1].split()[0]]
+        if not alive:
+            break
+        time.sleep(0.2)
+    assert not alive, f"pool workers {alive} outlived the killed run"
 
 
 def test_corrupt_and_partial_entries_are_recomputed(reference, tmp_path):
