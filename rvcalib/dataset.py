@@ -362,15 +362,22 @@ def _drop_transient(run: str, inp: np.ndarray, te: np.ndarray, direction: int, s
             break
     if end == 0:
         return 0
+    if end >= nover:
+        # not a start-up transient: the revolutions differ over the whole overlap (a drift with time,
+        # an encoder scale error, a change during the run); dropping would leave less than a revolution
+        notes.append(f"run {run}: its output revolutions differ over the whole overlap (by {float(np.mean(d)):.3g} "
+                     f"arcsec on average, up to {float(np.max(np.abs(d))):.3g} arcsec; noise {sigma:.3g} arcsec): not a "
+                     "start-up transient, so nothing is dropped; a drift, an encoder scale error or a change during "
+                     "the run is not in the library and shows as a residual ramp")
+        return 0
     cut = min(int(math.ceil(1.5 * end)) + w // 2, len(inp))
     remaining = abs(float(inp[-1] - inp[min(cut, len(inp) - 1)])) + step
     if remaining < PERIOD_DEG:
         cut = end + w // 2
     peak = float(np.max(np.abs(d[:max(end, 1)])))
-    more = "" if end < nover else " (it lasts through the whole overlap; it may continue further)"
     notes.append(f"run {run}: dropped the first {cut} samples as start-up transient: they differ from the "
                  f"same input angles one output revolution later by up to {peak:.3g} arcsec (noise "
-                 f"{sigma:.3g} arcsec){more}")
+                 f"{sigma:.3g} arcsec)")
     return cut
 
 

@@ -51,6 +51,11 @@ from rvcalib.forward import ModelEvaluationError, cache_stats, coarse_stride, gr
 from rvcalib.dataset import noise_estimate
 from rvcalib.residual import Diagnostics, diagnose, lag1_autocorr
 
+#: A residual trend over a record is reported when its t value exceeds RAMP_T and its size exceeds
+#: RAMP_NOISE_FACTOR times the noise (see :func:`rvcalib.residual.ramp_fit`).
+RAMP_T = 6.0
+RAMP_NOISE_FACTOR = 3.0
+
 #: Margin (BIC units) by which a harmonic-only model must beat the best physical candidate before
 #: the residual is called unexplained (a tie goes to the physical effect).
 HARMONIC_BIC_MARGIN = 2.0
@@ -1340,6 +1345,14 @@ class Calibrator:
             if unexplained:
                 verdict += " Unexplained (outside the library): " + ", ".join(
                     f"{u.label} {abs(u.amplitude_arcsec):.3g} arcsec" for u in unexplained) + "."
+        ramps = [d for d in after.runs
+                 if abs(d.ramp_t) > RAMP_T and abs(d.ramp_arcsec) > RAMP_NOISE_FACTOR * noise]
+        if ramps:
+            status = "unexplained"
+            verdict += (" The residual ramps over the record in run(s) " + ", ".join(
+                f"{d.run} ({d.ramp_arcsec:+.3g} arcsec, t {d.ramp_t:.1f})" for d in ramps)
+                + ": a drift in time or an encoder scale error, not in the library; the effects found may "
+                  "partly compensate it.")
         return CalibrationResult(self.ds, fitted, unexplained, before, after, after_phys, r0, r_all, iterations,
                                  status, verdict, noise, self.steps, time.perf_counter() - t_start,
                                  list(self.ds.notes) + self.notes, dict(cache_stats(), fits=self.fit_stats))

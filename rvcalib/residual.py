@@ -53,6 +53,34 @@ def order_spectrum(output_rad: np.ndarray, resid: np.ndarray, orders: list[int] 
     return out
 
 
+def ramp_fit(output_rad: np.ndarray, resid: np.ndarray, orders: int = 10) -> tuple[float, float]:
+    """Non-periodic trend of a residual: ``c + s (th - mean th) + sum_k (a_k cos k th + b_k sin k th)``
+    by least squares over the unwrapped output angle ``th`` (rad).
+
+    A ramp is not periodic: over one revolution it is a sawtooth whose jump at the wrap the orders
+    up to ``orders`` cannot take, so the slope stays identifiable beside them (a drift in time, an
+    encoder scale error). Returns the trend over the record (``s * span``, arcsec) and its t value.
+    """
+    th = np.asarray(output_rad, dtype=float)
+    r = np.asarray(resid, dtype=float)
+    span = float(th.max() - th.min())
+    cols = [np.ones_like(th), th - th.mean()]
+    for k in range(1, orders + 1):
+        cols += [np.cos(k * th), np.sin(k * th)]
+    A = np.column_stack(cols)
+    if r.size <= A.shape[1] + 2 or span <= 0:
+        return 0.0, 0.0
+    coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+    res = r - A @ coef
+    s2 = float(res @ res) / (r.size - A.shape[1])
+    try:
+        var = s2 * float(np.linalg.inv(A.T @ A)[1, 1])
+    except np.linalg.LinAlgError:
+        return 0.0, 0.0
+    se = math.sqrt(var) if var > 0 else float("inf")
+    return float(coef[1] * span), float(coef[1] / se) if se > 0 else 0.0
+
+
 def full_spectrum(output_rad: np.ndarray, resid: np.ndarray, max_order: int) -> np.ndarray:
     """Amplitudes of orders 0..max_order (arcsec), as :func:`order_spectrum`."""
     sp = order_spectrum(output_rad, resid, list(range(max_order + 1)))
@@ -109,6 +137,9 @@ class RunDiagnostics:
         Ljung-Box p-value (lags min(10, n/5)).
     noise_arcsec : float
         The run's noise estimate (from second differences of the measured TE).
+    ramp_arcsec, ramp_t : float
+        Non-periodic trend of the residual over the record (arcsec from first to last sample) and
+        its t value, fitted beside the orders 1..10 (:func:`ramp_fit`).
     """
 
     run: str
@@ -124,6 +155,8 @@ class RunDiagnostics:
     lag1: float
     ljung_box_p: float
     noise_arcsec: float
+    ramp_arcsec: float = 0.0
+    ramp_t: float = 0.0
 
     def to_dict(self) -> dict:
         """JSON-ready form."""
@@ -132,7 +165,8 @@ class RunDiagnostics:
                 "orders_arcsec": {str(k): v for k, v in self.orders.items()},
                 "nyquist_order": self.nyquist_order,
                 "dominant_orders": [{"order": k, "amplitude_arcsec": a} for k, a in self.dominant],
-                "lag1_autocorr": self.lag1, "ljung_box_p": self.ljung_box_p, "noise_arcsec": self.noise_arcsec}
+                "lag1_autocorr": self.lag1, "ljung_box_p": self.ljung_box_p, "noise_arcsec": self.noise_arcsec,
+                "ramp_arcsec": self.ramp_arcsec, "ramp_t": self.ramp_t}
 
 
 @dataclass
@@ -193,9 +227,11 @@ def diagnose(dataset: MeasuredDataset, residuals: list[np.ndarray], max_order: i
         sp = full_spectrum(th, r, upper) if upper >= 1 else np.zeros(1)
         idx = np.argsort(sp[1:])[::-1][:3] + 1
         dom = [(int(k), float(sp[k])) for k in idx]
+        ramp, ramp_t = ramp_fit(th, r, int(max(1, min(10, nyq - 1))))
         rds.append(RunDiagnostics(run.run, run.load_Nm, run.direction, int(r.size),
                                   float(np.sqrt(np.mean(r ** 2))), float(np.max(np.abs(r))), float(np.mean(r)),
-                                  orders, nyq, dom, lag1_autocorr(r), ljung_box_p(r), run.noise_arcsec))
+                                  orders, nyq, dom, lag1_autocorr(r), ljung_box_p(r), run.noise_arcsec,
+                                  ramp, ramp_t))
     allr = np.concatenate(residuals)
     mo = int(max_order if max_order is not None else max(1, min(200, int(min(nyq_all)) - 1)))
     spec = np.zeros(mo + 1)

@@ -205,3 +205,49 @@ def test_te_at_equals_the_grid_at_its_nodes_in_any_order_and_revolution(directio
     idx = np.random.default_rng(0).permutation(360)[:120]
     assert np.max(np.abs(te_at(case, x[idx] + 3 * PERIOD_DEG) - g[idx])) < 1e-3
     assert np.max(np.abs(te_at(case, x) - g)) < 1e-3
+
+
+def test_ramp_fit_separates_a_trend_from_periodic_orders():
+    """One revolution: a ramp is a sawtooth; orders 1..10 beside it do not absorb it, and a periodic
+    signal of those orders shows no ramp."""
+    from rvcalib.residual import ramp_fit
+
+    th = np.linspace(0.0, 2 * np.pi, 240, endpoint=False)
+    rng = np.random.default_rng(0)
+    periodic = 3.0 * np.sin(th + 0.4) + 1.5 * np.cos(5 * th) + rng.normal(0, 0.15, th.size)
+    # the estimator's spread at this noise: sd of the ramp 0.143 arcsec, of t 1.03 (200 seeds)
+    ramp, t = ramp_fit(th, periodic)
+    assert abs(t) < 4 and abs(ramp) < 4 * 0.143
+    trend = 10.0 * (th - th[0]) / (th[-1] - th[0])
+    ramp, t = ramp_fit(th, periodic + trend)
+    assert abs(ramp - 10.0) < 4 * 0.143 and t > 20
+
+
+def test_encoder_scale_error_is_flagged_as_a_ramp_not_hidden(workdir):
+    """An output encoder scale error of 2e-5 (a TE ramp of 26 arcsec over each revolution) is in no
+    library; the verdict must say the residual ramps, and the status must not be 'explained'."""
+    import pandas as pd
+
+    d = workdir / "gain"
+    simulate_dataset(d, RUNS, {}, samples_per_rev=STEPS, seed=11)
+    s = pd.read_csv(d / "samples.csv", dtype={"run": str})
+    s["output_deg"] *= 1 + 2e-5
+    s.to_csv(d / "samples.csv", index=False, float_format="%.10f")
+    res = calibrate(read_dataset(d), steps=STEPS)
+    assert res.status == "unexplained"
+    assert "ramps over the record" in res.verdict and "encoder scale error" in res.verdict
+    assert all(abs(r.ramp_arcsec - 25.8) < 1.0 for r in res.after.runs)
+
+
+def test_a_drift_over_two_revolutions_is_not_dropped_as_a_transient(tmp_path):
+    import pandas as pd
+
+    d = tmp_path / "drift"
+    simulate_dataset(d, RUNS[:1], {}, samples_per_rev=STEPS, seed=3, revolutions=2.0)
+    s = pd.read_csv(d / "samples.csv", dtype={"run": str})
+    t = s["time_s"].to_numpy()
+    s["output_deg"] += 3.0 * (t - t[0]) / (t[-1] - t[0]) / 3600.0   # +3 arcsec over the record
+    s.to_csv(d / "samples.csv", index=False, float_format="%.10f")
+    ds = read_dataset(d)
+    assert ds.runs[0].dropped["transient"] == 0 and ds.runs[0].n == 2 * STEPS
+    assert any("not a start-up transient" in n for n in ds.notes)
