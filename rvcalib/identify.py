@@ -386,7 +386,6 @@ class Calibrator:
         self._cond_runs = [[i for i, c in enumerate(self.cond_of) if c == cc] for cc in range(len(self.cond_base))]
         self.y = [r.te_arcsec for r in self.runs]
         self.n = int(sum(v.size for v in self.y))
-        self.yc = [_coarse_values(r, y, self.m) for r, y in zip(self.runs, self.y)]
         self.nc = self.m * len(self.runs)
         gdeg = np.arange(self.m) * (PERIOD_DEG / self.m)
         self.coarse_in_deg = gdeg
@@ -917,9 +916,11 @@ class Calibrator:
             it += 1
             t_it = time.perf_counter()
             p_cur = self._p_cur()
-            pc = self.predict_grid(self._pairs())
+            # the residual at the readings (the model solved there) taken to the coarse grid: where the
+            # readings are off the grid only this smooth remainder is interpolated, not the TE's kinks
             Ec = self._emp_matrix(self.empirical, coarse=True)
-            rc_raw = [yc - q for yc, q in zip(self.yc, pc)]
+            rc_raw = [_coarse_values(r, y - q, self.m)
+                      for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))]
             rc_cat = np.concatenate(rc_raw)
             Pc = _proj(Ec)
             rc = Pc(rc_cat)

@@ -114,15 +114,21 @@ def test_interrupted_run_resumes_without_loss(reference, tmp_path):
     pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
 
 
-def test_killed_subprocess_resumes_and_corrupts_nothing(reference, tmp_path):
-    out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "rvstudy", "--out", str(out), *DOE]
+def _start_run(out: Path, argv: list[str], entries: int) -> tuple[subprocess.Popen, CaseCache, list[str], dict]:
+    """Start ``rv-stackup --out OUT ARGV`` in a subprocess and return once ``entries`` cases are cached."""
+    cmd = [sys.executable, "-m", "rvstudy", "--out", str(out), *argv]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     cache = CaseCache(out / "cache")
     t0 = time.time()
-    while len(cache.entries()) < 5 and time.time() - t0 < 120 and proc.poll() is None:
+    while len(cache.entries()) < entries and time.time() - t0 < 120 and proc.poll() is None:
         time.sleep(0.05)
+    return proc, cache, cmd, env
+
+
+def test_killed_subprocess_resumes_and_corrupts_nothing(reference, tmp_path):
+    out = tmp_path / "run"
+    proc, cache, cmd, env = _start_run(out, DOE, 5)
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=30)
     n = len(cache.entries())
@@ -153,15 +159,8 @@ def test_pool_workers_exit_when_the_run_is_killed(tmp_path):
     """A SIGKILLed run cannot shut its pool down; its workers must not stay behind (they watch their parent)."""
     from rvstudy.executor import PARENT_POLL_S
 
-    out = tmp_path / "run"
     argv = [a if a != "1" else "2" for a in DOE]  # --workers 2: a real process pool
-    cmd = [sys.executable, "-m", "rvstudy", "--out", str(out), *argv]
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    cache = CaseCache(out / "cache")
-    t0 = time.time()
-    while len(cache.entries()) < 2 and time.time() - t0 < 120 and proc.poll() is None:
-        time.sleep(0.05)
+    proc, _, _, _ = _start_run(tmp_path / "run", argv, 2)
     kids = _children(proc.pid)
     assert kids, "the run should have started its pool"
     proc.send_signal(signal.SIGKILL)
