@@ -35,6 +35,7 @@ import pandas as pd
 import rsm
 from rsm.terms import preset_terms
 from rvcad.errors import ERROR_TYPES, Case
+from rvcad.params import Design
 from rvdyn.contacts import ContactLaw
 from rvdyn.screen import (
     ARCSEC_PER_ARCMIN,
@@ -215,11 +216,12 @@ MIN_RESOLVING_STEPS = 2 * 121
 PIN_PATTERNS = ("all", "alternate")
 
 
-def pattern_value(key: str, pattern: str | None, value: float, z_pins: int = 40) -> float | list[float]:
+def pattern_value(key: str, pattern: str | None, value: float, z_pins: int | None = None) -> float | list[float]:
     """The case-JSON value of a factor setting: the number itself, or the list of ``z_pins`` pin values
-    of a pin pattern (see :data:`PIN_PATTERNS`), in the error's unit."""
+    (default: the default design's 40) of a pin pattern (see :data:`PIN_PATTERNS`), in the error's unit."""
     if pattern is None:
         return value
+    z_pins = Design().z_pins if z_pins is None else int(z_pins)
     if pattern == "all":
         return [value] * z_pins
     if pattern == "alternate":
