@@ -119,19 +119,16 @@ def test_radians_are_detected(tmp_path):
         read_dataset(write(tmp_path / "c", runs, s))
 
 
-def test_error_units_by_magnitude(tmp_path):
-    runs, samples = good(tmp_path, pin_circle_diameter=[0.014, 0.0])
-    with pytest.raises(ValueError, match="pin_circle_diameter.*look like mm"):
+@pytest.mark.parametrize("column, values, message", [
+    ("pin_circle_diameter", [0.014, 0.0], "pin_circle_diameter.*look like mm"),
+    ("pin_pitch", [36.0, 0.0], "pin_pitch.*arcsec"),
+    ("temperature_C", [293.0, 293.0], "temperature_C.*kelvin"),
+    ("cam_eccentricity", [2000.0, 0.0], "cam_eccentricity.*run a"),
+])
+def test_error_units_by_magnitude(tmp_path, column, values, message):
+    runs, samples = good(tmp_path, **{column: values})
+    with pytest.raises(ValueError, match=message):
         read_dataset(write(tmp_path / "a", runs, samples))
-    runs, samples = good(tmp_path, pin_pitch=[36.0, 0.0])
-    with pytest.raises(ValueError, match="pin_pitch.*arcsec"):
-        read_dataset(write(tmp_path / "b", runs, samples))
-    runs, samples = good(tmp_path, temperature_C=[293.0, 293.0])
-    with pytest.raises(ValueError, match="temperature_C.*kelvin"):
-        read_dataset(write(tmp_path / "c", runs, samples))
-    runs, samples = good(tmp_path, cam_eccentricity=[2000.0, 0.0])
-    with pytest.raises(ValueError, match="cam_eccentricity.*run a"):
-        read_dataset(write(tmp_path / "d", runs, samples))
 
 
 def test_duplicates_and_transient_are_dropped_and_reported(tmp_path):
