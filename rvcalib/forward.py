@@ -3,9 +3,8 @@
 The model TE is solved by :func:`rvdyn.te.run_te` (analytic contacts). TE is periodic in one output
 revolution (input 121 turns, cranks 40, sun relative to the carrier 120), so angles are taken
 modulo it. :func:`grid_te` solves a uniform grid of ``steps`` input angles over one output
-revolution (the screening and the grid fits of :mod:`rvcalib.identify`, and readings that sit on
-the grid); :func:`te_at` solves exactly at given angles (readings off the grid: interpolating the
-grid is not exact, see there). Solutions are cached by the case's content hash (which holds the
+revolution (the screening and the coarse fits of :mod:`rvcalib.identify`); :func:`te_at` solves
+exactly at given angles (every reading of a run: interpolating a grid is not exact, see there). Solutions are cached by the case's content hash (which holds the
 load and the direction) and the angles, so identical conditions and repeated trial values are
 solved once per process; the cache is bounded by :data:`CACHE_BYTES`.
 
