@@ -15,7 +15,7 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
 import rsm  # noqa: E402
-from rvstudy.paper import DATA_DIR as PAPER_DATA  # noqa: E402
+from rvpaper import DATA_DIR as PAPER_DATA  # noqa: E402
 
 DATA = PAPER_DATA
 

@@ -312,9 +312,11 @@ def rsm_closed_loop(data: pd.DataFrame, factors: Sequence[str], response: str, l
     return RSMLoopResult(before, after, added, iterations, new_check, verdict)
 
 
-def table6_loop(shared_data: str | Path, **kwargs) -> RSMLoopResult:
+def table6_loop(data_dir: str | Path | None = None, **kwargs) -> RSMLoopResult:
     """The loop on the paper's Table 6 (Box-Behnken runs, response in arcmin) with Table 5's levels."""
-    d = Path(shared_data)
+    from rvpaper import DATA_DIR
+
+    d = Path(data_dir) if data_dir is not None else DATA_DIR
     data = pd.read_csv(d / "paper_table6_bbd_runs.csv")
     return rsm_closed_loop(data, ["EA", "EB", "EC", "ED"], "te_arcmin", levels=d / "paper_table5_levels.csv",
                            **kwargs)
@@ -345,6 +347,6 @@ def format_result(res: RSMLoopResult, top: int = 8) -> str:
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    from rvstudy.paper import DATA_DIR
+    from rvpaper import DATA_DIR
 
     print(format_result(table6_loop(sys.argv[1] if len(sys.argv) > 1 else DATA_DIR)))

@@ -39,36 +39,7 @@ from rvcad.errors import ERROR_TYPES, Case
 from rvdyn.contacts import ContactLaw
 from rvdyn.te import SOLVERS, run_te, write_table_atomic
 
-#: RSM factors of the paper (Table 5) and the Table 4 error type each one is.
-RSM_FACTORS: dict[str, str] = {
-    "EA": "pin_pitch",
-    "EB": "pin_circle_diameter",
-    "EC": "pin_radius",
-    "ED": "disc_hole_eccentricity",
-}
-
-#: Half range of each RSM factor in Table 5 (levels -h, 0, +h), in the error's unit (deg or um).
-TABLE5_HALF_RANGE: dict[str, float] = {"EA": 0.06, "EB": 14.0, "EC": 7.0, "ED": 14.0}
-
-#: Reduction stage of each Table 4 letter: B (sun) and C (planet) are the involute stage I.
-STAGE: dict[str, str] = {e.letter: ("I" if e.key in ("sun_eccentricity", "planet_eccentricity") else "II")
-                         for e in ERROR_TYPES.values()}
-
-#: Paper Table 4 descriptions by letter (for tables and plots).
-PAPER_DESCRIPTION: dict[str, str] = {
-    "A": "none",
-    "B": "eccentricity error of sun gear assembly",
-    "C": "eccentricity error of involute gear assembly",
-    "D": "phase error of cam segment on crankshaft",
-    "E": "eccentricity error of cam segment on crankshaft",
-    "F": "eccentricity error of crankshaft hole of planetary carrier",
-    "G": "eccentricity error of crankshaft hole of cycloid gear (E_D)",
-    "H": "circumferential position error of distribution circle of pin",
-    "I": "error of pin distribution circle diameter (E_B)",
-    "J": "error of pin radius (E_C)",
-    "K": "phase error of cycloid gear",
-    "L": "deviation of pin pitch (E_A)",
-}
+from rvpaper import PAPER_DESCRIPTION, RSM_FACTORS, STAGE, TABLE5_HALF_RANGE  # noqa: E402  (re-exported)
 
 ARCSEC_PER_ARCMIN = 60.0
 

@@ -3,5 +3,5 @@
 Modules: :mod:`rvstudy.study` (stages and configuration), :mod:`rvstudy.executor` (serial, local
 process pool, Dask), :mod:`rvstudy.cache` (content-keyed, atomic case cache),
 :mod:`rvstudy.montecarlo` (tolerances, yield, variance shares), :mod:`rvstudy.report` (Markdown
-report and tables), :mod:`rvstudy.paper` (the paper's published numbers), :mod:`rvstudy.cli`.
+report and tables), :mod:`rvpaper` (the paper's published numbers, a leaf package), :mod:`rvstudy.cli`.
 """

@@ -1,7 +1,7 @@
 """The study report: one Markdown file with the figures, plus every table as CSV and Parquet.
 
 Every table of ours is computed from the :class:`rvstudy.study.StudyResult` of the run; the paper's
-columns come from :mod:`rvstudy.paper`. All files are written atomically (temporary file in the same
+columns come from :mod:`rvpaper`. All files are written atomically (temporary file in the same
 folder, then :func:`os.replace`).
 
 Layout of ``OUT``::
@@ -35,7 +35,7 @@ from rvdyn.screen import (
     save_figure_atomic,
 )
 from rvdyn.te import write_table_atomic
-from rvstudy import paper
+import rvpaper as paper
 from rvstudy.cache import write_text_atomic
 from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyResult
 

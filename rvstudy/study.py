@@ -45,7 +45,7 @@ from rvdyn.screen import (
     run_screen,
 )
 from rvdyn.te import SOLVERS
-from rvstudy import paper
+import rvpaper as paper
 from rvstudy.cache import CaseCache
 from rvstudy.executor import CachedRunner, Executor, make_executor
 from rvstudy.montecarlo import (

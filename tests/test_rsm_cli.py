@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from rsm.cli import main
-from rvstudy.paper import DATA_DIR as PAPER_DATA
+from rvpaper import DATA_DIR as PAPER_DATA
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = PAPER_DATA

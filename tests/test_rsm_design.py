@@ -12,7 +12,7 @@ import pytest
 import rsm
 from rsm.design import BBD_BLOCKS
 from rsm.terms import model_matrix, parse_terms
-from rvstudy.paper import DATA_DIR as PAPER_DATA
+from rvpaper import DATA_DIR as PAPER_DATA
 
 DATA = PAPER_DATA
 BBD_RUNS = {3: 12, 4: 24, 5: 40, 6: 48, 7: 56}

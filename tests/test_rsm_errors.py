@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 import rsm
-from rvstudy.paper import DATA_DIR as PAPER_DATA
+from rvpaper import DATA_DIR as PAPER_DATA
 
 DATA = PAPER_DATA
 FACTORS = ["EA", "EB", "EC", "ED"]

@@ -11,7 +11,7 @@ import pytest
 
 import rsm
 from rsm import plots
-from rvstudy.paper import DATA_DIR as PAPER_DATA
+from rvpaper import DATA_DIR as PAPER_DATA
 
 DATA = PAPER_DATA
 FACTORS = ["EA", "EB", "EC", "ED"]

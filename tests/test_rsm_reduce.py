@@ -10,7 +10,7 @@ import pytest
 
 import rsm
 from rsm.terms import contains, parse_term
-from rvstudy.paper import DATA_DIR as PAPER_DATA
+from rvpaper import DATA_DIR as PAPER_DATA
 
 DATA = PAPER_DATA
 FACTORS = ["EA", "EB", "EC", "ED"]

@@ -11,7 +11,7 @@ import statsmodels.api as sm
 import statsmodels.formula.api as smf
 
 import rsm
-from rvstudy.paper import DATA_DIR as PAPER_DATA
+from rvpaper import DATA_DIR as PAPER_DATA
 
 DATA = PAPER_DATA
 

@@ -1,9 +1,11 @@
-"""The source paper's published numbers, for setting ours beside them in the report.
+"""The source paper's published numbers and its factor map: a leaf module (pandas only, no project imports).
 
-These are the paper's values (Tables 1, 4, 5, 6, 7, Eq. 8 and Eq. 9), read from the CSV files in
-``rvstudy/paper_data`` (package data, a verbatim copy of ``shared/data``), so that an installed
-``rv-stackup`` and the test suite need no folder outside the repository. Nothing here is a result of
-ours: every table of ours in the report is computed by the run.
+Reference: *Effect of Multifactor Interaction on the Accuracy of RV Reducers* (see ``data/README.md`` for
+the citation). These are the paper's values (Tables 1, 4, 5, 6, 7, Eq. 8 and Eq. 9), read from the CSV
+files in ``rvpaper/data`` (package data), so that an installed ``rv-stackup``, the test suite and the
+loop need no folder outside the repository. Nothing here is a result of ours: every table of ours in a
+report is computed by the run. The study (:mod:`rvstudy`), rsm's tests and the loop (:mod:`rvcalib`)
+all read the paper from here.
 
 Units follow the paper: EA in degrees, EB/EC/ED in micrometres, the response ("mean value of
 transmission error") in arcminutes.
@@ -14,11 +16,40 @@ from pathlib import Path
 
 import pandas as pd
 
-from rvdyn.screen import RSM_FACTORS
 
 #: Folder of the paper's tables as CSV (package data; a verbatim copy of the project's
 #: ``shared/data/paper_*.csv``, checked byte for byte by ``tests/test_stackup.py`` where that folder exists).
-DATA_DIR = Path(__file__).resolve().parent / "paper_data"
+DATA_DIR = Path(__file__).resolve().parent / "data"
+
+#: RSM factors of the paper (Table 5) and the Table 4 error type (``rvcad.errors`` key) each one is.
+RSM_FACTORS: dict[str, str] = {
+    "EA": "pin_pitch",
+    "EB": "pin_circle_diameter",
+    "EC": "pin_radius",
+    "ED": "disc_hole_eccentricity",
+}
+
+#: Half range of each RSM factor in Table 5 (levels -h, 0, +h), in the error's unit (deg or um).
+TABLE5_HALF_RANGE: dict[str, float] = {"EA": 0.06, "EB": 14.0, "EC": 7.0, "ED": 14.0}
+
+#: Reduction stage of each Table 4 letter: B (sun) and C (planet) are the involute stage I.
+STAGE: dict[str, str] = {L: ("I" if L in "BC" else "II") for L in "BCDEFGHIJKL"}
+
+#: Paper Table 4 descriptions by letter (for tables and plots).
+PAPER_DESCRIPTION: dict[str, str] = {
+    "A": "none",
+    "B": "eccentricity error of sun gear assembly",
+    "C": "eccentricity error of involute gear assembly",
+    "D": "phase error of cam segment on crankshaft",
+    "E": "eccentricity error of cam segment on crankshaft",
+    "F": "eccentricity error of crankshaft hole of planetary carrier",
+    "G": "eccentricity error of crankshaft hole of cycloid gear (E_D)",
+    "H": "circumferential position error of distribution circle of pin",
+    "I": "error of pin distribution circle diameter (E_B)",
+    "J": "error of pin radius (E_C)",
+    "K": "phase error of cycloid gear",
+    "L": "deviation of pin pitch (E_A)",
+}
 
 
 #: Paper R^2 and adjusted R^2 of the Table 7 fit.
