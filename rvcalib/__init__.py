@@ -12,8 +12,11 @@ Modules
 :mod:`rvcalib.residual`
     Residual diagnostics: RMS, peak, order spectrum, direction/load dependence, Ljung-Box whiteness.
 :mod:`rvcalib.identify`
-    ``calibrate(dataset)``: the loop (screening, nonlinear validation, F test + BIC, harmonic-only
-    competitor, joint nonlinear fit, backward elimination, confidence intervals).
+    ``calibrate(dataset)``: the loop, run in stages: :mod:`rvcalib.model` (run conditions, model TE
+    at the readings), :mod:`rvcalib.screening` (signatures, ranking, harmonic competitors),
+    :mod:`rvcalib.fitting` (nonlinear refits, confidence intervals), :mod:`rvcalib.selection`
+    (the policy: F test + BIC, encompassing test, backward elimination, alternatives),
+    :mod:`rvcalib.results` (typed candidate records, the result); :mod:`rvcalib.lsq` the numerics.
 :mod:`rvcalib.simulate`
     ``simulate_dataset(...)``: measured-like datasets with hidden effects (answer file kept apart).
 :mod:`rvcalib.rsm_loop`
