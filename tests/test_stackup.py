@@ -16,10 +16,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import rvstudy.executor as executor_mod
+import rvdyn.runner as executor_mod
 import rvpaper as paper
 from rvstudy import cli
-from rvstudy.cache import CaseCache, Job
+from rvdyn.cache import CaseCache, Job
 from rvstudy.montecarlo import (
     Tolerance,
     load_tolerances,
@@ -158,7 +158,7 @@ def _children(pid: int) -> list[int]:
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to list child processes")
 def test_pool_workers_exit_when_the_run_is_killed(tmp_path):
     """A SIGKILLed run cannot shut its pool down; its workers must not stay behind (they watch their parent)."""
-    from rvstudy.executor import PARENT_POLL_S
+    from rvdyn.runner import PARENT_POLL_S
 
     argv = [a if a != "1" else "2" for a in DOE]  # --workers 2: a real process pool
     proc, _, _, _ = _start_run(tmp_path / "run", argv, 2)
