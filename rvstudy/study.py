@@ -3,7 +3,7 @@
 Stages (each one a list of cases solved through a cached, parallel :class:`rvstudy.executor.CachedRunner`):
 
 1. ``screen`` -- every Table 4 error alone at +-its paper value and case A (Fig. 9), and the four RSM
-   factors swept over their Table 5 range (Fig. 11) (:mod:`rvdyn.screen`).
+   factors swept over their Table 5 range (Fig. 11) (:mod:`rvstudy.screen`).
 2. ``doe`` -- the response-surface design (Box-Behnken by default, from :func:`rsm.make_design`,
    in the paper's Table 6 run order when the point sets agree) on the factors of the levels table;
    responses ``mean_abs_arcmin`` (mean of |TE| over the revolution: our reading of the paper's
@@ -37,7 +37,7 @@ from rsm.terms import preset_terms
 from rvcad.errors import ERROR_TYPES, Case
 from rvcad.params import Design
 from rvdyn.contacts import ContactLaw
-from rvdyn.screen import (
+from rvstudy.screen import (
     ARCSEC_PER_ARCMIN,
     RSM_FACTORS,
     ScreenResult,
