@@ -20,6 +20,7 @@ Term syntax for user-chosen models: see :mod:`rsm.terms` (``EA``, ``EA:EB``, ``E
 ``EA^3``, ``EA:EB:EC``, presets ``linear``/``2fi``/``quadratic``).
 """
 
+from .checks import NotEstimableError, check_numeric_column
 from .coding import FactorLevels, Levels
 from .design import Design, box_behnken, central_composite, full_factorial_3, make_design
 from .model import ResponseSurfaceModel, ZeroPureErrorWarning, fit
@@ -43,7 +44,7 @@ from .surface import (
 from .terms import parse_terms, term_name
 
 __all__ = [
-    "FactorLevels", "Levels",
+    "NotEstimableError", "check_numeric_column", "FactorLevels", "Levels",
     "Design", "box_behnken", "central_composite", "full_factorial_3", "make_design",
     "ResponseSurfaceModel", "RSMResults", "ZeroPureErrorWarning", "fit",
     "BackwardResult", "PaperReduction", "ReductionComparison", "backward_elimination",

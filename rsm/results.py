@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
+from .checks import check_numeric_column
 from .surface import (
     CanonicalAnalysis,
     Optimum,
@@ -35,9 +36,6 @@ from .surface import (
     points_to_coded,
     validation_metrics,
 )
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .model import ResponseSurfaceModel
 
 __all__ = ["RSMResults", "PURE_ERROR_ZERO_RTOL", "ANOVA_COLUMNS"]
 
@@ -91,7 +89,7 @@ class RSMResults:
 
     def __init__(
         self,
-        model: "ResponseSurfaceModel",
+        model: Any,  # rsm.model.ResponseSurfaceModel (not imported: model imports this module)
         beta: np.ndarray,
         xtx_inv: np.ndarray,
         leverage: np.ndarray,
@@ -404,8 +402,6 @@ class RSMResults:
             RMSE, MAE, max error, bias, R2 and the fraction of observations inside the
             ``1 - alpha`` prediction interval.
         """
-        from .model import check_numeric_column
-
         response = self.model.response if response is None else response
         alpha = self.alpha if alpha is None else alpha
         obs = check_numeric_column(data, response, "response")
