@@ -421,9 +421,6 @@ def _design(cfg: StudyConfig, fs: FactorSet) -> tuple[pd.DataFrame, bool]:
     return coded, False
 
 
-_NOT_ESTIMABLE = re.compile(r"term '([^']+)' cannot be estimated")
-
-
 def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitBundle:
     """Full quadratic fit of the solved runs and its reductions.
 
@@ -442,12 +439,12 @@ def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitB
                 try:
                     model = rsm.ResponseSurfaceModel(ok, fs.names, response, names, levels=fs.levels, units="coded")
                     break
-                except ValueError as exc:
-                    m = _NOT_ESTIMABLE.search(str(exc))
-                    if m is None or m.group(1) not in names or len(names) <= 1:
+                except rsm.NotEstimableError as exc:
+                    bad = [t for t in exc.terms if t in names]
+                    if not bad or len(bad) >= len(names):
                         raise
-                    names.remove(m.group(1))
-                    dropped.append(m.group(1))
+                    names = [t for t in names if t not in bad]
+                    dropped.extend(bad)
             b.results = model.fit(alpha=alpha)
             b.comparison = rsm.compare_reductions(b.results, alpha=alpha, alpha_out=alpha)
         b.notes = list(dict.fromkeys([str(x.message) for x in w] + list(b.results.notes)))
