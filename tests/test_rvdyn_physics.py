@@ -183,3 +183,42 @@ def test_cli_te_json_and_csv(tmp_path, capsys) -> None:
     assert list(df.columns[:3]) == ["input_deg", "output_deg", "te_arcsec"]
     assert len(df) == 48
     assert js["pp"] == pytest.approx(df["te_arcsec"].max() - df["te_arcsec"].min(), abs=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------- contact laws
+_REF = json.loads((__import__("pathlib").Path(__file__).parent / "data" / "impact_te_reference.json").read_text())
+
+
+@pytest.mark.parametrize("name", list(_REF["te_arcsec"]))
+def test_impact_law_reproduces_the_reference_te(name: str, tmp_path) -> None:
+    """The paper's impact law, named (API, case JSON ``model.contact`` and the CLI's --contact impact
+    --K 2e5 --n 1.5) gives the TE of commit 197f86f (tests/data/impact_te_reference.json) to 1e-6 arcsec
+    on the nominal case and each Table 4 error at its paper value."""
+    from rvcad.errors import ERROR_TYPES
+
+    errs = {} if name == "nominal" else {name: ERROR_TYPES[name].paper_value}
+    ref = np.array(_REF["te_arcsec"][name])
+    case = Case.from_dict({"errors": errs, "model": {"contact": "impact", "contact_K_N_per_mm_n": 2e5,
+                                                     "contact_n": 1.5}})
+    r = run_te(case, "analytic", _REF["steps"])
+    assert np.abs(r.table["te_arcsec"].to_numpy() - ref).max() < 1e-6
+    api = run_te(Case.from_dict({"errors": errs}), "analytic", _REF["steps"], law=ContactLaw(2e5, 1.5, kind="impact"))
+    assert np.abs(api.table["te_arcsec"].to_numpy() - ref).max() < 1e-6
+    if name in ("nominal", "pin_pitch"):
+        cf = tmp_path / "c.json"
+        cf.write_text(json.dumps({"errors": errs}))
+        out = tmp_path / "te.csv"
+        assert rvdyn_main(["te", str(cf), "--contact", "impact", "--K", "2e5", "--n", "1.5", "--steps",
+                           str(_REF["steps"]), "--out", str(out), "--json"]) == 0
+        import pandas as pd
+
+        assert np.abs(pd.read_csv(out)["te_arcsec"].to_numpy() - ref).max() < 1e-6
+
+
+def test_contact_option_errors_name_the_key(tmp_path, capsys) -> None:
+    with pytest.raises(ValueError, match=r"model.contact 'hertz' is not allowed; allowed: \['impact', 'physical'\]"):
+        run_te(Case.from_dict({"model": {"contact": "hertz"}}), steps=4)
+    with pytest.raises(ValueError, match=r"model key 'contakt' is unknown"):
+        run_te(Case.from_dict({"model": {"contakt": 1.0}}), steps=4)
+    assert rvdyn_main(["te", "--contact", "physical", "--K", "3e5", "--steps", "4"]) == 2
+    assert "--K and --n set the impact law" in capsys.readouterr().err
