@@ -171,21 +171,25 @@ class Supports:
         return float(np.mean(self.z_cams) - self.z_planet)
 
     # ------------------------------------------------------------------ wind-up
-    def wind_up(self, B: np.ndarray, stage1_F: np.ndarray, rb2: float, T_Nmm: float) -> dict[str, np.ndarray]:
-        """Output wind-up of each support kind (N,), rad, at the output torque T (N mm).
+    def wind_up(self, B: np.ndarray, stage1_F: np.ndarray, rb2: float, b: np.ndarray,
+                stage1_f: np.ndarray) -> dict[str, np.ndarray]:
+        """Output wind-up of each support kind (N,), rad (unit-load method: theta = sum f . delta(F)).
 
-        ``B``: cam-bearing forces (N, nd, nc, 2); ``stage1_F``: loaded-flank mesh force of each planet
-        (N, nc), N, with ``rb2`` the planet base radius (mm)."""
-        fc = np.linalg.norm(B, axis=-1)
-        cam = (fc * (fc / self.cam_K) ** (1.0 / BEARING_EXP)).sum(axis=(1, 2))
-        R = self.journal_forces(B)
-        fj = np.linalg.norm(R, axis=-1)
-        journal = (fj * (fj / self.journal_K) ** (1.0 / BEARING_EXP)).sum(axis=(1, 2))
+        ``B``: cam-bearing forces (N, nd, nc, 2), N; ``stage1_F``: loaded-flank mesh force of each planet
+        (N, nc), N, ``rb2`` the planet base radius (mm); ``b``, ``stage1_f``: the same per unit output
+        torque (1/mm). Each part deflects under its actual load (bearings ``delta = (F/K)^0.9`` along F,
+        beams linearly)."""
+        def bearing(Fv, fv, K):
+            fn = np.linalg.norm(Fv, axis=-1)
+            dvec = Fv * ((fn / K) ** (1.0 / BEARING_EXP) / np.maximum(fn, 1e-300))[..., None]
+            return np.einsum("...x,...x->...", fv, dvec)
+
+        cam = bearing(B, b, self.cam_K).sum(axis=(1, 2))
+        journal = bearing(self.journal_forces(B), self.journal_forces(b), self.journal_K).sum(axis=(1, 2))
         y = self.bending_deflections(B)
-        Q = -np.swapaxes(B, 1, 2)
-        bend = np.einsum("njkx,njkx->n", Q, y)
+        q = -np.swapaxes(b, 1, 2)
+        bend = np.einsum("njkx,njkx->n", q, y)
         Mt = np.nan_to_num(stage1_F) * rb2
-        tors = (Mt * Mt * self.torsion_lever_mm() / self.GJ).sum(axis=1)
-        T = max(T_Nmm, 1e-300)
-        return {"cam_bearings": cam / T, "journal_bearings": journal / T, "crank_bending": bend / T,
-                "crank_torsion": tors / T}
+        mt = np.nan_to_num(stage1_f) * rb2
+        tors = (mt * Mt * self.torsion_lever_mm() / self.GJ).sum(axis=1)
+        return {"cam_bearings": cam, "journal_bearings": journal, "crank_bending": bend, "crank_torsion": tors}

@@ -76,9 +76,10 @@ class Solution:
     stage1_force_N : (N, n_cranks) N (NaN in the rigid limit)
     iterations : int, outer iterations used (largest over the chunks)
     parts_rad : dict of (N,) rad
-        Output wind-up of each part kind at the step (physical law): ``pins`` and ``gears`` (contact
-        work / T), ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (series
-        compliance); empty for the impact law.
+        Output wind-up of each part kind at the step (unit-load method, section 8 of docs/physics.md):
+        ``pins`` and ``gears`` (contact deflections), and with the physical law and elastic supports
+        ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (series
+        compliance); empty in the rigid limit and with floating discs (cam-bearing clearance).
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
     warnings : list of str
     """
@@ -455,6 +456,7 @@ class QuasiStaticSolver:
         C_all = np.empty((N, self.nd * self.zp))
         R_all = np.empty((N, self.nd * self.zp))
         nrm_all = np.empty((N, self.nd, self.zp, 2))
+        J_all = np.empty((N, self.nd * self.zp + 2 * self.nc, self.ndof))
         trust = np.full(N, OUTER_TRUST_MM)
         last_dx = np.zeros((N, self.ndof))
         mu_all = np.ones(N)
@@ -489,6 +491,7 @@ class QuasiStaticSolver:
                     # to O(dx^2 / rho), far below 1e-12 mm
                     G_all[sl] = G + _jdot(J, dx)
                     nrm_all[sl] = self._nrm_last
+                    J_all[sl] = J
                     C_all[sl] = self._C_last
                     R_all[sl] = self._R_last
                     break
@@ -500,6 +503,7 @@ class QuasiStaticSolver:
             x[sl] = xs
             prev = xs[-1].copy()
         self._R_all = R_all
+        self._J_all = J_all
         return self._finish(th, x, direction, load_Nm, self._step_law(law, C_all), iters, G_all, nrm_all)
 
     def _check_penetration(self, th, x, direction, law, G: np.ndarray | None = None,
@@ -541,11 +545,12 @@ class QuasiStaticSolver:
         warnings: list[str] = []
         if not law.rigid:
             te = te - direction * T * self.compliance_rad_per_Nmm
-            if law.kind == "physical":
-                work = F * np.maximum(delta, 0.0)
-                parts = {"pins": work[:, :n1].sum(axis=1) / T, "gears": work[:, n1:].sum(axis=1) / T}
+            if not self.float_discs:
+                f = self._unit_load_forces(law, delta, direction)               # dF/dT, N per N mm
+                work = f * np.maximum(delta, 0.0)
+                parts = {"pins": work[:, :n1].sum(axis=1), "gears": work[:, n1:].sum(axis=1)}
                 if self.supports is not None:
-                    sup = self._support_windup(th, x, F, nrm, T)
+                    sup = self._support_windup(th, x, F, f, nrm)
                     parts.update(sup)
                     te = te - direction * sum(sup.values())
         nan = law.rigid
@@ -571,8 +576,23 @@ class QuasiStaticSolver:
         relative radius R at the converged foot points (for either law: the force meets the real geometry)."""
         return hertz_line_pressure(F, self._R_all, self.pin_estar, self.face_width)
 
-    def _support_windup(self, th, x, F, nrm, T) -> dict[str, np.ndarray]:
-        """Series wind-up of the supports (rad per step) from the pin and mesh loads (bearings.Supports)."""
+    def _unit_load_forces(self, law, delta: np.ndarray, direction: int) -> np.ndarray:
+        """Contact forces per unit output torque, dF/dT (N, M) in N/(N mm), at the solution.
+
+        Equilibrium ``J^T F = b`` with ``F = F(-(G + J x))`` and ``db/dT = direction e0 / Rp`` gives
+        ``(J^T K J) dx/dT = -db/dT`` and ``dF/dT = -K J dx/dT`` (K: contact stiffnesses). With the loads
+        proportional to T this is F/T; with a preload (errors) it is the incremental load path the unit-load
+        method needs (docs/physics.md, section 8)."""
+        J = self._J_all
+        _, k = law.force_stiffness(delta)
+        H = np.einsum("nmi,nm,nmj->nij", J, k, J) + 1e-12 * np.eye(self.ndof)[None]
+        db = np.zeros(self.ndof)
+        db[0] = direction / self.Rp
+        dx = -np.linalg.solve(H, np.broadcast_to(db, (J.shape[0], self.ndof))[..., None])[..., 0]
+        return -k * np.einsum("nmi,ni->nm", J, dx)
+
+    def _disc_cam_forces(self, th, x, F, nrm) -> np.ndarray:
+        """Cam-bearing forces on the discs (N, nd, nc, 2) that balance the contact forces F (N, M)."""
         n1 = self.nd * self.zp
         to, ps, _, _ = self._unpack(th, x)
         cen, _ = self._poses(th, x)                                             # (N, nd, 2)
@@ -582,9 +602,17 @@ class QuasiStaticSolver:
         r = self.geom.pin_centers[None, None] - cen[:, :, None]
         M_disc = (r[..., 0] * fvec[..., 1] - r[..., 1] * fvec[..., 0]).sum(axis=2)
         cams = np.swapaxes(self.geom.cam_centers(to, ps), 1, 2)                # (N, nd, nc, 2)
-        B = Supports.cam_forces(F_disc, M_disc, cams - cen[:, :, None])
+        return Supports.cam_forces(F_disc, M_disc, cams - cen[:, :, None])
+
+    def _support_windup(self, th, x, F, f, nrm) -> dict[str, np.ndarray]:
+        """Series wind-up of the supports (rad per step): the deflections under the actual loads F,
+        weighted by the unit-load forces f (bearings.Supports.wind_up)."""
+        n1 = self.nd * self.zp
+        B = self._disc_cam_forces(th, x, F, nrm)
+        b = self._disc_cam_forces(th, x, f, nrm)
         self._cam_forces_last = B
-        return self.supports.wind_up(B, F[:, n1:n1 + self.nc], self.geom.planet.base_radius, T)
+        return self.supports.wind_up(B, F[:, n1:n1 + self.nc], self.geom.planet.base_radius, b,
+                                     f[:, n1:n1 + self.nc])
 
 
 def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
