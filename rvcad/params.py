@@ -50,6 +50,12 @@ class Design:
         Radius of the central clearance hole of each cycloid disc, mm.
     housing_outer_radius_mm : float
         Outer radius of the pin housing, mm.
+    cam_bearing_rollers, cam_bearing_roller_diameter_mm, cam_bearing_roller_length_mm : int, float, float
+        Needle rollers of each cam bearing: count, diameter and effective length, mm (assumption:
+        16 x 2.5 mm x 8 mm in the 9 mm cam hole).
+    journal_bearing_rollers, journal_bearing_roller_diameter_mm, journal_bearing_roller_length_mm : int, float, float
+        Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
+        (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
     """
 
     z_sun: int = 12
@@ -71,6 +77,17 @@ class Design:
     crank_journal_radius_mm: float = 7.0
     disc_center_hole_radius_mm: float = 14.0
     housing_outer_radius_mm: float = 80.0
+    # ---- bearings and supports of the physical contact law (rvdyn, issue 11) -------------------------
+    # Assumptions of this implementation (not in the paper; README "Assumptions"): the cam bearings are
+    # needle bearings between cam and disc hole, the crank journal bearings are modelled as cylindrical
+    # roller bearings (one in the flange plate, one in the carrier), all rolling elements steel (GCr15).
+    cam_bearing_rollers: int = 16
+    cam_bearing_roller_diameter_mm: float = 2.5
+    cam_bearing_roller_length_mm: float = 8.0
+    journal_bearing_rollers: int = 12
+    journal_bearing_roller_diameter_mm: float = 3.0
+    journal_bearing_roller_length_mm: float = 6.0
+    # ---- end of the bearing block ---------------------------------------------------------------------
 
     # ------------------------------------------------------------------ derived values
     @property
