@@ -84,7 +84,7 @@ ERROR_TYPES: dict[str, ErrorType] = {e.key: e for e in [
 """The eleven error types of paper Table 4 (A = none is the empty case)."""
 
 #: Largest magnitude accepted for each unit (a sanity bound, not physics): 1 mm and 5 degrees.
-_MAX_ABS = {"um": 1000.0, "deg": 5.0}
+MAX_ABS = {"um": 1000.0, "deg": 5.0}
 
 CASE_KEYS = ("name", "design", "errors", "load_Nm", "direction", "model")
 
@@ -202,7 +202,7 @@ def parse_errors(errors: dict[str, Any] | None, design: Design) -> list[ErrorIns
         if key not in ERROR_TYPES:
             reject("errors key", key, f"{sorted(ERROR_TYPES)}", "is unknown", CaseError)
         et = ERROR_TYPES[key]
-        lim = _MAX_ABS[et.unit]
+        lim = MAX_ABS[et.unit]
         forms = ("a number, an object {\"value\": v, ...} or a non-empty list of such objects"
                  + (f", or a list of {design.z_pins} numbers (one per pin)" if et.pinwise else ""))
         if isinstance(spec, list):
