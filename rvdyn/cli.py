@@ -15,6 +15,8 @@ from typing import Any
 
 from rvcad.errors import load_case
 from rvdyn.contacts import ContactLaw
+from rvdyn.options import CONTACT_LAWS
+from rvdyn.solver import law_from_model
 from rvdyn.te import SOLVERS, lost_motion, run_te
 
 
@@ -22,8 +24,16 @@ def _finite(x: float) -> Any:
     return x if isinstance(x, (int, str)) or (isinstance(x, float) and math.isfinite(x)) else None
 
 
-def _law(args: argparse.Namespace) -> ContactLaw:
-    return ContactLaw(K=args.K, n=args.n, rigid=args.rigid)
+def _law(args: argparse.Namespace, case) -> ContactLaw:
+    """The contact law: the case's ``model`` (contact, contact_K_N_per_mm_n, contact_n), each overridden
+    by the command line's --contact, --K, --n, --rigid."""
+    base = law_from_model(case.model)
+    kind = args.contact if args.contact is not None else base.kind
+    if kind == "physical" and (args.K is not None or args.n is not None):
+        raise ValueError("--K and --n set the impact law; they need --contact impact (the physical law "
+                         "takes its stiffness from the geometry and the materials)")
+    return ContactLaw(K=base.K if args.K is None else args.K, n=base.n if args.n is None else args.n,
+                      rigid=args.rigid, kind=kind)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,8 +52,11 @@ def build_parser() -> argparse.ArgumentParser:
     te.add_argument("--load-Nm", dest="load_Nm", type=float, default=None,
                     help="output load torque in N m (default: the case's, 20); 0 = rigid single-flank limit")
     te.add_argument("--direction", type=int, choices=(1, -1), default=None, help="+1 or -1 (default: the case's)")
-    te.add_argument("--K", type=float, default=ContactLaw.K, help="contact stiffness, N/mm^n (default 2e5)")
-    te.add_argument("--n", type=float, default=ContactLaw.n, help="contact force exponent (default 1.5)")
+    te.add_argument("--contact", choices=CONTACT_LAWS, default=None,
+                    help="contact law: impact (paper Eq. 1, F = K delta^n) or physical (Hertz line contact, ISO 6336 "
+                         "mesh stiffness, bearing and crankshaft compliance); default: the case's model.contact")
+    te.add_argument("--K", type=float, default=None, help="impact-law stiffness, N/mm^n (default 2e5)")
+    te.add_argument("--n", type=float, default=None, help="impact-law force exponent (default 1.5)")
     te.add_argument("--rigid", action="store_true", help="rigid single-flank limit (K -> infinity)")
     te.add_argument("--lost-motion", action="store_true",
                     help="also compute lost motion = mean TE(-1) - mean TE(+1) at light load (rigid limit)")
@@ -54,9 +67,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _te(args: argparse.Namespace) -> int:
     case = load_case(args.case)
-    law = _law(args)
+    law = _law(args, case)
     res = run_te(case, args.solver, args.steps, args.revolutions, args.load_Nm, args.direction, law)
-    out: dict[str, Any] = {"case": case.name, **{k: _finite(v) for k, v in res.stats.items()}}
+    out: dict[str, Any] = {"case": case.name, **{k: (v if k == "warnings" else _finite(v))
+                                                  for k, v in res.stats.items()}}
+    for w in res.stats["warnings"]:
+        print(f"rvdyn: warning: {w}", file=sys.stderr)
     if args.lost_motion:
         lm = lost_motion(case, args.solver, args.steps, law=law)
         out["lost_motion_arcsec"] = lm["lost_motion_arcsec"]
