@@ -139,8 +139,7 @@ def test_graph_sees_import_time_imports_only():
     assert "rvdyn.fcl_contacts" not in g["rvdyn.te"]  # imported inside make_contacts, when asked for
 
 
-# rsm joins the list when its model <-> results <-> surface circle (issue 12) is gone
-@pytest.mark.parametrize("package", ["rvpaper", "rvcad", "rvdyn", "rvstudy", "rvcalib"])
+@pytest.mark.parametrize("package", PACKAGES)
 def test_no_import_circle(package):
     """No two modules import each other, directly or through others, even inside functions."""
     circles = [c for c in _cycles(_graph(lazy=True)) if any(m == package or m.startswith(package + ".") for m in c)]
