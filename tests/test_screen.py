@@ -1,8 +1,6 @@
 """Single-factor screen and factor sweeps (rvstudy.screen, ``rv-stackup --stages screen``)."""
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 
 import numpy as np
@@ -22,7 +20,9 @@ from rvstudy.screen import (
     sweep_cases,
 )
 
-STEPS = 24
+from conftest import STUDY_STEPS
+
+STEPS = STUDY_STEPS
 
 
 def test_screen_cases_are_table4_at_paper_values():
@@ -96,15 +96,11 @@ def test_rank_needs_case_a():
 
 
 @pytest.fixture(scope="module")
-def screen_run(tmp_path_factory):
-    """``rv-stackup --stages screen`` once, analytic solver at a few steps: (output folder, JSON summary)."""
-    out = tmp_path_factory.mktemp("screen")
-    argv = ["--out", str(out), "--stages", "screen", "--solver", "analytic", "--steps", str(STEPS),
-            "--sweep-points", "3", "--workers", "1", "--no-progress", "--json"]
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
-        assert cli.main(argv) == 0
-    return out, json.loads(buf.getvalue())
+def screen_run(small_study):
+    """The screen stage of the shared small ``rv-stackup`` run (analytic, few steps, 3 sweep points):
+    (output folder, its summary.json)."""
+    out, _ = small_study
+    return out, json.loads((out / "summary.json").read_text())
 
 
 def test_real_screen_small_steps(screen_run):
@@ -126,6 +122,7 @@ def test_real_screen_small_steps(screen_run):
 def test_screen_stage_writes_tables_plots_and_json(screen_run):
     out, summary = screen_run
     assert summary["cases"]["failed"] == 0 and summary["cases"]["computed"] > 0
+    assert summary["config"]["sweep_points"] == 3
     for name in ("tables/screen.csv", "tables/sweeps.csv", "figures/screen.png", "figures/sweeps.png",
                  "figures/te_curves.png", "report.md"):
         assert (out / name).stat().st_size > 0, name
