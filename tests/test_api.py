@@ -29,6 +29,7 @@ def readme_snippet() -> str:
     return found[0]
 
 
+@pytest.mark.slow
 def test_readme_snippet_is_five_lines_and_runs(tmp_path):
     code = readme_snippet()
     assert len(code.strip().splitlines()) == 5

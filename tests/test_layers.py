@@ -176,6 +176,7 @@ def test_package_does_not_import_a_higher_layer(package):
     assert {m: b for m, b in bad.items() if b} == {}
 
 
+@pytest.mark.slow
 def test_rvdyn_loads_no_study_no_loop_no_matplotlib_at_import():
     """The same at run time: every rvdyn module imported in a fresh interpreter (this also sees what the
     third-party libraries load)."""

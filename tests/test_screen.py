@@ -103,6 +103,7 @@ def screen_run(small_study):
     return out, json.loads((out / "summary.json").read_text())
 
 
+@pytest.mark.slow
 def test_real_screen_small_steps(screen_run):
     """The analytic solver at a few steps: stage I errors change the TE ripple far less than cam and hole errors."""
     out, summary = screen_run
@@ -119,6 +120,7 @@ def test_real_screen_small_steps(screen_run):
     assert set(summary["stage_check"]) == {"pp", "mean_abs"}
 
 
+@pytest.mark.slow
 def test_screen_stage_writes_tables_plots_and_json(screen_run):
     out, summary = screen_run
     assert summary["cases"]["failed"] == 0 and summary["cases"]["computed"] > 0
@@ -134,6 +136,7 @@ def test_screen_stage_writes_tables_plots_and_json(screen_run):
     assert "Single-factor screen" in report and "pin_pitch" in report and "reproduced" in report
 
 
+@pytest.mark.slow
 def test_screen_stage_human_summary_reuses_cache(screen_run, tmp_path, capsys):
     out, _ = screen_run
     assert cli.main(["--out", str(tmp_path), "--cache", str(out / "cache"), "--stages", "screen", "--solver",

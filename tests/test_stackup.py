@@ -77,6 +77,7 @@ def test_packaged_paper_tables():
 
 
 # ---------------------------------------------------------------------------------------------- cache
+@pytest.mark.slow
 def test_rerun_reuses_every_case(doe_reference, tmp_path, capsys, monkeypatch):
     reference, first = doe_reference  # a first run from an empty cache solves every case
     assert first["cases"]["computed"] == 25 and first["cases"]["reused"] == 0
@@ -95,6 +96,7 @@ def test_rerun_reuses_every_case(doe_reference, tmp_path, capsys, monkeypatch):
     assert third["cases"]["computed"] == 25
 
 
+@pytest.mark.slow
 def test_interrupted_run_resumes_without_loss(reference, tmp_path):
     out = tmp_path / "run"
     k = 7
@@ -145,6 +147,7 @@ def _children(pid: int) -> list[int]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to list child processes")
 def test_killed_run_resumes_corrupts_nothing_and_leaves_no_workers(reference, tmp_path):
     """``rv-stackup`` with a process pool, SIGKILLed mid-run: every cache entry is whole, the pool workers
@@ -179,6 +182,7 @@ def test_killed_run_resumes_corrupts_nothing_and_leaves_no_workers(reference, tm
     pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
 
 
+@pytest.mark.slow
 def test_corrupt_and_partial_entries_are_recomputed(reference, tmp_path):
     out = _copy(reference, tmp_path / "run")
     cache = CaseCache(out / "cache")
@@ -219,6 +223,7 @@ def test_job_key_covers_solver_steps_and_law():
 
 
 # ---------------------------------------------------------------------------------------------- report
+@pytest.mark.slow
 def test_report_tables_come_from_the_run(reference, tmp_path):
     t6 = pd.read_csv(reference / "tables" / "table6_compare.csv")
     design = pd.read_csv(reference / "tables" / "design_runs.csv")
@@ -243,6 +248,7 @@ def test_report_tables_come_from_the_run(reference, tmp_path):
     assert "paper_te_arcmin" not in pd.read_csv(out / "tables" / "table6_compare.csv")
 
 
+@pytest.mark.slow
 def test_full_pipeline_small(small_study):
     """Every stage with small counts, figures included; the report sets ours beside the paper's."""
     out, text = small_study

@@ -16,6 +16,7 @@ from rvstudy.study import StudyConfig, run_study
 from conftest import STUDY_STEPS
 
 STEPS = STUDY_STEPS
+pytestmark = pytest.mark.slow  # process pool, Dask cluster, a design run each
 
 
 def _numbers(res) -> pd.DataFrame:
