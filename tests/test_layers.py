@@ -193,3 +193,49 @@ def test_rvdyn_loads_no_study_no_loop_no_matplotlib_at_import():
     loaded = set(json.loads(done.stdout.splitlines()[-1]))
     assert {"rvdyn", "rvcad", "fcl"} <= loaded  # every module was imported (fcl by rvdyn.collision)
     assert loaded & FORBIDDEN["rvdyn"] == set()
+
+
+#: Test files still importing private names, owned by work in progress elsewhere (issue 12); remove a
+#: file from here once it tests through the public API.
+PRIVATE_IMPORTS_PENDING = {"test_rvcad_export.py", "test_rvcad_parts.py"}
+
+
+def _private_uses(path: Path) -> list[str]:
+    """``module._name`` names a test file takes from the project's packages (imports and attributes)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    aliases: dict[str, str] = {}
+    out = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom) and n.module and n.module.split(".")[0] in PACKAGES:
+            for a in n.names:
+                if a.name.startswith("_") and not a.name.startswith("__"):
+                    out.append(f"{n.module}.{a.name}")
+                else:
+                    aliases[a.asname or a.name] = f"{n.module}.{a.name}"
+        elif isinstance(n, ast.Import):
+            for a in n.names:
+                if a.name.split(".")[0] in PACKAGES:
+                    aliases[a.asname or a.name.split(".")[0]] = a.name if a.asname else a.name.split(".")[0]
+    for n in ast.walk(tree):
+        if (isinstance(n, ast.Attribute) and n.attr.startswith("_") and not n.attr.startswith("__")
+                and isinstance(n.value, (ast.Name, ast.Attribute))):
+            base = ast.unparse(n.value)
+            head = base.split(".")[0]
+            if head in aliases:
+                out.append(f"{aliases[head]}{base[len(head):]}.{n.attr}")
+    return sorted(set(out))
+
+
+def test_private_use_finder(tmp_path):
+    probe = tmp_path / "test_probe.py"
+    probe.write_text("import rvdyn.runner as r\n"
+                     "from rvcad.export import _atomic_write, export_case\n"
+                     "from rvcad import parts\n"
+                     "r._hidden(); parts._Gear; export_case.__doc__; other._x\n")
+    assert _private_uses(probe) == ["rvcad.export._atomic_write", "rvcad.parts._Gear", "rvdyn.runner._hidden"]
+
+
+def test_tests_use_public_names_only():
+    bad = {p.name: _private_uses(p) for p in sorted((ROOT / "tests").glob("test_*.py"))
+           if p.name not in PRIVATE_IMPORTS_PENDING}
+    assert {k: v for k, v in bad.items() if v} == {}
