@@ -121,6 +121,18 @@ def test_real_screen_small_steps(screen_run):
 
 
 @pytest.mark.slow
+def test_default_serial_runner_gives_the_study_numbers(screen_run):
+    """run_screen on its own (serial, no cache) solves the + rows to the same numbers as rv-stackup."""
+    out, _ = screen_run
+    study = pd.read_csv(out / "tables" / "screen.csv")
+    study = study[study["sign"].isin([0, 1])].set_index("letter")
+    alone = run_screen("analytic", STEPS, load_Nm=20.0, progress=False, sweeps=False).screen.set_index("letter")
+    assert list(alone.index) == list(study.index)
+    for col in ("pp_arcsec", "mean_abs_arcsec", "rank_pp"):
+        np.testing.assert_allclose(alone[col], study[col], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.slow
 def test_screen_stage_writes_tables_plots_and_json(screen_run):
     out, summary = screen_run
     assert summary["cases"]["failed"] == 0 and summary["cases"]["computed"] > 0
