@@ -36,7 +36,7 @@ from rvstudy.screen import (
 )
 from rvdyn.te import write_table_atomic
 import rvpaper as paper
-from rvstudy.cache import write_text_atomic
+from rvdyn.cache import write_text_atomic
 from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyResult
 
 PRIMARY = "mean_abs_arcmin"
