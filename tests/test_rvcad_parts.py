@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from rvcad import collision
+from rvdyn import collision
 from rvcad.errors import Case
 from rvcad.parts import (AXIAL_CLEARANCE_MM, Assembly, CycloidDisc, PinHousing, PlanetGear, SunGear, _Gear)
 from rvcad.curves import involute_deviation
