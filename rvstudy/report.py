@@ -610,6 +610,18 @@ def write_report(res: StudyResult) -> Path:
         for resp in res.fits:
             fig_link(f"predicted_vs_observed_{resp}", f"predicted vs observed, {resp}")
 
+    # ---------------------------------------------------------------- the loop on our design (rvstudy.augment_section)
+    from rvstudy.augment_section import augment_section
+
+    sec = augment_section(res) if res.design is not None else None
+    if sec is not None:
+        add(sec.heading)
+        add(sec.intro)
+        for name, df in sec.tables.items():
+            tab(df, name)
+            add(md_table(df) + "\n")
+        L.extend(sec.findings)
+
     # ---------------------------------------------------------------- Monte Carlo
     if res.mc:
         mc = res.mc
