@@ -21,7 +21,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
 from rvcad.errors import load_case  # noqa: E402
-from rvcad.export import edge_samples, export_case, read_step  # noqa: E402
+from rvcad.export import export_case
+from rvcad.step import edge_samples, read_step  # noqa: E402
 from rvcad.parts import Assembly, CycloidDisc, _Gear  # noqa: E402
 
 

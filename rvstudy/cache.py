@@ -34,7 +34,7 @@ CACHE_VERSION = 1
 PHYSICS_MODULES = ("rvcad.params", "rvcad.errors", "rvcad.profile", "rvcad.geometry", "rvcad.tolerances",
                    "rvdyn.contacts", "rvdyn.solver", "rvdyn.te")
 #: Added to the fingerprint of fcl jobs.
-FCL_MODULES = ("rvcad.collision", "rvdyn.fcl_contacts")
+FCL_MODULES = ("rvdyn.collision", "rvdyn.fcl_contacts")
 
 
 @lru_cache(maxsize=4)

@@ -237,7 +237,7 @@ def make_executor(workers: int = 2, scheduler: str | None = None, timeout_s: flo
 class CachedRunner:
     """Solve cases through an executor, reusing and filling a :class:`CaseCache`.
 
-    A runner is what :func:`rvdyn.screen.run_screen` and the study call: ``runner(cases, desc)``
+    A runner is what :func:`rvstudy.screen.run_screen` and the study call: ``runner(cases, desc)``
     returns one result dict per case, in order: ``stats`` (arcsec), ``te_arcsec`` (ndarray or None),
     ``key``, ``cached`` (bool), ``status`` and ``error``. Equal cases (equal keys) are solved once.
     Every finished solve is written to the cache at once, so an interrupted run loses only the

@@ -27,7 +27,7 @@ import pandas as pd
 
 from rvcad.atomic import atomic_path
 from rvcad.errors import ERROR_TYPES
-from rvdyn.screen import (
+from rvstudy.screen import (
     STAGE,
     plot_screen,
     plot_sweeps,

@@ -15,9 +15,10 @@ import pytest
 
 from rvcad.cli import main
 from rvcad.errors import Case
-from rvcad.export import _atomic_write, edge_samples, export_case, read_step
+from rvcad.export import _atomic_write, export_case
+from rvcad.step import edge_samples, read_step
 from rvcad.parts import Assembly, CycloidDisc, _Gear
-from rvcad.tessellate import read_stl
+from rvcad.stl import read_stl
 from test_rvcad_helpers import stl_chords, stl_vertices
 
 TOL = 1e-4  # 0.1 um
