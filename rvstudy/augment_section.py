@@ -27,12 +27,14 @@ __all__ = ["AugmentSection", "augment_fits", "augment_table", "augment_section"]
 
 @dataclass
 class AugmentSection:
-    """A report section: heading, introduction, tables (name -> DataFrame) and findings (one line each)."""
+    """A report section: heading, introduction, tables shown (name -> DataFrame), findings (one line each) and
+    tables only written (``data``)."""
 
     heading: str
     intro: str
     tables: dict[str, pd.DataFrame] = field(default_factory=dict)
     findings: list[str] = field(default_factory=list)
+    data: dict[str, pd.DataFrame] = field(default_factory=dict)   # written as tables, not shown
     results: dict[str, rsm.AugmentResult] = field(default_factory=dict)
 
 

@@ -83,8 +83,11 @@ class Job:
 
     def settings(self) -> dict[str, Any]:
         """Solver settings that enter the key (besides the case)."""
+        law = {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}
+        if self.law.kind != "impact":  # the law's kind reaches the worker and the key (impact keys unchanged)
+            law["kind"] = self.law.kind
         return {"solver": self.solver, "steps": int(self.steps), "revolutions": float(self.revolutions),
-                "law": {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}}
+                "law": law}
 
     def key(self) -> str:
         """Cache key: sha256 (32 hex) of the case key, the settings, the code fingerprint and the version."""

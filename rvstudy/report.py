@@ -612,14 +612,18 @@ def write_report(res: StudyResult) -> Path:
 
     # ---------------------------------------------------------------- the loop on our design (rvstudy.augment_section)
     from rvstudy.augment_section import augment_section
+    from rvstudy.paper_readings import readings_section
 
-    sec = augment_section(res) if res.design is not None else None
-    if sec is not None:
+    for sec in (augment_section(res) if res.design is not None else None, readings_section(res)):
+        if sec is None:
+            continue
         add(sec.heading)
         add(sec.intro)
         for name, df in sec.tables.items():
             tab(df, name)
             add(md_table(df) + "\n")
+        for name, df in sec.data.items():
+            tab(df, name)
         L.extend(sec.findings)
 
     # ---------------------------------------------------------------- Monte Carlo

@@ -49,6 +49,7 @@ from rvdyn.te import SOLVERS
 import rvpaper as paper
 from rvstudy.cache import CaseCache
 from rvstudy.executor import CachedRunner, Executor, make_executor
+from rvstudy.paper_readings import READINGS_STEPS, run_readings
 from rvstudy.montecarlo import (
     Tolerance,
     default_tolerances,
@@ -59,7 +60,7 @@ from rvstudy.montecarlo import (
     yield_estimate,
 )
 
-STAGES = ("screen", "doe", "validation", "mc")
+STAGES = ("screen", "doe", "validation", "mc", "readings")
 DESIGNS = ("bbd", "ccd")
 #: Responses of the design, in arcmin: the paper's statistic first.
 RESPONSES = ("mean_abs_arcmin", "pp_arcmin")
@@ -366,6 +367,7 @@ class StudyResult:
     cache_counters: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
+    readings: Any = None                   # rvstudy.paper_readings.ReadingsResult
 
 
 def _responses(results: list[dict[str, Any]]) -> pd.DataFrame:
@@ -522,6 +524,12 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
             t0 = time.perf_counter()
             res.mc = _monte_carlo(cfg, fs, runner, res)
             res.timings["mc"] = time.perf_counter() - t0
+        if "readings" in cfg.stages and fs.is_paper:  # Table 6 as measurements (rvstudy.paper_readings)
+            t0 = time.perf_counter()
+            res.readings = run_readings(fs, ex, cache, min(cfg.steps, READINGS_STEPS), cfg.load_Nm,
+                                        ContactLaw(cfg.K, cfg.n), progress=cfg.progress, **kw)
+            res.notes.extend(res.readings.notes)
+            res.timings["readings"] = time.perf_counter() - t0
     finally:
         if own:
             ex.close()
