@@ -7,7 +7,6 @@ law reaches the worker and the cache key.
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 import pytest
 
 import rvpaper as paper
