@@ -1,4 +1,5 @@
-"""Command line of rvdyn: ``rvdyn te`` (TE of one case) and ``rvdyn screen`` (single-factor screen).
+"""Command line of rvdyn: ``rvdyn te`` (TE of one case), ``rvdyn stiffness`` (the hysteresis curve and
+datasheet figures) and ``rvdyn screen`` (single-factor screen).
 
 Each command prints a human summary by default; ``--json`` prints one JSON object on stdout.
 Bad input prints a message naming the field to stderr and exits with status 2.
@@ -60,6 +61,23 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also compute lost motion = mean TE(-1) - mean TE(+1) at light load (rigid limit)")
     te.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
 
+    st = sub.add_parser("stiffness", help="hysteresis curve (input locked) and the datasheet figures",
+                        description="The maker's torque sweep: input locked, output torque -rated -> +rated -> "
+                                    "-rated. Prints torsional rigidity (b/a), lost motion (+-3 %% rated), backlash "
+                                    "(zero torque, rigid play), hysteresis loss and the compliance budget (arcsec at "
+                                    "rated torque).")
+    st.add_argument("case", nargs="?", default=None, help="case JSON; default: nominal, no errors")
+    st.add_argument("--rated-Nm", dest="rated_Nm", type=float, default=None,
+                    help="rated output torque, N m (default 167, the RV-20E class of the default design)")
+    st.add_argument("--out", default=None, help="CURVE.csv to write (torque_Nm, torsion_arcmin, branch)")
+    st.add_argument("--plot", default=None, help="PNG of the hysteresis curve")
+    st.add_argument("--contact", choices=CONTACT_LAWS, default=None,
+                    help="contact law (default: the case's model.contact)")
+    st.add_argument("--solver", choices=SOLVERS, default="analytic")
+    st.add_argument("--input-deg", dest="input_deg", type=float, default=0.0, help="locked input angle, deg")
+    st.add_argument("--points", type=int, default=41, help="points per sweep branch (default 41)")
+    st.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
+
     sc = sub.add_parser("screen", help="single-factor screen of the Table 4 errors and RSM factor sweeps",
                         description="Paper Fig. 9 and Fig. 11: every Table 4 error alone at its paper value, "
                                     "and sweeps of EA..ED over the Table 5 range; writes CSV tables and PNG plots.")
@@ -99,12 +117,55 @@ def _te(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stiffness(args: argparse.Namespace) -> int:
+    from rvdyn.stiffness import DEFAULT_RATED_NM, hysteresis, write_curve
+
+    case = load_case(args.case)
+    law = None
+    if args.contact is not None:
+        base = law_from_model(case.model)
+        law = ContactLaw(K=base.K, n=base.n, kind=args.contact)
+    res = hysteresis(case, args.rated_Nm, args.input_deg, args.solver, law, args.points)
+    f = res.figures
+    for w in f["warnings"]:
+        print(f"rvdyn: warning: {w}", file=sys.stderr)
+    if args.out:
+        f["csv"] = str(write_curve(res, args.out))
+    if args.plot:
+        f["png"] = str(res.plot(args.plot))
+    if args.json:
+        print(json.dumps({"case": case.name, **f}))
+        return 0
+    ds = f["datasheet_class"]
+    print(f"case {case.name}: hysteresis curve, input locked at {f['input_angle_deg']:g} deg, rated torque "
+          f"{f['rated_torque_Nm']:g} N m, {f['contact']} contact law, supports {f['supports']}, friction "
+          f"mu_pin {f['pin_friction_coefficient']:g}, mu_bearing {f['bearing_friction_coefficient']:g}")
+    if args.rated_Nm is None and case.design != type(case.design)():
+        print(f"  note: rated torque {DEFAULT_RATED_NM:g} N m is the default design's (RV-20E class); give "
+              "--rated-Nm for this design")
+    print(f"  torsional rigidity {f['torsional_rigidity_Nm_per_arcmin']:.1f} N m/arcmin   (datasheet class "
+          f"{ds['model']}: about {ds['torsional_rigidity_Nm_per_arcmin']:g})")
+    print(f"  lost motion        {f['lost_motion_arcmin']:.4f} arcmin      (datasheet class: <= "
+          f"{ds['lost_motion_arcmin_max']:g})")
+    print(f"  backlash           {f['backlash_arcmin']:.4f} arcmin")
+    print(f"  hysteresis loss    {f['hysteresis_loss_arcmin']:.4f} arcmin")
+    print(f"  compliance budget at rated torque (arcsec, total {f['budget_total_arcsec']:.2f}):")
+    for k, v in sorted(f["budget"].items(), key=lambda kv: -kv[1]):
+        print(f"    {k:18s} {v:8.3f}  ({100 * v / max(f['budget_total_arcsec'], 1e-300):5.1f} %)")
+    for k in ("csv", "png"):
+        if k in f:
+            print(f"  wrote {f[k]}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``rvdyn``; returns the exit status."""
     args = build_parser().parse_args(argv)
     try:
         if args.command == "te":
             return _te(args)
+        if args.command == "stiffness":
+            return _stiffness(args)
         from rvdyn.screen import screen_command
 
         return screen_command(args)

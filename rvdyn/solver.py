@@ -82,6 +82,8 @@ class Solution:
         compliance); empty in the rigid limit and with floating discs (cam-bearing clearance).
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
     warnings : list of str
+    pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
+    cam_force_N : (N, n_discs, n_cranks, 2) N or None, forces of the cams on the discs (fixed frame)
     """
 
     theta_in: np.ndarray
@@ -97,6 +99,8 @@ class Solution:
     parts_rad: dict = field(default_factory=dict)
     peak_pressure_MPa: np.ndarray = field(default_factory=lambda: np.zeros(0))
     warnings: list = field(default_factory=list)
+    pin_force_N: np.ndarray | None = field(default=None, repr=False)
+    cam_force_N: np.ndarray | None = field(default=None, repr=False)
 
 
 class QuasiStaticSolver:
@@ -543,6 +547,9 @@ class QuasiStaticSolver:
         n1 = self.nd * self.zp
         parts: dict[str, np.ndarray] = {}
         warnings: list[str] = []
+        cam_F = None
+        if not law.rigid and not self.float_discs:
+            cam_F = self.disc_cam_forces(th, x, F, nrm)
         if not law.rigid:
             te = te - direction * T * self.compliance_rad_per_Nmm
             if not self.float_discs:
@@ -550,7 +557,7 @@ class QuasiStaticSolver:
                 work = f * np.maximum(delta, 0.0)
                 parts = {"pins": work[:, :n1].sum(axis=1), "gears": work[:, n1:].sum(axis=1)}
                 if self.supports is not None:
-                    sup = self._support_windup(th, x, F, f, nrm)
+                    sup = self._support_windup(th, x, F, f, nrm, cam_F)
                     parts.update(sup)
                     te = te - direction * sum(sup.values())
         nan = law.rigid
@@ -569,7 +576,8 @@ class QuasiStaticSolver:
             peak_force_N=np.full(th.size, np.nan) if nan else F.max(axis=1),
             max_penetration_mm=pen,
             stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:n1 + self.nc],
-            iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings)
+            iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings,
+            pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F)
 
     def _pin_pressure(self, F: np.ndarray, law) -> np.ndarray:
         """Peak Hertzian pressure p0 = sqrt(P E*/(pi R)) of every pin contact (N, 2 Zp), MPa, with the
@@ -591,7 +599,7 @@ class QuasiStaticSolver:
         dx = -np.linalg.solve(H, np.broadcast_to(db, (J.shape[0], self.ndof))[..., None])[..., 0]
         return -k * np.einsum("nmi,ni->nm", J, dx)
 
-    def _disc_cam_forces(self, th, x, F, nrm) -> np.ndarray:
+    def disc_cam_forces(self, th, x, F, nrm) -> np.ndarray:
         """Cam-bearing forces on the discs (N, nd, nc, 2) that balance the contact forces F (N, M)."""
         n1 = self.nd * self.zp
         to, ps, _, _ = self._unpack(th, x)
@@ -604,13 +612,11 @@ class QuasiStaticSolver:
         cams = np.swapaxes(self.geom.cam_centers(to, ps), 1, 2)                # (N, nd, nc, 2)
         return Supports.cam_forces(F_disc, M_disc, cams - cen[:, :, None])
 
-    def _support_windup(self, th, x, F, f, nrm) -> dict[str, np.ndarray]:
-        """Series wind-up of the supports (rad per step): the deflections under the actual loads F,
-        weighted by the unit-load forces f (bearings.Supports.wind_up)."""
+    def _support_windup(self, th, x, F, f, nrm, B) -> dict[str, np.ndarray]:
+        """Series wind-up of the supports (rad per step): the deflections under the actual loads F
+        (cam forces B), weighted by the unit-load forces f (bearings.Supports.wind_up)."""
         n1 = self.nd * self.zp
-        B = self._disc_cam_forces(th, x, F, nrm)
-        b = self._disc_cam_forces(th, x, f, nrm)
-        self._cam_forces_last = B
+        b = self.disc_cam_forces(th, x, f, nrm)
         return self.supports.wind_up(B, F[:, n1:n1 + self.nc], self.geom.planet.base_radius, b,
                                      f[:, n1:n1 + self.nc])
 
