@@ -1,11 +1,12 @@
-"""rvdyn: quasi-static meshing analysis of the RV reducer: transmission error, statistics, lost motion.
+"""rvdyn: quasi-static meshing analysis of the RV reducer: transmission error, statistics, backlash,
+and the hysteresis curve with the datasheet figures (rvdyn.stiffness).
 
 Two contact providers behind one solver: ``analytic`` (exact envelope and involute distances)
 and ``fcl`` (python-fcl distance queries on the exported meshes).
 """
 from rvdyn.contacts import AnalyticContacts, ContactLaw
 from rvdyn.solver import ARCSEC_PER_RAD, InterferenceError, QuasiStaticSolver, Solution
-from rvdyn.te import TEResult, lost_motion, run_te, te_stats, write_table_atomic
+from rvdyn.te import TEResult, backlash, run_te, te_stats, write_table_atomic
 
 __all__ = ["ARCSEC_PER_RAD", "AnalyticContacts", "ContactLaw", "InterferenceError", "QuasiStaticSolver", "Solution",
-           "TEResult", "lost_motion", "run_te", "te_stats", "write_table_atomic"]
+           "TEResult", "backlash", "run_te", "te_stats", "write_table_atomic"]

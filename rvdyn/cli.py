@@ -16,7 +16,7 @@ from rvcad.errors import load_case
 from rvdyn.contacts import ContactLaw
 from rvdyn.options import CONTACT_LAWS
 from rvdyn.solver import law_from_model
-from rvdyn.te import SOLVERS, lost_motion, run_te
+from rvdyn.te import SOLVERS, backlash, run_te
 
 
 def _finite(x: float) -> Any:
@@ -57,8 +57,11 @@ def build_parser() -> argparse.ArgumentParser:
     te.add_argument("--K", type=float, default=None, help="impact-law stiffness, N/mm^n (default 2e5)")
     te.add_argument("--n", type=float, default=None, help="impact-law force exponent (default 1.5)")
     te.add_argument("--rigid", action="store_true", help="rigid single-flank limit (K -> infinity)")
-    te.add_argument("--lost-motion", action="store_true",
-                    help="also compute lost motion = mean TE(-1) - mean TE(+1) at light load (rigid limit)")
+    te.add_argument("--backlash", action="store_true",
+                    help="also compute backlash = mean TE(-1) - mean TE(+1) in the rigid limit (the play at zero "
+                         "torque); the datasheet's lost motion is 'rvdyn stiffness'")
+    te.add_argument("--lost-motion", dest="old_lost_motion", action="store_true",
+                    help="old name of --backlash (kept; prints a note)")
     te.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
 
     st = sub.add_parser("stiffness", help="hysteresis curve (input locked) and the datasheet figures",
@@ -98,9 +101,11 @@ def _te(args: argparse.Namespace) -> int:
                                                   for k, v in res.stats.items()}}
     for w in res.stats["warnings"]:
         print(f"rvdyn: warning: {w}", file=sys.stderr)
-    if args.lost_motion:
-        lm = lost_motion(case, args.solver, args.steps, law=law)
-        out["lost_motion_arcsec"] = lm["lost_motion_arcsec"]
+    if args.old_lost_motion:
+        print("rvdyn: note: --lost-motion is now --backlash (the rigid play at zero torque, key backlash_arcsec); "
+              "the datasheet's lost motion (+-3 % rated torque) is 'rvdyn stiffness'", file=sys.stderr)
+    if args.backlash or args.old_lost_motion:
+        out["backlash_arcsec"] = backlash(case, args.solver, args.steps, law=law)["backlash_arcsec"]
     if args.out:
         out["csv"] = str(res.to_csv(args.out))
     if args.json:
@@ -110,8 +115,8 @@ def _te(args: argparse.Namespace) -> int:
               f"load {res.stats['load_Nm']:g} N m, direction {res.stats['direction']:+d}")
         print(f"  TE pp {out['pp']:.4f} arcsec  mean {out['mean']:.4f}  mean|.| {out['mean_abs']:.4f}  "
               f"rms {out['rms']:.4f}  ratio {res.stats['ratio']:.7f}  ({res.stats['seconds']:.2f} s)")
-        if "lost_motion_arcsec" in out:
-            print(f"  lost motion {out['lost_motion_arcsec']:.4f} arcsec")
+        if "backlash_arcsec" in out:
+            print(f"  backlash {out['backlash_arcsec']:.4f} arcsec (rigid play at zero torque)")
         if args.out:
             print(f"  wrote {out['csv']}")
     return 0

@@ -12,7 +12,7 @@ from rvcad.geometry import ReducerGeometry
 from rvdyn.cli import main as rvdyn_main
 from rvdyn.contacts import AnalyticContacts, ContactLaw
 from rvdyn.solver import ARCSEC_PER_RAD, InterferenceError, QuasiStaticSolver
-from rvdyn.te import lost_motion, run_te
+from rvdyn.te import backlash, run_te
 
 STEPS = 144
 
@@ -61,7 +61,7 @@ def _lever_arms(geom: ReducerGeometry, theta_in: np.ndarray) -> np.ndarray:
     return lam
 
 
-def test_pin_radius_reduction_clearance_to_angle_and_lost_motion() -> None:
+def test_pin_radius_reduction_clearance_to_angle_and_backlash() -> None:
     dr_um = 5.0
     case = Case.from_dict({"errors": {"pin_radius": -dr_um}})
     g = ReducerGeometry(case)
@@ -72,8 +72,8 @@ def test_pin_radius_reduction_clearance_to_angle_and_lost_motion() -> None:
     assert r.table["te_arcsec"].to_numpy() == pytest.approx(expect, rel=2e-3)
     # the largest lever is close to e * i * Z1/Z2 = 52.43 mm (the pin whose normal lines up with u')
     assert lam_max.min() == pytest.approx(1.3 * 121 / 3, rel=5e-3)
-    lm = lost_motion(case, "analytic", STEPS)
-    assert lm["lost_motion_arcsec"] == pytest.approx(-2 * expect.mean(), rel=2e-3)
+    lm = backlash(case, "analytic", STEPS)
+    assert lm["backlash_arcsec"] == pytest.approx(-2 * expect.mean(), rel=2e-3)
 
 
 def test_stage1_error_reduced_by_stage2_ratio() -> None:
@@ -107,15 +107,15 @@ def test_pin_ring_rotation_shifts_te_by_120_over_121_of_it(delta_deg: float) -> 
     assert np.max(np.abs(shift - expected)) < 0.01, (shift.min(), shift.max(), expected)
 
 
-def test_cam_bearing_clearance_lost_motion_is_geometric_slack() -> None:
-    """At the rigid limit a cam-bearing clearance c is pure geometric slack: the lost motion is
+def test_cam_bearing_clearance_backlash_is_geometric_slack() -> None:
+    """At the rigid limit a cam-bearing clearance c is pure geometric slack: the backlash is
     symmetric (TE +-LM/2 in the two directions), proportional to c, zero without a clearance."""
-    lm = {c: lost_motion(Case.from_dict({"model": {"cam_bearing_clearance_um": c}} if c else {}), steps=60)
+    lm = {c: backlash(Case.from_dict({"model": {"cam_bearing_clearance_um": c}} if c else {}), steps=60)
           for c in (0.0, 2.0, 4.0)}
-    assert abs(lm[0.0]["lost_motion_arcsec"]) < 1e-6
+    assert abs(lm[0.0]["backlash_arcsec"]) < 1e-6
     for c in (2.0, 4.0):
         assert lm[c]["te_plus_mean_arcsec"] == pytest.approx(-lm[c]["te_minus_mean_arcsec"], rel=1e-6)
-    assert lm[4.0]["lost_motion_arcsec"] == pytest.approx(2.0 * lm[2.0]["lost_motion_arcsec"], rel=1e-4)
+    assert lm[4.0]["backlash_arcsec"] == pytest.approx(2.0 * lm[2.0]["backlash_arcsec"], rel=1e-4)
 
 
 def test_cam_bearing_clearance_slack_between_its_closed_form_bounds() -> None:
@@ -366,3 +366,36 @@ def test_physical_law_pressure_and_gap_to_impact(physical_nominal) -> None:
     assert not sol.warnings
     imp = run_te(Case.from_dict({}), "analytic", 6, law=ContactLaw())
     assert 10 < imp.stats["mean"] / sol.te_rad.mean() / ARCSEC_PER_RAD < 40
+
+
+def test_cli_backlash_flag_and_old_name(capsys) -> None:
+    assert rvdyn_main(["te", "--steps", "4", "--backlash", "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert abs(js["backlash_arcsec"]) < 1e-6 and "lost_motion_arcsec" not in js
+    assert rvdyn_main(["te", "--steps", "4", "--lost-motion", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert "backlash_arcsec" in json.loads(cap.out) and "--lost-motion is now --backlash" in cap.err
+
+
+def test_load_and_interference_messages_name_the_cause() -> None:
+    """Issue 14 item 11: a huge load is not blamed on the errors; the rigid limit suggests the elastic law,
+    an elastic law does not; a gross misfit under the physical law is refused naming the errors."""
+    with pytest.raises(InterferenceError, match=r"the load 1e\+12 N m presses the contacts .* reduce load_Nm") as ei:
+        run_te(Case.from_dict({}), steps=4, load_Nm=1e12)
+    assert "errors" not in str(ei.value)
+    with pytest.raises(InterferenceError, match=r"reduce the errors that close the clearance") as ei:
+        run_te(Case.from_dict({"errors": {"disc_phase": 0.1}}), steps=4, law=ContactLaw(kind="physical"))
+    assert "use the elastic contact law" not in str(ei.value)
+    with pytest.raises(InterferenceError, match=r"rigid limit.*elastic contact law under load"):
+        g = ReducerGeometry(Case.from_dict({"errors": {"pin_circle_diameter": -14}}))
+        QuasiStaticSolver(g, AnalyticContacts(g), ContactLaw(rigid=True)).solve(np.zeros(2), 1, 20.0)
+
+
+def test_pressure_above_the_limit_warns(capsys) -> None:
+    """Peak Hertz pressure against the stated limit (model.contact_pressure_limit_MPa): a disc phase of
+    0.05 deg under the physical law reaches about 5.5 GPa > 4 GPa: a warning in the result and on stderr."""
+    r = run_te(Case.from_dict({"errors": {"disc_phase": 0.05}, "model": {"contact": "physical"}}), steps=4)
+    assert r.stats["peak_pressure_MPa"] > 4000
+    assert any("exceeds the stated limit 4000 MPa" in w for w in r.stats["warnings"])
+    ok = run_te(Case.from_dict({"model": {"contact": "physical"}}), steps=4)
+    assert ok.stats["warnings"] == [] and 100 < ok.stats["peak_pressure_MPa"] < 4000
