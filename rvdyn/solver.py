@@ -154,8 +154,14 @@ class QuasiStaticSolver:
         self.c_gamma = iso_mesh_stiffness(self.c_single, self.eps_alpha)      # N/(mm um)
         self.k_mesh = self.c_gamma * 1e3 * d.gear_width_mm                     # N/mm along the line of action
         self.supports = None
+        self.k_stage1 = self.k_mesh
+        self.torsion_share = 0.0
         if self.law.kind == "physical" and model_choice(m, "supports") == "elastic" and not self.float_discs:
             self.supports = Supports.from_design(d)
+            # crank torsion between planet and cams in series with the mesh, seen along the line of action
+            k_t = self.supports.GJ / (self.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
+            self.k_stage1 = 1.0 / (1.0 / self.k_mesh + 1.0 / k_t)
+            self.torsion_share = self.k_stage1 / k_t                           # share of the stage I deflection
         self._C_last: np.ndarray | None = None
         self._R_last: np.ndarray | None = None
         self._R_all: np.ndarray | None = None
@@ -353,7 +359,7 @@ class QuasiStaticSolver:
         if not law.physical:
             return law
         n1 = self.nd * self.zp
-        return PhysicalLaw(LineContact(1.0 / (math.pi * self.pin_estar), C, self.face_width), n1, self.k_mesh)
+        return PhysicalLaw(LineContact(1.0 / (math.pi * self.pin_estar), C, self.face_width), n1, self.k_stage1)
 
     def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200) -> np.ndarray:
         """Minimise the linearised potential around x0; returns the step (N, ndof).
@@ -556,7 +562,9 @@ class QuasiStaticSolver:
                 f = self._unit_load_forces(law, delta, direction)               # dF/dT, N per N mm
                 work = f * np.maximum(delta, 0.0)
                 parts = {"pins": work[:, :n1].sum(axis=1), "gears": work[:, n1:].sum(axis=1)}
-                if self.supports is not None:
+                if self.supports is not None and law.kind == "physical":
+                    parts["crank_torsion"] = self.torsion_share * parts["gears"]
+                    parts["gears"] = parts["gears"] - parts["crank_torsion"]
                     sup = self._support_windup(th, x, F, f, nrm, cam_F)
                     parts.update(sup)
                     te = te - direction * sum(sup.values())
@@ -617,8 +625,7 @@ class QuasiStaticSolver:
         (cam forces B), weighted by the unit-load forces f (bearings.Supports.wind_up)."""
         n1 = self.nd * self.zp
         b = self.disc_cam_forces(th, x, f, nrm)
-        return self.supports.wind_up(B, F[:, n1:n1 + self.nc], self.geom.planet.base_radius, b,
-                                     f[:, n1:n1 + self.nc])
+        return self.supports.wind_up(B, b)
 
 
 def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:

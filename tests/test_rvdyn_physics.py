@@ -342,18 +342,25 @@ def physical_nominal():
 
 
 def test_physical_budget_is_the_wind_up(physical_nominal) -> None:
-    """Virtual work: with rigid supports the TE is the pins' and the gears' deflection work per unit
-    torque (to 1e-3); with elastic supports the supports add their series terms exactly; the supports
+    """Virtual work: the TE is the sum of every part's deflection work per unit torque (to 1e-3): with
+    rigid supports the pins' and the gears', with elastic supports also the bearings', the crank bending
+    (series, after the equilibrium) and the crank torsion (a spring in series with the mesh, inside the
+    equilibrium: its share of the stage I deflection is c_torsion / (c_mesh + c_torsion)). The supports
     and the Hertz contact make the wind-up grow slightly less than linearly with the load."""
-    for L, sol in physical_nominal["rigid"].items():
-        te = sol.te_rad
-        assert set(sol.parts_rad) == {"pins", "gears"}
-        assert -te == pytest.approx(sol.parts_rad["pins"] + sol.parts_rad["gears"], rel=1e-3)
-    for L, sol in physical_nominal["elastic"].items():
-        rigid = physical_nominal["rigid"][L]
-        sup = sum(v for k, v in sol.parts_rad.items() if k not in ("pins", "gears"))
-        assert sol.te_rad == pytest.approx(rigid.te_rad - sup, rel=1e-9)
-        assert sol.parts_rad["journal_bearings"].min() > 0 and sol.parts_rad["crank_bending"].min() > 0
+    for sup, parts in (("rigid", {"pins", "gears"}),
+                       ("elastic", {"pins", "gears", "cam_bearings", "journal_bearings", "crank_bending",
+                                    "crank_torsion"})):
+        for L, sol in physical_nominal[sup].items():
+            assert set(sol.parts_rad) == parts
+            assert -sol.te_rad == pytest.approx(sum(sol.parts_rad.values()), rel=1e-3)
+    el = physical_nominal["elastic"][20.0]
+    assert el.parts_rad["journal_bearings"].min() > 0 and el.parts_rad["crank_bending"].min() > 0
+    g = ReducerGeometry(Case.from_dict({"model": {"contact": "physical"}}))
+    s = QuasiStaticSolver(g, AnalyticContacts(g))
+    k_t = s.supports.GJ / (s.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
+    assert s.k_stage1 == pytest.approx(s.k_mesh * k_t / (s.k_mesh + k_t), rel=1e-12)
+    ratio = el.parts_rad["crank_torsion"] / (el.parts_rad["crank_torsion"] + el.parts_rad["gears"])
+    assert ratio == pytest.approx(s.k_mesh / (s.k_mesh + k_t), rel=1e-9)
     e20, e40 = (physical_nominal["elastic"][L].te_rad.mean() for L in (20.0, 40.0))
     assert 1.6 < e40 / e20 < 2.0
 
@@ -391,11 +398,17 @@ def test_load_and_interference_messages_name_the_cause() -> None:
         QuasiStaticSolver(g, AnalyticContacts(g), ContactLaw(rigid=True)).solve(np.zeros(2), 1, 20.0)
 
 
-def test_pressure_above_the_limit_warns(capsys) -> None:
-    """Peak Hertz pressure against the stated limit (model.contact_pressure_limit_MPa): a disc phase of
-    0.05 deg under the physical law reaches about 5.5 GPa > 4 GPa: a warning in the result and on stderr."""
-    r = run_te(Case.from_dict({"errors": {"disc_phase": 0.05}, "model": {"contact": "physical"}}), steps=4)
+def test_pressure_above_the_limit_warns(tmp_path, capsys) -> None:
+    """Peak Hertz pressure against the stated limit (model.contact_pressure_limit_MPa): one pin 0.02 deg
+    out of pitch (22 um into a zero-backlash disc) under the physical law reaches about 4.2 GPa > 4 GPa:
+    a warning in the result and on stderr; the nominal case stays far below."""
+    r = run_te(Case.from_dict({"errors": {"pin_pitch": 0.02}, "model": {"contact": "physical"}}), steps=4)
     assert r.stats["peak_pressure_MPa"] > 4000
     assert any("exceeds the stated limit 4000 MPa" in w for w in r.stats["warnings"])
     ok = run_te(Case.from_dict({"model": {"contact": "physical"}}), steps=4)
     assert ok.stats["warnings"] == [] and 100 < ok.stats["peak_pressure_MPa"] < 4000
+    cf = tmp_path / "c.json"
+    cf.write_text(json.dumps({"errors": {"pin_pitch": 0.02}}))
+    assert rvdyn_main(["te", str(cf), "--contact", "physical", "--steps", "4", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert "rvdyn: warning: peak pin-disc contact pressure" in cap.err and json.loads(cap.out)["warnings"]
