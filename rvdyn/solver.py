@@ -84,6 +84,7 @@ class Solution:
     warnings : list of str
     pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
     cam_force_N : (N, n_discs, n_cranks, 2) N or None, forces of the cams on the discs (fixed frame)
+    n_pin_contacts : (N,) int, pin-disc contacts (both discs) that touch (penetration > 0)
     """
 
     theta_in: np.ndarray
@@ -101,6 +102,7 @@ class Solution:
     warnings: list = field(default_factory=list)
     pin_force_N: np.ndarray | None = field(default=None, repr=False)
     cam_force_N: np.ndarray | None = field(default=None, repr=False)
+    n_pin_contacts: np.ndarray | None = field(default=None, repr=False)
 
 
 class QuasiStaticSolver:
@@ -585,7 +587,8 @@ class QuasiStaticSolver:
             max_penetration_mm=pen,
             stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:n1 + self.nc],
             iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings,
-            pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F)
+            pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F,
+            n_pin_contacts=(delta[:, :n1] > (1e-12 if not law.rigid else 0.0)).sum(axis=1))
 
     def _pin_pressure(self, F: np.ndarray, law) -> np.ndarray:
         """Peak Hertzian pressure p0 = sqrt(P E*/(pi R)) of every pin contact (N, 2 Zp), MPa, with the

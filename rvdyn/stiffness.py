@@ -59,10 +59,12 @@ class StiffnessResult:
         The sweep: ``torque_Nm``, ``torsion_arcmin``, ``branch`` (``load`` -rated -> +rated,
         ``unload`` +rated -> -rated).
     elastic : DataFrame
-        The friction-free equilibrium: ``torque_Nm``, ``torsion_arcmin``, ``friction_torque_Nm``.
+        The friction-free equilibrium: ``torque_Nm``, ``torsion_arcmin``, ``friction_torque_Nm``,
+        ``pins_in_contact`` (pin-disc contacts of both discs that touch).
     figures : dict
         ``torsional_rigidity_Nm_per_arcmin``, ``lost_motion_arcmin``, ``backlash_arcmin``,
-        ``hysteresis_loss_arcmin``, ``rated_torque_Nm``, ``budget`` (part -> arcsec at rated torque)
+        ``hysteresis_loss_arcmin``, ``rated_torque_Nm``, ``budget`` (part -> arcsec at rated torque),
+        ``pins_in_contact`` (torque fraction of rated -> pin contacts of both discs, positive side)
         and the context (contact law, friction coefficients, datasheet class, notes).
     """
 
@@ -171,7 +173,7 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
                 for k, v in sol.parts_rad.items():
                     budget_acc.setdefault(k, []).append(float(v[0]) * ARCSEC_PER_RAD)
         sides[sign] = rows
-    el_theta, el_tau, el_fric = [], [], []
+    el_theta, el_tau, el_fric, el_pins = [], [], [], []
     for sign in (-1, 1):
         rows = sides[sign]
         theta = np.array([sol.te_rad[0] for _, sol in rows])
@@ -181,11 +183,13 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
             el_theta.append(theta[i])
             el_tau.append(rows[i][0] * 1e3)
             el_fric.append(tf[i])
+            el_pins.append(int(rows[i][1].n_pin_contacts[0]))
     el_theta = np.array(el_theta)
     el_tau = np.array(el_tau)
     el_fric = np.array(el_fric)
+    el_pins = np.array(el_pins)
     o = np.lexsort((el_tau, el_theta))
-    el_theta, el_tau, el_fric = el_theta[o], el_tau[o], el_fric[o]
+    el_theta, el_tau, el_fric, el_pins = el_theta[o], el_tau[o], el_fric[o], el_pins[o]
     U = np.maximum.accumulate(el_tau + el_fric)                                  # loading branch tau(theta)
     D = np.maximum.accumulate(el_tau - el_fric)                                  # unloading branch
     R = rated * 1e3
@@ -207,7 +211,7 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     # the unloading branch from +rated is the first branch's return; sample the load branch of the
     # complete cycle (-rated -> +rated after an unloading from +rated) for the width
     elastic = pd.DataFrame({"torque_Nm": el_tau / 1e3, "torsion_arcmin": el_theta * ARCSEC_PER_RAD / 60.0,
-                            "friction_torque_Nm": el_fric / 1e3})
+                            "friction_torque_Nm": el_fric / 1e3, "pins_in_contact": el_pins})
     lm_plus, _ = _mid_width(curve, LOST_MOTION_FRACTION * rated)
     lm_minus, _ = _mid_width(curve, -LOST_MOTION_FRACTION * rated)
     _, width0 = _mid_width(curve, 0.0)
@@ -226,6 +230,7 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
         "rated_torque_Nm": rated,
         "budget": budget,
         "budget_total_arcsec": float(sum(budget.values())),
+        "pins_in_contact": {f"{f:g}": int(sol.n_pin_contacts[0]) for f, (_, sol) in zip((0.0,) + LEVELS, sides[1])},
         "contact": s.law.kind,
         "supports": "elastic" if s.supports is not None else "rigid",
         "pin_friction_coefficient": mu_p,

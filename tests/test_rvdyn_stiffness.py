@@ -99,3 +99,44 @@ def test_cli_stiffness_json_csv_and_bad_input(tmp_path, capsys) -> None:
     assert rvdyn_main(["stiffness", "--rated-Nm", "0", "--out", str(tmp_path / "x.csv")]) == 2
     assert "rated torque 0.0 N m must be a finite number > 0" in capsys.readouterr().err
     assert not (tmp_path / "x.csv").exists()
+
+
+# ---------------------------------------------------------------------------------------------- profile modification
+@pytest.fixture(scope="module")
+def modified():
+    law = ContactLaw(kind="physical")
+    no_fric = {"pin_friction_coefficient": 0.0, "bearing_friction_coefficient": 0.0}
+    return hysteresis(Case.from_dict({"design": {"profile_equidistant_mm": 0.01}, "model": no_fric}), law=law,
+                      points=11)
+
+
+def test_equidistant_modification_backlash_and_pins_in_contact(modified) -> None:
+    """An equidistant modification d_rp = 10 um opens the same play as a pin 10 um thinner:
+    2 d_rp / lambda_max (lambda_max = e i Z1/Z2 = 52.43 mm): 1.31 arcmin; few pins touch at light
+    load and more engage as the torque grows (never fewer)."""
+    f = modified.figures
+    assert f["backlash_arcmin"] == pytest.approx(2 * 0.01 / (1.3 * 121 / 3) * ARCSEC_PER_RAD / 60, rel=5e-3)
+    n = np.array(list(f["pins_in_contact"].values()))
+    assert n[0] <= 4 and n[-1] >= 3 * n[0] and np.all(np.diff(n) >= 0)
+    assert f["lost_motion_arcmin"] > f["backlash_arcmin"]
+
+
+def test_rotation_modification_shifts_te_closed_form() -> None:
+    """Both profiles turned by delta relative to their crank holes: the mesh holds when the output turns by
+    -delta Zc / (Zc + 1 + Z1/Z2) = -delta 117/121 (a uniform TE shift)."""
+    from rvdyn.te import run_te
+
+    a = run_te(Case.from_dict({}), steps=12).table["te_arcsec"].to_numpy()
+    b = run_te(Case.from_dict({"design": {"profile_rotation_deg": 0.01}}), steps=12).table["te_arcsec"].to_numpy()
+    assert np.abs(b - a - (-0.01 * 3600 * 39 / (39 + 4 / 3))).max() < 1e-3
+
+
+def test_modification_is_in_the_shared_profile_and_checked() -> None:
+    """The modification lives in the shared profile maths (rvcad.profile), so the geometry and the
+    exported discs (rvcad.parts takes geometry.profiles) carry it; out-of-range values name the field."""
+    from rvcad.geometry import ReducerGeometry
+
+    g = ReducerGeometry(Case.from_dict({"design": {"profile_equidistant_mm": 0.02, "profile_shift_mm": -0.01}}))
+    assert g.profiles[0].pin_radius == pytest.approx(3.02) and g.profiles[1].pin_circle_radius == pytest.approx(63.99)
+    with pytest.raises(ValueError, match=r"design.profile_shift_mm 0.5 is out of range; \|value\| <= 0.2"):
+        ReducerGeometry(Case.from_dict({"design": {"profile_shift_mm": 0.5}}))
