@@ -102,8 +102,11 @@ class Job:
 
     def settings(self) -> dict[str, Any]:
         """Solver settings that enter the key (besides the case)."""
+        law = {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}
+        if self.law.kind != "impact":  # the law's kind reaches the worker and the key (impact keys unchanged)
+            law["kind"] = self.law.kind
         d: dict[str, Any] = {"solver": self.solver, "steps": int(self.steps), "revolutions": float(self.revolutions),
-                             "law": {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}}
+                             "law": law}
         if self.theta_in_deg is not None:
             th = np.asarray(self.theta_in_deg, dtype=np.float64)
             d["steps"] = int(th.size)

@@ -50,6 +50,7 @@ import rvpaper as paper
 from rvdyn.cache import CaseCache
 from rvdyn.runner import Executor, make_executor
 from rvdyn.runner import Runner as CachedRunner
+from rvstudy.paper_readings import READINGS_STEPS, run_readings
 from rvstudy.montecarlo import (
     Tolerance,
     default_tolerances,
@@ -60,7 +61,7 @@ from rvstudy.montecarlo import (
     yield_estimate,
 )
 
-STAGES = ("screen", "doe", "validation", "mc")
+STAGES = ("screen", "doe", "validation", "mc", "readings")
 DESIGNS = ("bbd", "ccd")
 #: Responses of the design, in arcmin: the paper's statistic first.
 RESPONSES = ("mean_abs_arcmin", "pp_arcmin")
@@ -367,6 +368,7 @@ class StudyResult:
     cache_counters: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
+    readings: Any = None                   # rvstudy.paper_readings.ReadingsResult
 
 
 def _responses(results: list[dict[str, Any]]) -> pd.DataFrame:
@@ -523,6 +525,12 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
             t0 = time.perf_counter()
             res.mc = _monte_carlo(cfg, fs, runner, res)
             res.timings["mc"] = time.perf_counter() - t0
+        if "readings" in cfg.stages and fs.is_paper:  # Table 6 as measurements (rvstudy.paper_readings)
+            t0 = time.perf_counter()
+            res.readings = run_readings(fs, ex, cache, min(cfg.steps, READINGS_STEPS), cfg.load_Nm,
+                                        ContactLaw(cfg.K, cfg.n), progress=cfg.progress, **kw)
+            res.notes.extend(res.readings.notes)
+            res.timings["readings"] = time.perf_counter() - t0
     finally:
         if own:
             ex.close()
