@@ -5,7 +5,7 @@ Lengths in mm, angles in degrees at the API.
 from __future__ import annotations
 
 import math
-from typing import Any, Iterator
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
@@ -29,7 +29,11 @@ class Assembly:
         Validated case (``None``: nominal).
     theta_in_deg : float
         Input (sun) angle, degrees; the other moving parts follow the ideal kinematics
-        (:meth:`ReducerGeometry.placement`).
+        (:meth:`ReducerGeometry.placement`) unless ``state`` is given.
+    state : (theta_out rad, (psi_0, psi_1) rad) or None
+        Explicit output and crank angles at ``theta_in_deg`` (e.g. the pose solved by ``rvdyn``).
+    geometry : ReducerGeometry or None
+        Pre-built geometry of the case (saves rebuilding it).
 
     Attributes
     ----------
@@ -41,12 +45,14 @@ class Assembly:
         Placement of every part (identity for fixed parts).
     """
 
-    def __init__(self, case: Case | None = None, theta_in_deg: float = 0.0) -> None:
+    def __init__(self, case: Case | None = None, theta_in_deg: float = 0.0,
+                 state: tuple[float, Sequence[float]] | None = None,
+                 geometry: ReducerGeometry | None = None) -> None:
         self.case = case if case is not None else Case.from_dict({"name": "nominal"})
         self.theta_in_deg = float(theta_in_deg)
         if not math.isfinite(self.theta_in_deg):
             raise ValueError(f"theta_in_deg {theta_in_deg!r} must be finite")
-        g = ReducerGeometry(self.case)
+        g = geometry if geometry is not None else ReducerGeometry(self.case)
         self.geometry = g
         self.layout = AxialLayout.from_design(g.design)
         d = g.design
@@ -59,7 +65,14 @@ class Assembly:
         parts.append(PinHousing(g, self.layout))
         parts += [Pin(g, i, self.layout) for i in range(d.z_pins)]
         self.parts: dict[str, Part] = {p.name: p for p in parts}
-        pl = g.placement(math.radians(self.theta_in_deg))
+        self.state = None if state is None else (float(state[0]), tuple(float(v) for v in state[1]))
+        if self.state is not None and (len(self.state[1]) != d.n_cranks
+                                       or not all(map(math.isfinite, (self.state[0],) + self.state[1]))):
+            raise ValueError(f"state {state!r} must be (theta_out rad, {d.n_cranks} crank angles rad), finite")
+        if self.state is None:
+            pl = g.placement(math.radians(self.theta_in_deg))
+        else:
+            pl = g.placement(math.radians(self.theta_in_deg), self.state[0], self.state[1])
         self.placements: dict[str, tuple[float, float, float]] = {
             p.name: ((0.0, 0.0, 0.0) if p.placement_key is None else tuple(map(float, pl[p.placement_key])))
             for p in parts}
@@ -71,6 +84,7 @@ class Assembly:
         other = object.__new__(Assembly)
         other.__dict__.update(self.__dict__)
         other.theta_in_deg = float(theta_in_deg)
+        other.state = None
         pl = self.geometry.placement(math.radians(other.theta_in_deg))
         other.placements = {
             p.name: ((0.0, 0.0, 0.0) if p.placement_key is None else tuple(map(float, pl[p.placement_key])))

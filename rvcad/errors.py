@@ -318,8 +318,6 @@ class Case:
             reject("direction", direction, "+1 or -1", "is not a drive direction", CaseError)
         model = as_mapping(d.get("model", {}), "model",
                            "an object of rvdyn physics options (omit the key or give {} for none)", CaseError)
-        for k, v in model.items():
-            _number(v, f"model.{k}")
         try:
             model = parse_model(model)
         except InputError:

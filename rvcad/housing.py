@@ -46,7 +46,7 @@ class Pin(Part):
         return {**super().info(), "center_mm": self.center.tolist(), "radius_mm": self.radius}
 
 
-def _lens_area(R: float, r: float, d: float) -> float:
+def lens_area(R: float, r: float, d: float) -> float:
     """Area of the intersection of two circles (radii R, r, centre distance d), mm^2."""
     if d >= R + r:
         return 0.0
@@ -123,7 +123,7 @@ class PinHousing(Part):
     def exact_area(self) -> float:
         """pi R_out^2 - pi Rp^2 - sum over pins of the groove area outside the bore, mm^2."""
         R = self.bore_radius
-        grooves = sum(math.pi * r * r - _lens_area(R, float(r), float(np.linalg.norm(c - self.bore_center)))
+        grooves = sum(math.pi * r * r - lens_area(R, float(r), float(np.linalg.norm(c - self.bore_center)))
                       for c, r in zip(self.groove_centers, self.groove_radii))
         return math.pi * (self.outer_radius ** 2 - R ** 2) - grooves
 
@@ -137,4 +137,4 @@ class PinHousing(Part):
 
 
 
-__all__ = ["Pin", "PinHousing"]
+__all__ = ["Pin", "PinHousing", "lens_area"]

@@ -129,5 +129,18 @@ def cylinders_union(sections: list[tuple[float, float, np.ndarray, float]]):
     return solids[0]
 
 
+class InvalidSolidError(ValueError):
+    """A built solid fails OpenCASCADE's ``BRepCheck_Analyzer``; it is not written."""
 
-__all__ = ["cylinders_union", "occ_wire", "planar_solid"]
+
+def check_solid(shape: Any, name: str) -> Any:
+    """Raise :class:`InvalidSolidError` unless ``BRepCheck_Analyzer`` finds the shape valid; returns it."""
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    if not BRepCheck_Analyzer(shape).IsValid():
+        raise InvalidSolidError(f"part {name}: the built solid is not valid (OpenCASCADE BRepCheck_Analyzer); "
+                                "it is not written")
+    return shape
+
+
+__all__ = ["InvalidSolidError", "check_solid", "cylinders_union", "occ_wire", "planar_solid"]

@@ -43,7 +43,7 @@ import pandas as pd
 
 import rvpaper as paper
 from rvdyn.contacts import ContactLaw
-from rvstudy.executor import CachedRunner
+from rvdyn.runner import Runner as CachedRunner
 from rvstudy.screen import ARCSEC_PER_ARCMIN, make_case
 
 __all__ = ["PATTERNS", "STATISTICS", "LAWS", "READINGS_STEPS", "DEFAULT_READING", "ReadingsResult",
@@ -167,7 +167,7 @@ def run_readings(fs: Any, executor: Any, cache: Any, steps: int = READINGS_STEPS
     fs : rvstudy.study.FactorSet
         The paper's factors (EA..ED, Table 5 levels); its ``patterns`` are replaced per reading.
     executor, cache
-        The study's executor and :class:`rvstudy.cache.CaseCache` (solves are cached and reused).
+        The study's executor and :class:`rvdyn.cache.CaseCache` (solves are cached and reused).
     steps : int
         Steps per output revolution (default :data:`READINGS_STEPS`).
     load_Nm : float

@@ -36,8 +36,8 @@ from rvstudy.screen import (
 )
 from rvdyn.te import write_table_atomic
 import rvpaper as paper
+from rvdyn.cache import write_text_atomic
 from rvstudy.augment_section import augment_section
-from rvstudy.cache import write_text_atomic
 from rvstudy.paper_readings import readings_section
 from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyResult
 

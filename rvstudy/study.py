@@ -1,6 +1,6 @@
 """The default study of ``rv-stackup``: the paper's sections 4.2-5 end to end, plus a tolerance stack-up.
 
-Stages (each one a list of cases solved through a cached, parallel :class:`rvstudy.executor.CachedRunner`):
+Stages (each one a list of cases solved through the cached, parallel :class:`rvdyn.runner.Runner`):
 
 1. ``screen`` -- every Table 4 error alone at +-its paper value and case A (Fig. 9), and the four RSM
    factors swept over their Table 5 range (Fig. 11) (:mod:`rvstudy.screen`).
@@ -47,8 +47,9 @@ from rvstudy.screen import (
 )
 from rvdyn.te import SOLVERS
 import rvpaper as paper
-from rvstudy.cache import CaseCache
-from rvstudy.executor import CachedRunner, Executor, make_executor
+from rvdyn.cache import CaseCache
+from rvdyn.runner import Executor, make_executor
+from rvdyn.runner import Runner as CachedRunner
 from rvstudy.paper_readings import READINGS_STEPS, run_readings
 from rvstudy.montecarlo import (
     Tolerance,

@@ -12,8 +12,8 @@ import pytest
 import rvpaper as paper
 from rvdyn.contacts import ContactLaw
 from rvdyn.te import run_te
-from rvstudy.cache import CaseCache, Job
-from rvstudy.executor import make_executor, solve_job
+from rvdyn.cache import CaseCache, Job
+from rvdyn.runner import make_executor, solve_job
 from rvstudy.paper_readings import compare_with_paper, readings_section, run_readings
 from rvstudy.screen import make_case
 from rvstudy.study import StudyConfig, load_factors, run_study
