@@ -14,27 +14,34 @@ import pytest
 
 import rvcad
 from rvcad.atomic import atomic_path, remove_stale_temps
-from rvcad.check import DesignError, check_case, pin_interference
+from rvcad.check import check_case, pin_interference
 from rvcad.cli import main, solved_state
 from rvcad.errors import Case
 from rvcad.export import ExportFolderError, content_key, export_case
 from rvcad.geometry import ReducerGeometry
 from rvcad.occ import InvalidSolidError
 from rvcad.overlap import overlaps
+from rvcad.params import Design
 from rvcad.parts import Assembly
+from rvcad.validation import DesignError
 
+#: The four examples of issue 14 (items 3 and 4): the first two are refused by the design layer
+#: (Design.validate), the pin ones by the geometric check of the perturbed case (rvcad.check).
 BAD = [
-    ({"design": {"stage1_backlash_mm": 1.0}}, r"design\.stage1_backlash_mm 1 mm .* allowed: below 0\.99"),
-    ({"design": {"crank_angles_deg": [0, 0]}}, r"design\.crank_angles_deg \[0, 0\] .* allowed: cranks at least"),
-    ({"errors": {"pin_radius": 1000}}, r"errors\.pin_radius .* 1000\.0 um .* at most 100 um"),
-    ({"errors": {"pin_circle_diameter": -1000}}, r"errors\.pin_circle_diameter .* 500\.0 um .* at most 100 um"),
+    ({"design": {"stage1_backlash_mm": 1.0}}, r"design\.stage1_backlash_mm 1\.0 gives a pointed planet tooth"),
+    ({"design": {"crank_angles_deg": [0, 0]}}, r"design\.crank_angles_deg \[0\.0, 0\.0\] puts the two cranks"),
+    ({"errors": {"pin_radius": 1000}}, r"errors\.pin_radius 1000 makes the pins overlap the discs by at least "
+                                       r"1000\.0 um .* at most 100 um"),
+    ({"errors": {"pin_circle_diameter": -1000}}, r"errors\.pin_circle_diameter -1000 makes the pins overlap the "
+                                                 r"discs by at least 500\.0 um .* at most 100 um"),
 ]
 
 
 @pytest.mark.parametrize("case, message", BAD)
 def test_design_check_names_the_field(case: dict, message: str) -> None:
-    with pytest.raises(DesignError, match=message):
+    with pytest.raises(DesignError, match=message) as err:
         check_case(Case.from_dict(case))
+    assert err.value.field == message.split(" ")[0].replace("\\", "")
     with pytest.raises(DesignError, match=message.split(" ")[0]):
         rvcad.reducer(case)
 
@@ -54,11 +61,13 @@ def test_cli_refuses_before_writing(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_tooth_land_closed_form() -> None:
-    """The planet's tip land vanishes at b_max = b + 2 r_pitch * (tip half angle): the refusal sits there."""
+    """The planet's tip land vanishes at b_max = 2 r_pitch * (tip half angle) of the geometry's own
+    involute (thinning by b turns each flank by b / (2 r_pitch)); the design layer's ISO 21771 tip
+    thickness refuses exactly there."""
     g = ReducerGeometry(Case.from_dict({}))
     b_max = 2.0 * g.planet.pitch_radius * g.planet.tip_half_angle()
     assert 0.99 < b_max < 1.0
-    check_case(Case.from_dict({"design": {"stage1_backlash_mm": round(b_max - 0.01, 4)}}))
+    check_case(Case.from_dict({"design": {"stage1_backlash_mm": round(b_max - 1e-4, 4)}}))
     with pytest.raises(DesignError, match="stage1_backlash_mm"):
         check_case(Case.from_dict({"design": {"stage1_backlash_mm": round(b_max + 1e-4, 4)}}))
 
@@ -76,9 +85,10 @@ def test_pin_interference_closed_forms() -> None:
 
 
 def test_invalid_solid_is_an_error_not_a_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Past the design check (switched off here), BRepCheck stops the pointed planet: no planet0.step."""
+    """Past the design checks (bypassed here: the case is built without validation and the geometric
+    check is switched off), BRepCheck stops the pointed planet: no planet0.step."""
     monkeypatch.setattr("rvcad.export.check_case", lambda case, geometry=None: {})
-    case = Case.from_dict({"name": "pointed", "design": {"stage1_backlash_mm": 1.0}})
+    case = Case(name="pointed", design=Design(stage1_backlash_mm=1.0))
     with pytest.raises(InvalidSolidError, match="part planet0: the built solid is not valid"):
         export_case(case, tmp_path / "o", formats=["step"], parts=["planet0"])
     assert not (tmp_path / "o" / "planet0.step").exists()
