@@ -11,12 +11,13 @@ and what is allowed:
 * crank holes: the perturbed holes of the two cranks in each disc (radius ``cam_radius_mm``, moved
   by ``errors.disc_hole_eccentricity``) do not overlap and stay inside the disc root circle; the
   journal holes of the plates (moved by ``errors.carrier_hole_eccentricity``) stay inside the rim;
-* pins against the discs (:func:`pin_interference`): the smallest largest penetration of the
-  pins into a disc that any small rigid in-plane motion of the disc reaches (a relaxation of every
-  pose the solver can take: the cams restrict the disc further), over one crank revolution. Above
-  :data:`MAX_PENETRATION_MM` (the elastic limit of ``rvdyn``, 100 um) no pose resolves it:
-  ``errors.pin_radius`` +1000 um or ``errors.pin_circle_diameter`` -1000 um. The message names
-  the error types whose removal brings it below the limit.
+* contacts (:func:`pin_interference`): the smallest largest penetration of the pins into the
+  discs and of the loaded stage I flanks over the poses the solver can take (its coordinates:
+  output and crank angles), at states over one crank revolution. The solver keeps these gaps and
+  more, so its equilibrium penetrates at least as much. Above :data:`MAX_PENETRATION_MM` (the
+  elastic limit of ``rvdyn``, 100 um) it would refuse the case too: ``errors.pin_radius`` +1000 um
+  (1000.0 um), ``errors.pin_circle_diameter`` -1000 um (500.0 um), a pin 150 um too large (149 um;
+  rvdyn: 155 um). The message names the error types whose removal brings it below the limit.
 
 Lengths in mm at the API, angles in rad inside.
 """
@@ -92,22 +93,73 @@ def crank_period_input(g: ReducerGeometry) -> float:
 
 
 def pin_interference(g: ReducerGeometry, states: int = INTERFERENCE_STATES, rounds: int = 8) -> np.ndarray:
-    """Smallest largest pin penetration into each disc over small rigid in-plane disc motions, mm.
+    """Smallest largest contact penetration (pins in the discs, loaded stage I flanks) over the poses
+    the solver can take, mm.
 
-    At each of ``states`` ideal states over one crank revolution the disc may move by
-    (dx, dy, dtheta); the linearised gaps ``g_i - n_i . (d + dtheta perp(f_i))`` (outward normal
-    n_i at the foot point f_i, disc profile frame) give a linear programme ``min t, -g_i' <= t``
-    (scipy ``linprog``) inside a trust region, re-linearised ``rounds`` times; a move is kept only
-    if the exact penetration drops, else the trust region halves. The trust region matters: the
-    ideal contact normals all pass through the pitch point, so rolling about it is a first-order
-    free motion (the reducer's own kinematics, sampled by the states instead). The disc's real
-    motion is further restricted by the cams, so a solver pose penetrates about this much or more.
+    At each of ``states`` ideal states over one crank revolution the solver's coordinates, the
+    output angle and the crank angles (``x = (Rp dtheta_out, e dpsi_0, e dpsi_1)``, mm, as in
+    ``rvdyn.solver``), may change; the gaps the solver keeps, the pins of both discs and the loaded
+    stage I flanks (the case's direction), linearised by finite differences (``g + J x``), give a
+    linear programme ``min t, -(g + J x) <= t`` (scipy ``linprog``) inside a trust region,
+    re-linearised ``rounds`` times; a move is kept only if the exact penetration drops, else the
+    trust region halves. The solver keeps
+    the same gaps and more (supports, bearings), so every pose it reaches penetrates at least this
+    much (a lower bound). Where the case's
+    model lets the discs float in a cam-bearing clearance, each disc may instead move freely in its
+    plane (a weaker bound).
 
     Returns
     -------
-    (states, n_discs) float64
+    (states,) float64
         Penetration, mm (<= 0: a pose without pin-disc overlap exists).
     """
+    try:
+        floating = float(g.case.model.get("cam_bearing_clearance_um", 0.0) or 0.0) > 0.0
+    except (TypeError, ValueError):
+        floating = True
+    if floating:
+        return _free_disc_interference(g, states, rounds)
+    th = np.linspace(0.0, crank_period_input(g), states, endpoint=False)
+    to0, ps0 = g.ideal_state(th)
+    d = g.design
+    rp, e, nc = d.pin_circle_radius_mm, d.eccentricity_mm, d.n_cranks
+
+    def gaps(x: np.ndarray) -> np.ndarray:
+        to, ps = to0 + x[:, 0] / rp, ps0 + x[:, 1:] / e
+        pins = g.pin_gaps(to, ps)[0].reshape(states, -1)
+        return np.concatenate([pins, g.stage1_gaps(th, to, ps, g.case.direction)], axis=1)
+
+    x = np.zeros((states, 1 + nc))
+    G = gaps(x)
+    best = (-G).max(axis=1)
+    radius = np.maximum(np.abs(best), 1e-3)
+    done = np.zeros(states, dtype=bool)
+    h = 1e-6  # mm: the gaps are exact to ~1e-10 mm (foot-point tolerance), the slopes to ~1e-4
+    for _ in range(rounds):
+        J = np.stack([(gaps(x + h * np.eye(1 + nc)[i]) - G) / h for i in range(1 + nc)], axis=-1)
+        step = np.zeros_like(x)
+        for s in np.nonzero(~done)[0]:
+            A = np.c_[-J[s], -np.ones(len(G[s]))]
+            res = linprog(np.r_[np.zeros(1 + nc), 1.0], A_ub=A, b_ub=G[s], method="highs",
+                          bounds=[(-radius[s], radius[s])] * (1 + nc) + [(None, None)])
+            if res.status != 0 or res.x[-1] > best[s] - 1e-9:  # no improvement predicted
+                done[s] = True
+                continue
+            step[s] = res.x[:-1]
+        if done.all():
+            break
+        Gn = gaps(x + step)
+        pen = (-Gn).max(axis=1)
+        better = (pen < best) & ~done
+        x[better], G[better], best[better] = x[better] + step[better], Gn[better], pen[better]
+        radius[~better] *= 0.5
+    return best
+
+
+def _free_disc_interference(g: ReducerGeometry, states: int, rounds: int) -> np.ndarray:
+    """Per state, the largest over the discs of the smallest largest pin penetration when each disc
+    may move freely in its plane (x, y, rotation): the relaxation for discs that float in a cam-bearing
+    clearance. Linear programmes in a trust region as in :func:`pin_interference`; (states,) mm."""
     th = np.linspace(0.0, crank_period_input(g), states, endpoint=False)
     to, ps = g.ideal_state(th)
     nd = g.design.n_discs
@@ -146,7 +198,7 @@ def pin_interference(g: ReducerGeometry, states: int = INTERFERENCE_STATES, roun
                 else:
                     radius *= 0.5
             out[s, k] = best
-    return out
+    return out.max(axis=1)
 
 
 def _blame(case: Case, limit: float) -> list[str]:
@@ -180,7 +232,7 @@ def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool 
     -------
     dict
         ``planet_tip_land_mm``, ``sun_tip_land_mm``, ``crank_hole_separation_mm``,
-        ``pin_penetration_mm`` (largest over the states of the smallest reachable penetration).
+        ``pin_penetration_mm`` (largest over the states of the smallest reachable contact penetration).
 
     Raises
     ------
@@ -213,10 +265,10 @@ def _check(case: Case, geometry: ReducerGeometry | None) -> dict[str, Any]:
         values = [case.raw_errors.get(f.split(".", 1)[1]) for f in fields]
         given = quote(values[0]) if len(fields) == 1 else "(" + ", ".join(map(quote, values)) + ")"
         raise DesignError(
-            f"{' + '.join(fields)} {given} makes the pins overlap the discs by at least {pen * 1e3:.1f} um in every "
-            f"pose of the disc; allowed: a pin-disc overlap of at most {MAX_PENETRATION_MM * 1e3:g} um (the "
-            "solver's elastic contact limit)", field=fields[0], value=values[0],
-            allowed=f"a pin-disc overlap of at most {MAX_PENETRATION_MM * 1e3:g} um")
+            f"{' + '.join(fields)} {given} makes the parts overlap (pins in the discs, loaded stage I flanks) by at "
+            f"least {pen * 1e3:.1f} um in every pose the solver can take; allowed: an overlap of at most "
+            f"{MAX_PENETRATION_MM * 1e3:g} um (the solver's elastic contact limit)", field=fields[0], value=values[0],
+            allowed=f"an overlap of at most {MAX_PENETRATION_MM * 1e3:g} um")
     d = g.design
     sep = 2.0 * d.center_distance_mm * abs(math.sin(0.5 * math.radians(d.crank_angles_deg[1] - d.crank_angles_deg[0])))
     return {"planet_tip_land_mm": _tooth_lands(g.planet)[0], "sun_tip_land_mm": _tooth_lands(g.sun)[0],

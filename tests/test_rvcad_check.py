@@ -14,7 +14,7 @@ import pytest
 
 import rvcad
 from rvcad.atomic import atomic_path, remove_stale_temps
-from rvcad.check import check_case, pin_interference
+from rvcad.check import check_case, crank_period_input, pin_interference
 from rvcad.cli import main, solved_state
 from rvcad.errors import Case
 from rvcad.export import ExportFolderError, content_key, export_case
@@ -30,10 +30,10 @@ from rvcad.validation import DesignError
 BAD = [
     ({"design": {"stage1_backlash_mm": 1.0}}, r"design\.stage1_backlash_mm 1\.0 gives a pointed planet tooth"),
     ({"design": {"crank_angles_deg": [0, 0]}}, r"design\.crank_angles_deg \[0\.0, 0\.0\] puts the two cranks"),
-    ({"errors": {"pin_radius": 1000}}, r"errors\.pin_radius 1000 makes the pins overlap the discs by at least "
-                                       r"1000\.0 um .* at most 100 um"),
-    ({"errors": {"pin_circle_diameter": -1000}}, r"errors\.pin_circle_diameter -1000 makes the pins overlap the "
-                                                 r"discs by at least 500\.0 um .* at most 100 um"),
+    ({"errors": {"pin_radius": 1000}}, r"errors\.pin_radius 1000 makes the parts overlap \(pins in the discs, "
+                                       r"loaded stage I flanks\) by at least 1000\.0 um .* at most 100 um"),
+    ({"errors": {"pin_circle_diameter": -1000}}, r"errors\.pin_circle_diameter -1000 makes the parts overlap .* by "
+                                                 r"at least 500\.0 um .* at most 100 um"),
 ]
 
 
@@ -76,12 +76,29 @@ def test_pin_interference_closed_forms() -> None:
     """Nominal: the pins touch (0). All pins larger by d: d in every pose (the disc is surrounded by
     pins on every normal). Pin circle smaller by 2 d: each pin moves d radially, d cos(a) along its
     contact normal (a: angle between normal and radius, 0 at the roots and tips), so the largest
-    penetration lies in (d cos(a_max), d] and reaches d where a pin sits at a root or tip."""
+    penetration lies in (d cos(a_max), d] and reaches d where a pin sits at a root or tip. The
+    bound never exceeds what rvdyn's equilibrium keeps (checked against rvdyn below)."""
     assert np.abs(pin_interference(ReducerGeometry(Case.from_dict({})), states=4)).max() < 1e-9
     pen = pin_interference(ReducerGeometry(Case.from_dict({"errors": {"pin_radius": 50}})), states=4)
     assert pen.min() == pytest.approx(0.05, abs=1e-6)
     pen = pin_interference(ReducerGeometry(Case.from_dict({"errors": {"pin_circle_diameter": -100}})), states=4)
     assert 0.0495 < pen.min() and pen.max() <= 0.05 + 1e-9
+
+
+def test_interference_bound_below_the_solver() -> None:
+    """One pin 80 um too large: the check's bound (smallest reachable penetration, 45-62 um over the
+    states) lies below the penetration rvdyn's equilibrium keeps at the same states (81-82 um) and
+    is of its size (the solver also holds the planets and the unloaded flanks)."""
+    from rvdyn.contacts import AnalyticContacts
+    from rvdyn.solver import QuasiStaticSolver
+
+    case = Case.from_dict({"errors": {"pin_radius": [{"pin": 3, "value": 80}]}})
+    g = ReducerGeometry(case)
+    bound = pin_interference(g, states=6)
+    th = np.linspace(0.0, crank_period_input(g), 6, endpoint=False)
+    sol = QuasiStaticSolver(g, AnalyticContacts(g)).solve(th, direction=1, load_Nm=case.load_Nm)
+    assert np.all(bound <= sol.max_penetration_mm + 1e-6)
+    assert bound.max() > 0.5 * sol.max_penetration_mm.max()
 
 
 def test_invalid_solid_is_an_error_not_a_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
