@@ -22,7 +22,7 @@ Term syntax for user-chosen models: see :mod:`rsm.terms` (``EA``, ``EA:EB``, ``E
 ``EA^3``, ``EA:EB:EC``, presets ``linear``/``2fi``/``quadratic``).
 """
 
-from .augment import AugmentResult, SelectionRule, TermTest, augment, format_augment
+from .augment import AugmentResult, SelectionRule, TermTest, augment, fit_block, format_augment
 from .candidates import CandidateTerm, DerivedColumn, default_candidates, polynomial_candidates
 from .checks import NotEstimableError, check_numeric_column
 from .coding import FactorLevels, Levels
@@ -48,7 +48,7 @@ from .surface import (
 from .terms import parse_terms, term_name
 
 __all__ = [
-    "AugmentResult", "SelectionRule", "TermTest", "augment", "format_augment",
+    "AugmentResult", "SelectionRule", "TermTest", "augment", "fit_block", "format_augment",
     "CandidateTerm", "DerivedColumn", "default_candidates", "polynomial_candidates",
     "NotEstimableError", "check_numeric_column", "FactorLevels", "Levels",
     "Design", "box_behnken", "central_composite", "full_factorial_3", "make_design",

@@ -12,7 +12,8 @@ libraries): by default the candidate with the smallest p, if its Bonferroni-adju
 estimable candidates of that iteration) is below ``alpha`` and it lowers the BIC; among candidates
 whose columns the runs cannot tell apart (|correlation| > 0.9999 once the current model is
 projected out) a physical term is preferred. The loop repeats up to ``max_add`` times on the
-augmented model. With new runs, the candidates are judged on all runs together (the fitted and
+augmented model, and stops when the model reproduces the runs exactly (a term that takes the residual
+of exact data to zero counts as F = inf, p = 0). With new runs, the candidates are judged on all runs together (the fitted and
 the new ones).
 
 Example
@@ -291,6 +292,8 @@ def augment(
     added: list[str] = []
     iterations: list[list[TermTest]] = []
     for _ in range(rule.max_add):
+        if cur.exact_fit:  # nothing left to explain
+            break
         tests, columns = _test_candidates(ws, cur, terms, extra, [c for c in cands if c.name not in added])
         _mark_aliases(cur, tests, columns)
         iterations.append(tests)
@@ -332,7 +335,12 @@ def _test_candidates(ws: _Workspace, cur: RSMResults, terms: list[str], extra: l
         res = model.fit(alpha=cur.alpha, warn=False)
         row = res.anova.loc[new_names[0]]
         lof = res.anova.loc["Lack of fit"]
-        tests.append(TermTest(c.name, c.kind, c.meaning, True, "", res.ssr, float(row["F"]), float(row["p"]),
+        F, p = float(row["F"]), float(row["p"])
+        if res.exact_fit and not cur.exact_fit:
+            # the term takes the residual to zero (exact data): the strongest support there is; the ANOVA
+            # leaves F undefined (0/0 after the term), the limit of F as the residual vanishes is +inf
+            F, p = float("inf"), 0.0
+        tests.append(TermTest(c.name, c.kind, c.meaning, True, "", res.ssr, F, p,
                               float("nan"), res.bic - cur.bic, float(lof["F"]), float(lof["p"]), res.r2_pred))
         columns[c.name] = model.exog[:, model.term_names.index(new_names[0])]
     est = [t for t in tests if t.estimable]
@@ -355,14 +363,12 @@ def _mark_aliases(cur: RSMResults, tests: list[TermTest], columns: dict[str, np.
 
 def _verdict(start: RSMResults, before: RSMResults, after: RSMResults, added: list[str],
              new_check: dict | None) -> str:
-    lof = before.anova.loc["Lack of fit"]
-    lof_a = after.anova.loc["Lack of fit"]
-    head = (f"The starting model ({len(before.term_names)} terms) shows lack of fit F {lof['F']:.4g} "
-            f"(p {lof['p']:.3g}, {before.df_lack_of_fit} and {before.df_pure_error} df)")
+    head = f"The starting model ({len(before.term_names)} terms) shows {_lof_text(before)}"
     if added:
         text = (f"{head}; the runs support adding {', '.join(added)}: residual SS {before.ssr:.4g} -> "
                 f"{after.ssr:.4g}, RMSE {before.rmse:.4g} -> {after.rmse:.4g}, R2pred {before.r2_pred:.4f} -> "
-                f"{after.r2_pred:.4f}, lack of fit F {lof_a['F']:.4g} (p {lof_a['p']:.3g}).")
+                f"{after.r2_pred:.4f}" + (f", {_lof_text(after)}." if math.isfinite(float(after.anova.loc[
+                    "Lack of fit", "F"])) else "."))
     else:
         text = f"{head}; no estimable higher-order or physical term is supported (Bonferroni-adjusted F test and BIC)."
     if new_check is not None:
@@ -371,6 +377,21 @@ def _verdict(start: RSMResults, before: RSMResults, after: RSMResults, added: li
                  f"{' (lack of fit)' if new_check['lack_of_fit'] else ''}; terms judged on all "
                  f"{before.nobs} runs.")
     return text
+
+
+def _lof_text(res: RSMResults) -> str:
+    """``lack of fit F .. (p .., a and b df)``, or why the lack-of-fit test is undefined."""
+    lof = res.anova.loc["Lack of fit"]
+    if math.isfinite(float(lof["F"])):
+        return f"lack of fit F {lof['F']:.4g} (p {lof['p']:.3g}, {res.df_lack_of_fit} and {res.df_pure_error} df)"
+    if res.pure_error_is_zero:
+        why = "pure error is zero: replicated runs agree exactly, as a deterministic simulator gives"
+    elif res.df_pure_error == 0:
+        why = "no replicated runs"
+    else:
+        why = "no lack-of-fit df"
+    return (f"residual SS {res.ssr:.4g} on {res.df_resid} df, all of it lack of fit: the lack-of-fit F test is "
+            f"undefined ({why})") if res.pure_error_is_zero else f"no lack-of-fit test ({why})"
 
 
 def format_augment(res: AugmentResult, top: int = 8) -> str:

@@ -12,6 +12,11 @@ from typing import Any
 
 from rvcad.validation import DesignError, as_int, as_mapping, as_real, read_json_file, reject
 
+#: Profile shift coefficients of the stage I gears (assumption; x1 = -x2 keeps the 30 mm centre
+#: distance, and x1 = +0.4 keeps the planet tip off the 12-tooth sun's base circle).
+SUN_SHIFT = 0.4
+PLANET_SHIFT = -0.4
+
 
 @dataclass(frozen=True)
 class Design:
@@ -59,6 +64,11 @@ class Design:
     journal_bearing_rollers, journal_bearing_roller_diameter_mm, journal_bearing_roller_length_mm : int, float, float
         Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
         (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
+    profile_equidistant_mm, profile_shift_mm, profile_rotation_deg : float
+        Profile modification of both discs: the disc is cut by a wheel of radius ``pin_radius_mm +
+        equidistant`` whose centre runs on the circle ``pin_circle_radius + shift``, and the profile is
+        turned by ``rotation`` (+z) relative to the crank holes. Positive equidistant and negative shift
+        remove material (backlash); 0 by default.
     """
 
     z_sun: int = 12
@@ -90,6 +100,12 @@ class Design:
     journal_bearing_rollers: int = 12
     journal_bearing_roller_diameter_mm: float = 3.0
     journal_bearing_roller_length_mm: float = 6.0
+    # Profile modification of the cycloid discs (rvcad.profile.modified_profile_parameters): the
+    # grinding wheel's radius rp + equidistant, its centre circle Rp + shift, the profile turned by
+    # rotation. Zero by default (the paper's unmodified, zero-backlash profile).
+    profile_equidistant_mm: float = 0.0
+    profile_shift_mm: float = 0.0
+    profile_rotation_deg: float = 0.0
     # ---- end of the bearing block ---------------------------------------------------------------------
 
     # ------------------------------------------------------------------ derived values
@@ -217,8 +233,8 @@ class Design:
             bad("eccentricity_mm", self.eccentricity_mm, f"< Rp / Zp = {rp / self.z_pins:.4f} mm",
                 f"mm gives a shortening coefficient e*Zp/Rp = {k1:.4f} >= 1 (a looped, unusable profile)")
         # stage I: a tip land on both gears (the planet thinned by the backlash) and a contact ratio > 1
-        for gear, z, shift, thin in (("sun", self.z_sun, _shift("SUN_SHIFT"), 0.0),
-                                     ("planet", self.z_planet, _shift("PLANET_SHIFT"), self.stage1_backlash_mm)):
+        for gear, z, shift, thin in (("sun", self.z_sun, SUN_SHIFT, 0.0),
+                                     ("planet", self.z_planet, PLANET_SHIFT, self.stage1_backlash_mm)):
             land = self.tooth_tip_thickness_mm(z, shift, thin)
             if land <= 0.0:
                 name, value = ("stage1_backlash_mm", thin) if thin > 0 and \
@@ -236,7 +252,7 @@ class Design:
         c0, c1 = self.crank_angles_deg
         sep = abs((c1 - c0 + 180.0) % 360.0 - 180.0)
         chord = 2.0 * a * math.sin(math.radians(sep) / 2.0)
-        planet_tip = self.planet_pitch_radius_mm + self.module_mm * (1.0 + _shift("PLANET_SHIFT"))
+        planet_tip = self.planet_pitch_radius_mm + self.module_mm * (1.0 + PLANET_SHIFT)
         need = max(2.0 * planet_tip, 2.0 * self.cam_radius_mm)
         if chord <= need:
             what = "planet tip circles" if 2.0 * planet_tip >= 2.0 * self.cam_radius_mm else "cam holes"
@@ -291,7 +307,7 @@ class Design:
         """
         m, al = self.module_mm, math.radians(self.pressure_angle_deg)
         out = -self.center_distance_mm * math.sin(al)
-        for z, x in ((self.z_sun, _shift("SUN_SHIFT")), (self.z_planet, _shift("PLANET_SHIFT"))):
+        for z, x in ((self.z_sun, SUN_SHIFT), (self.z_planet, PLANET_SHIFT)):
             rb = m * z / 2.0 * math.cos(al)
             ra = m * z / 2.0 + m * (1.0 + x)
             out += math.sqrt(max(ra * ra - rb * rb, 0.0))
@@ -357,13 +373,6 @@ class Design:
 def _inv(a: float) -> float:
     """Involute function tan(a) - a."""
     return math.tan(a) - a
-
-
-def _shift(name: str) -> float:
-    """Profile shift coefficient of a stage I gear (``rvcad.geometry.SUN_SHIFT`` / ``PLANET_SHIFT``)."""
-    from rvcad import geometry  # imported here: geometry imports this module
-
-    return float(getattr(geometry, name))
 
 
 #: Physical range of every Design field: (low, high, low bound open?, reason). Relations between

@@ -23,7 +23,6 @@ wind-up cancels in it); ``rank_mean_abs`` ranks by ``|mean_abs - mean_abs(A)|`` 
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +34,7 @@ import pandas as pd
 from rvcad.atomic import atomic_path
 from rvcad.errors import ERROR_TYPES, Case
 from rvdyn.contacts import ContactLaw
-from rvdyn.te import SOLVERS, run_te
+from rvdyn.runner import Runner as ForwardRunner
 
 from rvpaper import PAPER_DESCRIPTION, RSM_FACTORS, STAGE, TABLE5_HALF_RANGE  # noqa: E402  (re-exported)
 
@@ -147,7 +146,7 @@ def sweep_cases(points: int = 7, load_Nm: float = 20.0, half_range: dict[str, fl
 
 def serial_runner(solver: str = "analytic", steps: int = 720, law: ContactLaw | None = None,
                   progress: bool = True) -> Runner:
-    """A runner that solves the cases one after another in this process (no cache).
+    """A runner that solves the cases one after another in this process, with no cache.
 
     Parameters
     ----------
@@ -158,20 +157,7 @@ def serial_runner(solver: str = "analytic", steps: int = 720, law: ContactLaw | 
     progress : bool
         Show a tqdm bar on stderr.
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
-
-    def run(cases: Sequence[Case], desc: str = "cases") -> list[dict[str, Any]]:
-        from tqdm.auto import tqdm
-
-        out = []
-        for c in tqdm(list(cases), desc=desc, unit="case", disable=not progress, file=sys.stderr):
-            r = run_te(c, solver, steps, 1.0, law=law)
-            out.append({"stats": dict(r.stats), "te_arcsec": r.table["te_arcsec"].to_numpy(),
-                        "key": c.key(), "cached": False})
-        return out
-
-    return run
+    return ForwardRunner(None, None, solver, steps, law, progress=progress)
 
 
 def _stat_columns(results: list[dict[str, Any]]) -> pd.DataFrame:

@@ -1,6 +1,6 @@
 """The default study of ``rv-stackup``: the paper's sections 4.2-5 end to end, plus a tolerance stack-up.
 
-Stages (each one a list of cases solved through a cached, parallel :class:`rvstudy.executor.CachedRunner`):
+Stages (each one a list of cases solved through the cached, parallel :class:`rvdyn.runner.Runner`):
 
 1. ``screen`` -- every Table 4 error alone at +-its paper value and case A (Fig. 9), and the four RSM
    factors swept over their Table 5 range (Fig. 11) (:mod:`rvstudy.screen`).
@@ -47,8 +47,10 @@ from rvstudy.screen import (
 )
 from rvdyn.te import SOLVERS
 import rvpaper as paper
-from rvstudy.cache import CaseCache
-from rvstudy.executor import CachedRunner, Executor, make_executor
+from rvdyn.cache import CaseCache
+from rvdyn.runner import Executor, make_executor
+from rvdyn.runner import Runner as CachedRunner
+from rvstudy.paper_readings import READINGS_STEPS, run_readings
 from rvstudy.montecarlo import (
     Tolerance,
     default_tolerances,
@@ -59,7 +61,7 @@ from rvstudy.montecarlo import (
     yield_estimate,
 )
 
-STAGES = ("screen", "doe", "validation", "mc")
+STAGES = ("screen", "doe", "validation", "mc", "readings")
 DESIGNS = ("bbd", "ccd")
 #: Responses of the design, in arcmin: the paper's statistic first.
 RESPONSES = ("mean_abs_arcmin", "pp_arcmin")
@@ -366,6 +368,7 @@ class StudyResult:
     cache_counters: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
+    readings: Any = None                   # rvstudy.paper_readings.ReadingsResult
 
 
 def _responses(results: list[dict[str, Any]]) -> pd.DataFrame:
@@ -522,6 +525,12 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
             t0 = time.perf_counter()
             res.mc = _monte_carlo(cfg, fs, runner, res)
             res.timings["mc"] = time.perf_counter() - t0
+        if "readings" in cfg.stages and fs.is_paper:  # Table 6 as measurements (rvstudy.paper_readings)
+            t0 = time.perf_counter()
+            res.readings = run_readings(fs, ex, cache, min(cfg.steps, READINGS_STEPS), cfg.load_Nm,
+                                        ContactLaw(cfg.K, cfg.n), progress=cfg.progress, **kw)
+            res.notes.extend(res.readings.notes)
+            res.timings["readings"] = time.perf_counter() - t0
     finally:
         if own:
             ex.close()

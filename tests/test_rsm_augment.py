@@ -102,6 +102,20 @@ def test_new_runs_show_lack_of_fit(table6, levels):
         rsm.augment(fit, new_data=new.astype({"EC": object}).assign(EC=[0, "x", 0, 0]))
 
 
+def test_exact_data_term_that_zeroes_the_residual_is_added(table6):
+    """Exact data (a simulator without noise): the term that takes the residual to zero gets F = inf, p = 0."""
+    d = table6[FACTORS].astype(float).copy()
+    d["y"] = 1 + d.EA ** 2 + 0.3 * d.EB - 0.5 * d.EB ** 2 * d.EC
+    with pytest.warns(rsm.ZeroPureErrorWarning):
+        fit = rsm.fit(d, FACTORS, "y")
+    res = rsm.augment(fit, candidates=polynomial_candidates(FACTORS))
+    assert res.added == ["EB^2:EC"] and res.after.exact_fit
+    t = next(t for t in res.iterations[0] if t.term == "EB^2:EC")
+    assert t.F == float("inf") and t.p == 0.0
+    assert len(res.iterations) == 1  # nothing is left to explain: the loop stops
+    assert "undefined (pure error is zero" in res.verdict
+
+
 def test_prediction_test_is_chow(table6, levels):
     """Chow's predictive F equals the pooled-refit form ((SS_all - SS_1)/m) / (SS_1/df_1)."""
     fit = rsm.fit(table6.iloc[:23], FACTORS, "te_arcmin", levels=levels)
