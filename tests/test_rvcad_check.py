@@ -15,7 +15,7 @@ import pytest
 import rvcad
 from rvcad.atomic import atomic_path, remove_stale_temps
 from rvcad.check import check_case, crank_period_input, pin_interference
-from rvcad.cli import main, solved_state
+from rvcad.cli import main
 from rvcad.errors import Case
 from rvcad.export import ExportFolderError, content_key, export_case
 from rvcad.geometry import ReducerGeometry
@@ -147,23 +147,33 @@ def test_overlaps_pins_and_report(tmp_path: Path, capsys: pytest.CaptureFixture)
 
 
 def test_solved_pose_export(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    """--pose solved places the assembly at rvdyn's equilibrium: output angle within the TE of the
-    ideal one, the pose named in the report, the assembly's cache key changed."""
-    case = Case.from_dict({"errors": {"pin_radius": 5}})
+    """rvcad places the assembly at an explicit state; rvdyn.pose gives the solved one (rvcad sits
+    below rvdyn and never imports it): output angle within the TE of the ideal one, the pose named
+    in the report, the assembly's cache key changed."""
+    from rvdyn.pose import main as pose_main
+    from rvdyn.pose import solved_state
+
+    case = Case.from_dict({"name": "c", "errors": {"pin_radius": 5}})
     to, psi = solved_state(case, 30.0)
     ideal = math.radians(30.0) / case.design.ratio
     assert abs(to - ideal) < math.radians(60 / 3600) and len(psi) == 2
     path = tmp_path / "c.json"
     path.write_text(json.dumps(case.to_dict()))
+    assert pose_main([str(path), "--theta-in-deg", "30"]) == 0
+    text = capsys.readouterr().out.strip()
+    assert [float(v) for v in text.split(",")] == pytest.approx([math.degrees(v) for v in (to,) + psi], abs=1e-9)
     argv = ["export", str(path), "--out", str(tmp_path / "o"), "--parts", "pin00", "--format", "stl",
-            "--theta-in-deg", "30", "--json", "--pose", "solved"]
+            "--theta-in-deg", "30", "--json", "--state", text]
     assert main(argv) == 0
     rep = json.loads(capsys.readouterr().out)
-    assert rep["pose"] == "solved" and rep["overlaps"]["pose"] == "solved"
+    assert rep["pose"] == "state" and rep["overlaps"]["pose"] == "state"
     assert rep["overlaps"]["pin_disc"]["max_depth_mm"] < 0.1  # elastic contact under the case's load
-    # the assembly files of the solved pose are cached under their own key
+    # the assembly files of another state are cached under their own key
     assert content_key(case, 0.1, "stl", "assembly.stl", 30.0, (to, psi)) != \
         content_key(case, 0.1, "stl", "assembly.stl", 30.0)
+    code = main(argv[:-1] + ["1,2"])
+    cap = capsys.readouterr()
+    assert code == 2 and "--state 1,2 must give the output angle and 2 crank angles" in cap.err
 
 
 # ---------------------------------------------------------------------------- export folders

@@ -298,7 +298,7 @@ def test_help_describes_every_option(capsys: pytest.CaptureFixture) -> None:
     assert main(["export", "--help"]) == 0
     text = capsys.readouterr().out
     for opt in ("--out", "--format", "--tolerance-um", "--theta-in-deg", "--parts", "--force", "--json", "CASE.json",
-                "--pose", "own frame", "world frame", "assembly.step", "exit codes", "BRepCheck"):
+                "--state", "own frame", "world frame", "assembly.step", "exit codes", "BRepCheck"):
         assert opt in text
     assert main(["--help"]) == 0
     assert "export" in capsys.readouterr().out
