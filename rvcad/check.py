@@ -81,8 +81,9 @@ def _check_holes(g: ReducerGeometry) -> None:
                    f"with the errors puts the crank holes of {part} {sep:.4f} mm apart (they overlap)", DesignError)
         reach = float(np.max(np.linalg.norm(holes, axis=-1))) + r
         if reach >= limit:
-            reject(field, g.case.raw_errors.get(field.split(".", 1)[1]), f"holes inside the {'root circle' if part.startswith('disc') else 'rim'} "
-                   f"({limit:.4f} mm)", f"moves a crank hole of {part} out to {reach:.4f} mm", DesignError)
+            where = "root circle" if part.startswith("disc") else "rim"
+            reject(field, g.case.raw_errors.get(field.split(".", 1)[1]), f"holes inside the {where} ({limit:.4f} mm)",
+                   f"moves a crank hole of {part} out to {reach:.4f} mm", DesignError)
 
 
 # ----------------------------------------------------------------------------- pins against discs
