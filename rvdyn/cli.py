@@ -1,5 +1,7 @@
-"""Command line of rvdyn: ``rvdyn te`` (TE of one case), ``rvdyn stiffness`` (the hysteresis curve and
-datasheet figures) and ``rvdyn screen`` (single-factor screen).
+"""Command line of rvdyn: ``rvdyn te`` (TE of one case) and ``rvdyn stiffness`` (the hysteresis curve and
+datasheet figures).
+
+The single-factor screen and factor sweeps belong to the study: ``rv-stackup --stages screen``.
 
 Each command prints a human summary by default; ``--json`` prints one JSON object on stdout.
 Bad input prints a message naming the field to stderr and exits with status 2.
@@ -81,15 +83,6 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--points", type=int, default=41, help="points per sweep branch (default 41)")
     st.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
 
-    sc = sub.add_parser("screen", help="single-factor screen of the Table 4 errors and RSM factor sweeps",
-                        description="Paper Fig. 9 and Fig. 11: every Table 4 error alone at its paper value, "
-                                    "and sweeps of EA..ED over the Table 5 range; writes CSV tables and PNG plots.")
-    sc.add_argument("--out", required=True, help="output folder")
-    sc.add_argument("--solver", choices=SOLVERS, default="analytic")
-    sc.add_argument("--steps", type=int, default=720)
-    sc.add_argument("--sweep-points", type=int, default=7, help="points per factor sweep (default 7)")
-    sc.add_argument("--load-Nm", dest="load_Nm", type=float, default=20.0)
-    sc.add_argument("--json", action="store_true")
     return p
 
 
@@ -167,13 +160,9 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``rvdyn``; returns the exit status."""
     args = build_parser().parse_args(argv)
     try:
-        if args.command == "te":
-            return _te(args)
         if args.command == "stiffness":
             return _stiffness(args)
-        from rvdyn.screen import screen_command
-
-        return screen_command(args)
+        return _te(args)
     except ValueError as exc:
         print(f"rvdyn: error: {exc}", file=sys.stderr)
         return 2

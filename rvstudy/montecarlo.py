@@ -28,7 +28,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from rvcad.errors import ERROR_TYPES
+from rvcad.errors import ERROR_TYPES, MAX_ABS
+from rvcad.validation import TableError, read_json_file
 
 DISTRIBUTIONS = ("normal", "uniform", "triangular", "fixed", "none")
 _NPARAMS = {"normal": (1, 2), "uniform": (2, 2), "triangular": (3, 3), "fixed": (1, 1), "none": (0, 0)}
@@ -125,9 +126,10 @@ def default_tolerances() -> dict[str, Tolerance]:
 
 
 def parse_tolerance(text: str) -> Tolerance:
-    """Parse ``KEY=DIST:P1:P2...`` (e.g. ``pin_pitch=normal:0.005``); ValueError names the option."""
+    """Parse ``KEY=DIST:P1:P2...`` (e.g. ``pin_pitch=normal:0.005``); TableError names the option."""
     if "=" not in text:
-        raise ValueError(f"--tolerance {text!r} must look like KEY=DIST:PARAMS, e.g. pin_radius=normal:1.5")
+        raise TableError(f"--tolerance {text!r} must look like KEY=DIST:PARAMS, e.g. pin_radius=normal:1.5",
+                         field="--tolerance", value=text, allowed="KEY=DIST:PARAMS")
     key, spec = text.split("=", 1)
     return _parse_spec(key.strip(), spec.strip(), f"--tolerance {text!r}")
 
@@ -138,38 +140,67 @@ def _parse_spec(key: str, spec: str, where: str) -> Tolerance:
     try:
         params = tuple(float(s) for s in parts[1:] if s.strip() != "")
     except ValueError:
-        raise ValueError(f"{where}: parameters must be numbers, got {spec!r}") from None
+        raise TableError(f"{where}: parameters must be numbers, got {spec!r}", field=where, value=spec,
+                         allowed="DIST:NUMBER[:NUMBER...]") from None
     try:
-        return Tolerance(key, dist, params)
+        tol = Tolerance(key, dist, params)
     except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from None
+        raise TableError(f"{where}: {exc}", field=where, value=spec) from None
+    # physical range: every drawn value must stay a valid case value (|value| <= MAX_ABS of the unit);
+    # a normal distribution within 6 sigma (a draw beyond it has probability 2e-9)
+    lim = MAX_ABS[tol.unit]
+    p = tol.params
+    reach = abs(p[1] if len(p) > 1 else 0.0) + 6.0 * p[0] if tol.dist == "normal" else max(
+        (abs(x) for x in p), default=0.0)
+    if reach > lim:
+        raise TableError(f"{where}: {tol.describe()} reaches {reach:g} {tol.unit}; allowed: draws within "
+                         f"|value| <= {lim:g} {tol.unit} (for normal: |mean| + 6 sigma)", field=where, value=spec,
+                         allowed=f"|value| <= {lim:g} {tol.unit}")
+    return tol
 
 
 def load_tolerances(path: str | Path) -> dict[str, Tolerance]:
-    """Read a tolerance file: CSV ``error,dist,p1[,p2[,p3]]`` or JSON ``{key: "dist:p1:p2"}``."""
+    """Read a tolerance file: CSV ``error,dist,p1[,p2[,p3]]`` or JSON ``{key: "dist:p1:p2"}``.
+
+    Raises TableError naming the file, row and field (a key given twice, an unknown column, a bad value).
+    """
     p = Path(path)
     if not p.is_file():
-        raise ValueError(f"--tolerances file {str(p)!r} does not exist")
+        raise TableError(f"--tolerances file {str(p)!r} does not exist", field="--tolerances", value=str(p),
+                         allowed="an existing CSV or JSON file")
     out: dict[str, Tolerance] = {}
     if p.suffix.lower() == ".json":
-        import json
-
-        try:
-            d = json.loads(p.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"--tolerances file {str(p)!r} is not valid JSON: {exc}") from None
+        d = read_json_file(p, "--tolerances file", TableError)
         if not isinstance(d, dict):
-            raise ValueError(f"--tolerances file {str(p)!r} must hold an object {{error: 'dist:params'}}")
+            raise TableError(f"--tolerances file {str(p)!r} must hold an object {{error: 'dist:params'}}",
+                             field="--tolerances", value=str(p), allowed="a JSON object")
         for k, v in d.items():
-            out[k] = _parse_spec(k, str(v), f"--tolerances {p.name} key {k!r}")
+            if not isinstance(v, str):
+                raise TableError(f"--tolerances {p.name} key {k!r}: {v!r} is not a string; allowed: 'dist:params'",
+                                 field=k, value=v, allowed="'dist:params'")
+            out[k] = _parse_spec(k, v, f"--tolerances {p.name} key {k!r}")
         return out
-    df = pd.read_csv(p, dtype=str).fillna("")
+    try:
+        df = pd.read_csv(p, dtype=str).fillna("")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        raise TableError(f"--tolerances file {str(p)!r} cannot be read as CSV: {' '.join(str(exc).split())}",
+                         field="--tolerances", value=str(p), allowed="CSV error,dist,p1,p2,p3") from None
+    df.columns = [str(c).strip() for c in df.columns]
     for c in ("error", "dist"):
         if c not in df.columns:
-            raise ValueError(f"--tolerances file {str(p)!r} needs columns error,dist,p1..p3; '{c}' is missing")
+            raise TableError(f"--tolerances file {str(p)!r} needs columns error,dist,p1..p3; '{c}' is missing",
+                             field="--tolerances", value=list(df.columns), allowed="error,dist,p1,p2,p3")
+    for c in df.columns:
+        if c not in ("error", "dist", "p1", "p2", "p3"):
+            raise TableError(f"--tolerances file {str(p)!r}: column {c!r} is unknown; allowed: error,dist,p1,p2,p3",
+                             field=c, value=c, allowed="error,dist,p1,p2,p3")
     for i, r in df.iterrows():
         spec = ":".join([r["dist"]] + [r[c] for c in ("p1", "p2", "p3") if c in df.columns and r[c] != ""])
-        out[r["error"]] = _parse_spec(r["error"], spec, f"--tolerances {p.name} row {i + 1}")
+        key = r["error"].strip()
+        if key in out:
+            raise TableError(f"--tolerances {p.name} row {i + 1}: error {key!r} is given twice; allowed: each "
+                             "error once", field=key, value=key, allowed="each error once")
+        out[key] = _parse_spec(key, spec, f"--tolerances {p.name} row {i + 1}")
     return out
 
 

@@ -160,7 +160,7 @@ def test_bad_input_clear_errors_and_no_partial_csv(tmp_path, capsys) -> None:
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"errors": {"pin_radius": "NaN"}}))
     assert rvdyn_main(["te", str(bad), "--out", str(out)]) == 2
-    assert "errors.pin_radius 'NaN' must be a number" in capsys.readouterr().err
+    assert "errors.pin_radius 'NaN' is of type str, not a number; allowed: a number" in capsys.readouterr().err
     rigid = tmp_path / "rigid.json"
     rigid.write_text(json.dumps({"errors": {"pin_circle_diameter": -14}}))
     assert rvdyn_main(["te", str(rigid), "--rigid", "--steps", "4", "--out", str(out)]) == 2
