@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from rvcad import validation as v
 from rvcad.errors import load_case
 from rvcad.export import DEFAULT_TOLERANCE_UM, FORMATS, TOLERANCE_RANGE_UM, ExportedFile, export_case
 
@@ -67,7 +68,7 @@ def _angle(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``rvcad`` (subcommand ``export``)."""
-    p = argparse.ArgumentParser(
+    p = v.ArgumentParser(
         prog="rvcad",
         description="Error-perturbed CAD of the RV reducer: exact parts as STEP and STL files.",
         epilog="Run 'rvcad export --help' for the export options. Lengths in mm, angles in degrees, "
@@ -102,6 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _export(args: argparse.Namespace) -> int:
+    v.output_dir(args.out)
     case = load_case(args.case)
     parts = [s.strip() for s in args.parts.split(",") if s.strip()] if args.parts else None
 
@@ -143,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return _export(args)
     except ValueError as exc:
-        print(f"rvcad {args.command}: error: {exc}", file=sys.stderr)
+        print(f"rvcad {args.command}: error: {v.one_line(exc)}", file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"rvcad {args.command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "),

@@ -17,6 +17,7 @@ is in the comments below the constants); the bound is quoted in the refusal mess
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import numbers
@@ -316,7 +317,7 @@ def output_file(path: str | Path, name: str = "--out") -> Path:
     """An output file path: not an existing folder, and its parent not an existing file."""
     p = Path(path)
     if p.is_dir():
-        reject(name, str(p), "a file path (the folder is not overwritten)", "is an existing folder", OptionError)
+        reject(name, str(p), "a file path (the folder is not overwritten)", "is an existing folder, not a file", OptionError)
     for parent in p.parents:
         if parent.exists() and not parent.is_dir():
             reject(name, str(p), "a path whose folders are folders", f"lies under the file {str(parent)!r}",
@@ -328,7 +329,7 @@ def output_dir(path: str | Path, name: str = "--out") -> Path:
     """An output folder path: not an existing file (nor under one)."""
     p = Path(path)
     if p.exists() and not p.is_dir():
-        reject(name, str(p), "a folder (created if missing)", "is an existing file", OptionError)
+        reject(name, str(p), "a folder (created if missing)", "is an existing file, not a folder", OptionError)
     for parent in p.parents:
         if parent.exists() and not parent.is_dir():
             reject(name, str(p), "a path whose folders are folders", f"lies under the file {str(parent)!r}",
@@ -339,3 +340,15 @@ def output_dir(path: str | Path, name: str = "--out") -> Path:
 def one_line(exc: BaseException) -> str:
     """The message of an exception on one line (newlines folded), for the command lines' stderr."""
     return " ".join(str(exc).split())
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """``argparse.ArgumentParser`` whose usage errors are one line on stderr (exit status 2).
+
+    argparse prints the usage block and then the error; the project's command lines print only
+    ``PROG: error: MESSAGE (see PROG --help)`` so every bad-input exit is one line. Subcommand parsers
+    created with ``add_subparsers`` inherit the class.
+    """
+
+    def error(self, message: str) -> NoReturn:  # noqa: D401 - argparse API
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")

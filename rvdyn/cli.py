@@ -11,7 +11,8 @@ import math
 import sys
 from typing import Any
 
-from rvcad.errors import load_case
+from rvcad.errors import MAX_LOAD_NM, load_case
+from rvcad import validation as v
 from rvdyn.contacts import ContactLaw
 from rvdyn.te import SOLVERS, lost_motion, run_te
 
@@ -25,7 +26,7 @@ def _law(args: argparse.Namespace) -> ContactLaw:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rvdyn", description="Quasi-static transmission error of an RV reducer.")
+    p = v.ArgumentParser(prog="rvdyn", description="Quasi-static transmission error of an RV reducer.")
     sub = p.add_subparsers(dest="command", required=True)
     te = sub.add_parser("te", help="TE curve of one case (CSV) and its statistics",
                         description="Solve the quasi-static meshing equilibrium at N input angles and write "
@@ -59,7 +60,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_te_options(args: argparse.Namespace) -> None:
+    """Bounds of the size options and the output path, before anything is solved (OptionError)."""
+    v.steps_option(args.steps)
+    v.option_real(args.revolutions, "--revolutions", 0.0, v.MAX_REVOLUTIONS, lo_open=True,
+                  why=f"at most {v.MAX_STEPS} steps over them")
+    if args.load_Nm is not None:
+        v.option_real(args.load_Nm, "--load-Nm", 0.0, MAX_LOAD_NM, unit="N m")
+    if args.out:
+        v.output_file(args.out)
+
+
 def _te(args: argparse.Namespace) -> int:
+    _check_te_options(args)
     case = load_case(args.case)
     law = _law(args)
     res = run_te(case, args.solver, args.steps, args.revolutions, args.load_Nm, args.direction, law)
@@ -89,11 +102,18 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "te":
             return _te(args)
+        v.steps_option(args.steps)
+        v.option_int(args.sweep_points, "--sweep-points", 2, v.MAX_SWEEP_POINTS,
+                     why="each point is one solve per factor")
+        v.output_dir(args.out)
         from rvdyn.screen import screen_command
 
         return screen_command(args)
     except ValueError as exc:
-        print(f"rvdyn: error: {exc}", file=sys.stderr)
+        print(f"rvdyn: error: {v.one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"rvdyn: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
         return 2
 
 

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rvcad import validation as v
 from rvdyn.contacts import ContactLaw
 from rvdyn.te import SOLVERS
 from rvstudy.montecarlo import default_tolerances, load_tolerances, parse_tolerance
@@ -24,7 +25,7 @@ DEFAULT_SOLVER = "fcl"
 
 def build_parser() -> argparse.ArgumentParser:
     """Argument parser of ``rv-stackup``."""
-    p = argparse.ArgumentParser(
+    p = v.ArgumentParser(
         prog="rv-stackup",
         description="Single-factor screen, Box-Behnken response surface, validation and Monte Carlo "
                     "tolerance stack-up of the RV reducer's transmission error (paper sections 4.2-5).",
@@ -73,8 +74,29 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def check_sizes(args: argparse.Namespace) -> None:
+    """Upper bounds of the size options and the output folders (OptionError naming the option and bound).
+
+    The bounds come from the memory and time budget in :mod:`rvcad.validation` (one solve within
+    ``MEMORY_BUDGET_BYTES``; at most ``MAX_CASES`` full-solver cases per option); the lower bounds
+    stay in :meth:`StudyConfig.validate`.
+    """
+    v.steps_option(args.steps)
+    v.option_int(args.workers, "--workers", 1, v.MAX_WORKERS, why="local processes of about 160 MB each")
+    v.option_int(args.sweep_points, "--sweep-points", 2, v.MAX_SWEEP_POINTS, why="each point is one solve per factor")
+    v.option_int(args.n_validation, "--validation-cases", 0, v.MAX_CASES, why="each is one full solve")
+    v.option_int(args.mc_check, "--mc-check", 0, v.MAX_CASES, why="each is one full solve")
+    v.option_int(args.mc_samples, "--mc-samples", 100, v.MAX_MC_SAMPLES, why="about 1 kB per draw")
+    if args.center is not None:
+        v.option_int(args.center, "--center", 0, v.MAX_CENTER_RUNS, why="each is one full solve")
+    v.output_dir(args.out)
+    if args.cache:
+        v.output_dir(args.cache, "--cache")
+
+
 def config_from_args(args: argparse.Namespace) -> StudyConfig:
     """StudyConfig from parsed options; ValueError naming the option on bad values."""
+    check_sizes(args)
     tols = default_tolerances()
     if args.tolerances:
         tols.update(load_tolerances(args.tolerances))
@@ -139,7 +161,10 @@ def main(argv: list[str] | None = None) -> int:
         cfg = config_from_args(args)
         res = run_study(cfg)
     except ValueError as exc:
-        print(f"rv-stackup: error: {exc}", file=sys.stderr)
+        print(f"rv-stackup: error: {v.one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"rv-stackup: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("rv-stackup: interrupted; finished cases are in the cache, rerun the same command to resume",
