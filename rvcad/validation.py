@@ -120,12 +120,13 @@ _QUOTE = 60
 
 
 def quote(value: Any) -> str:
-    """Short ``repr`` of a value for a message (cut to 60 characters)."""
+    """Short ``repr`` of a value for a message (cut to 60 characters, strings to 300)."""
     try:
         text = repr(value)
     except Exception:  # noqa: BLE001 - a broken __repr__ must not hide the real error
         text = f"<{type(value).__name__}>"
-    return text if len(text) <= _QUOTE else text[:_QUOTE - 3] + "..."
+    limit = 5 * _QUOTE if isinstance(value, str) else _QUOTE  # paths and names in full
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def reject(field: str, value: Any, allowed: str, problem: str = "is not allowed",
