@@ -115,6 +115,14 @@ MAX_GRID_STEPS = 14_400
 #: reducer, beyond which the loop would be fitting pin-by-pin noise.
 MAX_TERMS = 40
 
+#: Largest contact stiffness K of the impact law, N/mm^n: stiffer is the rigid limit (--rigid). At the
+#: default 20 N m a pin carries about 20e3 N mm / 64 mm / 20 contacts = 16 N, which deflects
+#: (16 / 1e9)^(1/1.5) mm = 0.006 um at K = 1e9 (n = 1.5); beyond, the Newton steps overflow.
+MAX_CONTACT_K = 1.0e9
+#: Largest input angle of a placement, degrees: beyond it float64 (ulp 1.2e-10 deg at 1e6 deg) starts
+#: to lose the sub-arcsecond positions; 1e6 deg is 23 output revolutions of the 121:1 reducer.
+MAX_ANGLE_DEG = 1.0e6
+
 #: Longest text quoted back in a message, characters.
 _QUOTE = 60
 

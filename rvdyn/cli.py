@@ -67,6 +67,9 @@ def _check_te_options(args: argparse.Namespace) -> None:
                   why=f"at most {v.MAX_STEPS} steps over them")
     if args.load_Nm is not None:
         v.option_real(args.load_Nm, "--load-Nm", 0.0, MAX_LOAD_NM, unit="N m")
+    if not args.rigid:
+        v.option_real(args.K, "--K", 0.0, v.MAX_CONTACT_K, lo_open=True, unit="N/mm^n",
+                      why="stiffer is the rigid limit, --rigid")
     if args.out:
         v.output_file(args.out)
 

@@ -82,6 +82,7 @@ def check_sizes(args: argparse.Namespace) -> None:
     stay in :meth:`StudyConfig.validate`.
     """
     v.steps_option(args.steps)
+    v.option_real(args.K, "--K", 0.0, v.MAX_CONTACT_K, lo_open=True, unit="N/mm^n", why="stiffer is the rigid limit")
     v.option_int(args.workers, "--workers", 1, v.MAX_WORKERS, why="local processes of about 160 MB each")
     v.option_int(args.sweep_points, "--sweep-points", 2, v.MAX_SWEEP_POINTS, why="each point is one solve per factor")
     v.option_int(args.n_validation, "--validation-cases", 0, v.MAX_CASES, why="each is one full solve")
