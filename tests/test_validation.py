@@ -245,6 +245,11 @@ def test_dataset_errors_are_dataset_errors(tmp_path: Path) -> None:
     (tmp_path / "samples.csv").write_text("run,input_deg,output_deg\na,0,0\n")
     with pytest.raises(DatasetError, match=r"runs.csv: column 'direction' run a is 2"):
         read_dataset(tmp_path)
+    # found by the fuzz: an empty run cell in samples.csv (pandas 3 keeps it NaN) crashed the run lookup
+    (tmp_path / "runs.csv").write_text("run,load_Nm,direction\n1,20,1\n")
+    (tmp_path / "samples.csv").write_text("run,input_deg,output_deg\n,-1,-1\n1,0.0,0.0\na,10890.0,90.0\n")
+    with pytest.raises(DatasetError, match=r"samples.csv: column 'run' row 2 is empty"):
+        read_dataset(tmp_path)
 
 
 # ------------------------------------------------------------------------- command lines (items 2, 5, 7)
