@@ -108,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         v.steps_option(args.steps)
         v.option_int(args.sweep_points, "--sweep-points", 2, v.MAX_SWEEP_POINTS,
                      why="each point is one solve per factor")
+        v.option_real(args.load_Nm, "--load-Nm", 0.0, MAX_LOAD_NM, unit="N m")
         v.output_dir(args.out)
         from rvdyn.screen import screen_command
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from rvcad import validation as v
+from rvcad.errors import MAX_LOAD_NM
 from rvdyn.contacts import ContactLaw
 from rvdyn.te import SOLVERS
 from rvstudy.montecarlo import default_tolerances, load_tolerances, parse_tolerance
@@ -83,6 +84,10 @@ def check_sizes(args: argparse.Namespace) -> None:
     """
     v.steps_option(args.steps)
     v.option_real(args.K, "--K", 0.0, v.MAX_CONTACT_K, lo_open=True, unit="N/mm^n", why="stiffer is the rigid limit")
+    v.option_real(args.load_Nm, "--load-Nm", 0.0, MAX_LOAD_NM, unit="N m")
+    v.option_real(args.spec_arcmin, "--spec-arcmin", 0.0, 60.0, lo_open=True, unit="arcmin",
+                  why="a TE peak-to-peak spec; 60 arcmin is a degree")
+    v.option_real(args.scheduler_timeout, "--scheduler-timeout", 0.0, 3600.0, lo_open=True, unit="s")
     v.option_int(args.workers, "--workers", 1, v.MAX_WORKERS, why="local processes of about 160 MB each")
     v.option_int(args.sweep_points, "--sweep-points", 2, v.MAX_SWEEP_POINTS, why="each point is one solve per factor")
     v.option_int(args.n_validation, "--validation-cases", 0, v.MAX_CASES, why="each is one full solve")

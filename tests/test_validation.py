@@ -135,6 +135,18 @@ def test_valid_cases_still_load(tmp_path: Path) -> None:
 
 
 # ------------------------------------------------------------------------- design relations (issue 15 item 3)
+def test_every_numeric_design_field_has_a_physical_range() -> None:
+    from dataclasses import fields
+
+    numeric = [f.name for f in fields(Design) if isinstance(f.default, (int, float)) and not isinstance(f.default, bool)]
+    missing = [n for n in numeric + ["crank_angles_deg"] if n not in FIELD_RANGES]
+    assert missing == [], f"add these Design fields to rvcad.params.FIELD_RANGES: {missing}"
+    for n, (lo, hi, _, _) in FIELD_RANGES.items():
+        default = getattr(Design(), n)
+        for x in (default if isinstance(default, tuple) else (default,)):
+            assert lo <= x <= hi, n
+
+
 @pytest.mark.parametrize("name", sorted(FIELD_RANGES))
 def test_every_design_field_has_a_range_naming_it(name: str) -> None:
     lo, hi, _, _ = FIELD_RANGES[name]
