@@ -91,26 +91,21 @@ CASE_KEYS = ("name", "design", "errors", "load_Nm", "direction", "model")
 
 @dataclass(frozen=True)
 class ModelOption:
-    """A physical effect the base model of the paper lacks, as an option of the case's ``model`` object."""
+    """A physical effect the base model of the paper lacks, as an option of the case's ``model`` object.
+
+    ``choices`` non-empty: a named option (a string out of ``choices``; ``low``/``high`` unused).
+    """
 
     key: str
     unit: str
     low: float
     high: float
-    default: float
+    default: Any
     meaning: str
+    choices: tuple[str, ...] = ()
 
 
-MODEL_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
-    ModelOption("torsional_compliance_arcsec_per_Nm", "arcsec/(N m)", 0.0, 100.0, 0.0,
-                "torsional compliance of the carrier and crank bearings: the output lags by this times the "
-                "resisting torque (load dependent)"),
-    ModelOption("friction_torque_Nm", "N m", 0.0, 1000.0, 0.0,
-                "friction torque at the output that always resists the motion (direction-dependent hysteresis)"),
-    ModelOption("cam_bearing_clearance_um", "um", 0.0, 200.0, 0.0,
-                "radial clearance of every cam (crank) bearing between crank and disc (lost motion)"),
-    ModelOption("cam_bearing_stiffness_N_per_um", "N/um", 1.0, 1.0e6, 1000.0,
-                "radial stiffness of a cam bearing once its clearance is taken up"),
+GEOMETRY_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
     ModelOption("temperature_C", "degC", -40.0, 150.0, 20.0,
                 "temperature of the reducer (20 degC = as built)"),
     ModelOption("pin_circle_diameter_um_per_K", "um/K", -20.0, 20.0, 0.0,
@@ -121,27 +116,43 @@ MODEL_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
     ModelOption("pin_circle_ovality_angle_deg", "deg", -360.0, 360.0, 0.0,
                 "direction of the major axis of the pin circle ovality"),
 ]}
-"""Physics options of ``case["model"]``: effects that the paper's model lacks (units in the keys)."""
+"""The ``model`` options that move parts (used by :class:`ResolvedErrors`). The solver's physics options
+(contact law, compliance, friction, bearing clearance) live in ``rvdyn.options``, which validates the
+whole ``model`` object (names, ranges) when a case is solved."""
 
 
-def parse_model(model: dict[str, Any] | None) -> dict[str, float]:
-    """Validate the ``model`` object of a case: known keys, finite numbers inside their range."""
-    model = dict(model or {})
-    out: dict[str, float] = {}
-    for k, v in model.items():
-        if k not in MODEL_OPTIONS:
-            raise ValueError(f"model key {k!r} is unknown; allowed: {sorted(MODEL_OPTIONS)}")
-        o = MODEL_OPTIONS[k]
-        x = _number(v, f"model.{k}")
-        if not o.low <= x <= o.high:
-            raise ValueError(f"model.{k} {x} {o.unit} is out of range; allowed [{o.low}, {o.high}]")
-        out[k] = x
+def check_option(o: ModelOption, v: Any) -> Any:
+    """Validated value of one model option (number in range or one of its choices)."""
+    if o.choices:
+        if not isinstance(v, str) or v not in o.choices:
+            raise ValueError(f"model.{o.key} {v!r} is not allowed; allowed: {list(o.choices)}")
+        return v
+    x = _number(v, f"model.{o.key}")
+    if not o.low <= x <= o.high:
+        raise ValueError(f"model.{o.key} {x} {o.unit} is out of range; allowed [{o.low}, {o.high}]")
+    return x
+
+
+def parse_model(model: dict[str, Any] | None) -> dict[str, Any]:
+    """Type-check the ``model`` object of a case: string keys, values finite numbers or names; the
+    geometric options (:data:`GEOMETRY_OPTIONS`) also in range. The other names are validated by
+    ``rvdyn.options.parse_model``, where the physics lives."""
+    out: dict[str, Any] = {}
+    for k, v in dict(model or {}).items():
+        if not isinstance(k, str):
+            raise ValueError(f"model key {k!r} must be a string")
+        if k in GEOMETRY_OPTIONS:
+            out[k] = check_option(GEOMETRY_OPTIONS[k], v)
+        elif isinstance(v, str):
+            out[k] = v
+        else:
+            out[k] = _number(v, f"model.{k}")
     return out
 
 
-def model_value(model: dict[str, float], key: str) -> float:
-    """Value of a model option, or its default."""
-    return float(model.get(key, MODEL_OPTIONS[key].default))
+def geometry_option(model: dict[str, Any], key: str) -> float:
+    """Value of a geometric model option, or its default."""
+    return float(model.get(key, GEOMETRY_OPTIONS[key].default))
 
 
 def _number(v: Any, where: str) -> float:
@@ -307,8 +318,6 @@ class Case:
             reject("direction", direction, "+1 or -1", "is not a drive direction", CaseError)
         model = as_mapping(d.get("model", {}), "model",
                            "an object of rvdyn physics options (omit the key or give {} for none)", CaseError)
-        for k, v in model.items():
-            _number(v, f"model.{k}")
         try:
             model = parse_model(model)
         except InputError:
@@ -434,14 +443,14 @@ class ResolvedErrors:
                 self.pin_pitch[pins] += math.radians(v)
             else:  # pragma: no cover - parse_errors rejects unknown keys
                 raise ValueError(f"errors key {inst.key!r} is unknown")
-        # geometric effects of the case's model options (see MODEL_OPTIONS)
+        # geometric effects of the case's model options (see GEOMETRY_OPTIONS)
         m = case.model
-        dT = model_value(m, "temperature_C") - 20.0
-        self.pin_radial += model_value(m, "pin_circle_diameter_um_per_K") * dT * um / 2.0
-        ov = model_value(m, "pin_circle_ovality_um")
+        dT = geometry_option(m, "temperature_C") - 20.0
+        self.pin_radial += geometry_option(m, "pin_circle_diameter_um_per_K") * dT * um / 2.0
+        ov = geometry_option(m, "pin_circle_ovality_um")
         if ov:
             phi = 2 * np.pi * np.arange(zp) / zp
-            self.pin_radial += ov * um * np.cos(2.0 * (phi - math.radians(model_value(m, "pin_circle_ovality_angle_deg"))))
+            self.pin_radial += ov * um * np.cos(2.0 * (phi - math.radians(geometry_option(m, "pin_circle_ovality_angle_deg"))))
         self._check(case)
 
     def _check(self, case: Case) -> None:

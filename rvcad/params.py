@@ -10,7 +10,13 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
+from rvcad.profile import MAX_MODIFICATION
 from rvcad.validation import DesignError, as_int, as_mapping, as_real, read_json_file, reject
+
+#: Profile shift coefficients of the stage I gears (assumption; x1 = -x2 keeps the 30 mm centre
+#: distance, and x1 = +0.4 keeps the planet tip off the 12-tooth sun's base circle).
+SUN_SHIFT = 0.4
+PLANET_SHIFT = -0.4
 
 
 @dataclass(frozen=True)
@@ -53,6 +59,17 @@ class Design:
         Radius of the central clearance hole of each cycloid disc, mm.
     housing_outer_radius_mm : float
         Outer radius of the pin housing, mm.
+    cam_bearing_rollers, cam_bearing_roller_diameter_mm, cam_bearing_roller_length_mm : int, float, float
+        Needle rollers of each cam bearing: count, diameter and effective length, mm (assumption:
+        16 x 2.5 mm x 8 mm in the 9 mm cam hole).
+    journal_bearing_rollers, journal_bearing_roller_diameter_mm, journal_bearing_roller_length_mm : int, float, float
+        Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
+        (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
+    profile_equidistant_mm, profile_shift_mm, profile_rotation_deg : float
+        Profile modification of both discs: the disc is cut by a wheel of radius ``pin_radius_mm +
+        equidistant`` whose centre runs on the circle ``pin_circle_radius + shift``, and the profile is
+        turned by ``rotation`` (+z) relative to the crank holes. Positive equidistant and negative shift
+        remove material (backlash); 0 by default.
     """
 
     z_sun: int = 12
@@ -74,6 +91,23 @@ class Design:
     crank_journal_radius_mm: float = 7.0
     disc_center_hole_radius_mm: float = 14.0
     housing_outer_radius_mm: float = 80.0
+    # ---- bearings and supports of the physical contact law (rvdyn, issue 11) -------------------------
+    # Assumptions of this implementation (not in the paper; README "Assumptions"): the cam bearings are
+    # needle bearings between cam and disc hole, the crank journal bearings are modelled as cylindrical
+    # roller bearings (one in the flange plate, one in the carrier), all rolling elements steel (GCr15).
+    cam_bearing_rollers: int = 16
+    cam_bearing_roller_diameter_mm: float = 2.5
+    cam_bearing_roller_length_mm: float = 8.0
+    journal_bearing_rollers: int = 12
+    journal_bearing_roller_diameter_mm: float = 3.0
+    journal_bearing_roller_length_mm: float = 6.0
+    # Profile modification of the cycloid discs (rvcad.profile.modified_profile_parameters): the
+    # grinding wheel's radius rp + equidistant, its centre circle Rp + shift, the profile turned by
+    # rotation. Zero by default (the paper's unmodified, zero-backlash profile).
+    profile_equidistant_mm: float = 0.0
+    profile_shift_mm: float = 0.0
+    profile_rotation_deg: float = 0.0
+    # ---- end of the bearing block ---------------------------------------------------------------------
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -171,7 +205,7 @@ class Design:
     def _check_ranges(self) -> None:
         for name, (lo, hi, lo_open, why) in FIELD_RANGES.items():
             v = getattr(self, name)
-            if name.startswith("z_"):
+            if type(self.__dataclass_fields__[name].default) is int:
                 as_int(v, f"design.{name}", lo=int(lo), hi=int(hi), cls=DesignError, why=why)
             elif name == "crank_angles_deg":
                 if len(v) != 2:
@@ -200,8 +234,8 @@ class Design:
             bad("eccentricity_mm", self.eccentricity_mm, f"< Rp / Zp = {rp / self.z_pins:.4f} mm",
                 f"mm gives a shortening coefficient e*Zp/Rp = {k1:.4f} >= 1 (a looped, unusable profile)")
         # stage I: a tip land on both gears (the planet thinned by the backlash) and a contact ratio > 1
-        for gear, z, shift, thin in (("sun", self.z_sun, _shift("SUN_SHIFT"), 0.0),
-                                     ("planet", self.z_planet, _shift("PLANET_SHIFT"), self.stage1_backlash_mm)):
+        for gear, z, shift, thin in (("sun", self.z_sun, SUN_SHIFT, 0.0),
+                                     ("planet", self.z_planet, PLANET_SHIFT, self.stage1_backlash_mm)):
             land = self.tooth_tip_thickness_mm(z, shift, thin)
             if land <= 0.0:
                 name, value = ("stage1_backlash_mm", thin) if thin > 0 and \
@@ -219,7 +253,7 @@ class Design:
         c0, c1 = self.crank_angles_deg
         sep = abs((c1 - c0 + 180.0) % 360.0 - 180.0)
         chord = 2.0 * a * math.sin(math.radians(sep) / 2.0)
-        planet_tip = self.planet_pitch_radius_mm + self.module_mm * (1.0 + _shift("PLANET_SHIFT"))
+        planet_tip = self.planet_pitch_radius_mm + self.module_mm * (1.0 + PLANET_SHIFT)
         need = max(2.0 * planet_tip, 2.0 * self.cam_radius_mm)
         if chord <= need:
             what = "planet tip circles" if 2.0 * planet_tip >= 2.0 * self.cam_radius_mm else "cam holes"
@@ -274,7 +308,7 @@ class Design:
         """
         m, al = self.module_mm, math.radians(self.pressure_angle_deg)
         out = -self.center_distance_mm * math.sin(al)
-        for z, x in ((self.z_sun, _shift("SUN_SHIFT")), (self.z_planet, _shift("PLANET_SHIFT"))):
+        for z, x in ((self.z_sun, SUN_SHIFT), (self.z_planet, PLANET_SHIFT)):
             rb = m * z / 2.0 * math.cos(al)
             ra = m * z / 2.0 + m * (1.0 + x)
             out += math.sqrt(max(ra * ra - rb * rb, 0.0))
@@ -342,13 +376,6 @@ def _inv(a: float) -> float:
     return math.tan(a) - a
 
 
-def _shift(name: str) -> float:
-    """Profile shift coefficient of a stage I gear (``rvcad.geometry.SUN_SHIFT`` / ``PLANET_SHIFT``)."""
-    from rvcad import geometry  # imported here: geometry imports this module
-
-    return float(getattr(geometry, name))
-
-
 #: Physical range of every Design field: (low, high, low bound open?, reason). Relations between
 #: fields are checked in :meth:`Design.validate` after these.
 FIELD_RANGES: dict[str, tuple[float, float, bool, str]] = {
@@ -371,6 +398,13 @@ FIELD_RANGES: dict[str, tuple[float, float, bool, str]] = {
     "crank_journal_radius_mm": (0.0, 1000.0, True, "inside the cam as well"),
     "disc_center_hole_radius_mm": (0.0, 1000.0, True, "between the sun and the crank holes as well"),
     "housing_outer_radius_mm": (0.0, 2000.0, True, "a reducer below 2 m"),
+    "cam_bearing_rollers": (3, 200, False, "rolling elements of one bearing"),
+    "cam_bearing_roller_diameter_mm": (0.0, 100.0, True, "needle rollers below 100 mm"),
+    "cam_bearing_roller_length_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "journal_bearing_rollers": (3, 200, False, "rolling elements of one bearing"),
+    "journal_bearing_roller_diameter_mm": (0.0, 100.0, True, "rollers below 100 mm"),
+    "journal_bearing_roller_length_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    **{k: (-lim, lim, False, "rvcad.profile.MAX_MODIFICATION") for k, lim in MAX_MODIFICATION.items()},
 }
 
 

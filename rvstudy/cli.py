@@ -17,6 +17,7 @@ from typing import Any
 from rvcad import validation as v
 from rvcad.errors import MAX_LOAD_NM
 from rvdyn.contacts import ContactLaw
+from rvdyn.runner import SchedulerError
 from rvdyn.te import SOLVERS
 from rvstudy.montecarlo import default_tolerances, load_tolerances, parse_tolerance
 from rvstudy.study import DEFAULT_SEED, DEFAULT_STEPS, DESIGNS, STAGES, StudyConfig, run_study
@@ -166,6 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = config_from_args(args)
         res = run_study(cfg)
+    except SchedulerError as exc:
+        print(f"rv-stackup: error: --scheduler {exc.address!r}: {exc.reason}", file=sys.stderr)
+        return 2
     except ValueError as exc:
         print(f"rv-stackup: error: {v.one_line(exc)}", file=sys.stderr)
         return 2

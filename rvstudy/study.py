@@ -1,9 +1,9 @@
 """The default study of ``rv-stackup``: the paper's sections 4.2-5 end to end, plus a tolerance stack-up.
 
-Stages (each one a list of cases solved through a cached, parallel :class:`rvstudy.executor.CachedRunner`):
+Stages (each one a list of cases solved through the cached, parallel :class:`rvdyn.runner.Runner`):
 
 1. ``screen`` -- every Table 4 error alone at +-its paper value and case A (Fig. 9), and the four RSM
-   factors swept over their Table 5 range (Fig. 11) (:mod:`rvdyn.screen`).
+   factors swept over their Table 5 range (Fig. 11) (:mod:`rvstudy.screen`).
 2. ``doe`` -- the response-surface design (Box-Behnken by default, from :func:`rsm.make_design`,
    in the paper's Table 6 run order when the point sets agree) on the factors of the levels table;
    responses ``mean_abs_arcmin`` (mean of |TE| over the revolution: our reading of the paper's
@@ -38,7 +38,7 @@ from rvcad.errors import ERROR_TYPES, MAX_ABS, Case
 from rvcad.params import Design
 from rvcad.validation import TableError
 from rvdyn.contacts import ContactLaw
-from rvdyn.screen import (
+from rvstudy.screen import (
     ARCSEC_PER_ARCMIN,
     RSM_FACTORS,
     ScreenResult,
@@ -47,8 +47,10 @@ from rvdyn.screen import (
 )
 from rvdyn.te import SOLVERS
 import rvpaper as paper
-from rvstudy.cache import CaseCache
-from rvstudy.executor import CachedRunner, Executor, make_executor
+from rvdyn.cache import CaseCache
+from rvdyn.runner import Executor, make_executor
+from rvdyn.runner import Runner as CachedRunner
+from rvstudy.paper_readings import READINGS_STEPS, run_readings
 from rvstudy.montecarlo import (
     Tolerance,
     default_tolerances,
@@ -59,7 +61,7 @@ from rvstudy.montecarlo import (
     yield_estimate,
 )
 
-STAGES = ("screen", "doe", "validation", "mc")
+STAGES = ("screen", "doe", "validation", "mc", "readings")
 DESIGNS = ("bbd", "ccd")
 #: Responses of the design, in arcmin: the paper's statistic first.
 RESPONSES = ("mean_abs_arcmin", "pp_arcmin")
@@ -366,6 +368,7 @@ class StudyResult:
     cache_counters: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
+    readings: Any = None                   # rvstudy.paper_readings.ReadingsResult
 
 
 def _responses(results: list[dict[str, Any]]) -> pd.DataFrame:
@@ -429,9 +432,6 @@ def _design(cfg: StudyConfig, fs: FactorSet) -> tuple[pd.DataFrame, bool]:
     return coded, False
 
 
-_NOT_ESTIMABLE = re.compile(r"term '([^']+)' cannot be estimated")
-
-
 def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitBundle:
     """Full quadratic fit of the solved runs and its reductions.
 
@@ -450,12 +450,12 @@ def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitB
                 try:
                     model = rsm.ResponseSurfaceModel(ok, fs.names, response, names, levels=fs.levels, units="coded")
                     break
-                except ValueError as exc:
-                    m = _NOT_ESTIMABLE.search(str(exc))
-                    if m is None or m.group(1) not in names or len(names) <= 1:
+                except rsm.NotEstimableError as exc:
+                    bad = [t for t in exc.terms if t in names]
+                    if not bad or len(bad) >= len(names):
                         raise
-                    names.remove(m.group(1))
-                    dropped.append(m.group(1))
+                    names = [t for t in names if t not in bad]
+                    dropped.extend(bad)
             b.results = model.fit(alpha=alpha)
             b.comparison = rsm.compare_reductions(b.results, alpha=alpha, alpha_out=alpha)
         b.notes = list(dict.fromkeys([str(x.message) for x in w] + list(b.results.notes)))
@@ -525,6 +525,12 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
             t0 = time.perf_counter()
             res.mc = _monte_carlo(cfg, fs, runner, res)
             res.timings["mc"] = time.perf_counter() - t0
+        if "readings" in cfg.stages and fs.is_paper:  # Table 6 as measurements (rvstudy.paper_readings)
+            t0 = time.perf_counter()
+            res.readings = run_readings(fs, ex, cache, min(cfg.steps, READINGS_STEPS), cfg.load_Nm,
+                                        ContactLaw(cfg.K, cfg.n), progress=cfg.progress, **kw)
+            res.notes.extend(res.readings.notes)
+            res.timings["readings"] = time.perf_counter() - t0
     finally:
         if own:
             ex.close()
