@@ -32,6 +32,7 @@ from scipy.optimize import linprog
 from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvcad.plan import PLATE_RIM_CLEARANCE_MM
+from rvcad.validation import DesignError
 
 #: Largest pin-disc penetration a pose may keep, mm: the elastic contact limit of the solver
 #: (``rvdyn.solver.MAX_ELASTIC_PENETRATION_MM``, 0.1 mm); a case above it everywhere is refused.
@@ -44,8 +45,8 @@ INTERFERENCE_STATES = 12
 MIN_TOOTH_LAND_MM = 1e-3
 
 
-class DesignError(ValueError):
-    """The case cannot give valid, assemblable solids; the message names the field."""
+# DesignError: the case cannot give valid, assemblable solids; the message names the field. It is the
+# validation layer's class (rvcad.validation), so Design.validate and this check raise one family.
 
 
 # ----------------------------------------------------------------------------- stage I teeth

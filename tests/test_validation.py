@@ -13,7 +13,7 @@ import pytest
 
 from rvcad.errors import Case, load_case
 from rvcad.params import FIELD_RANGES, Design, load_design
-from rvcad.profile import CycloidProfile, InvoluteGear
+from rvcad.profile import CycloidProfile
 from rvcad.validation import (CaseError, DatasetError, DesignError, InputError, JSONInputError, OptionError,
                               TableError, as_int, as_real, loads_json)
 
@@ -162,13 +162,10 @@ def test_every_design_field_has_a_range_naming_it(name: str) -> None:
     ({"z_pins": 30}, r"design.z_disc 39 .*allowed: z_pins - 1 = 29"),
     ({"pin_radius_mm": 5.1}, r"design.pin_radius_mm 5.1 mm makes the 40 pins overlap.*< half the pin chord pitch, 5.0214 mm"),
     ({"eccentricity_mm": 1.6}, r"design.eccentricity_mm 1.6 mm gives a shortening coefficient e\*Zp/Rp = 1.0000 >= 1"),
-    ({"stage1_backlash_mm": 1.0}, r"design.stage1_backlash_mm 1.0 gives a pointed planet tooth"),
-    ({"crank_angles_deg": [0, 0]}, r"design.crank_angles_deg \[0.0, 0.0\] puts the two cranks 0.000 mm apart"),
-    ({"crank_angles_deg": [0, 90]}, r"design.crank_angles_deg \[0.0, 90.0\] puts the two cranks 42.426 mm apart .*"
-                                    r"planet tip circles \(46.500 mm across\) overlap"),
+    ({"crank_angles_deg": [0, 0]}, r"design.crank_angles_deg \[0, 0\] puts the two planets 0.000 mm apart"),
+    ({"crank_angles_deg": [0, 90]}, r"design.crank_angles_deg \[0, 90\] puts the two planets 42.426 mm apart .*"
+                                    r"tip circles \(46.500 mm across\) overlap; allowed: cranks at least 101.61 deg"),
     ({"cam_radius_mm": 29.0}, r"design.cam_radius_mm 29.0 mm plus the eccentricity reaches the disc centre"),
-    ({"module_mm": 2.0, "cam_radius_mm": 12.0}, r"design.cam_radius_mm 12.0 mm puts the cam holes \(at the 48 mm crank "
-                                                r"radius\) through the disc's root circle 59.7000 mm"),
     ({"crank_journal_radius_mm": 8.0}, r"design.crank_journal_radius_mm 8.0 mm does not pass through the cam"),
     ({"housing_outer_radius_mm": 66.0}, r"design.housing_outer_radius_mm 66.0 mm does not hold the pins"),
 ])
@@ -183,16 +180,8 @@ def test_designs_of_issue_15_are_valid() -> None:
     assert d30.ratio == pytest.approx(1 + 36 * 30 / 12, abs=1e-9)
 
 
-def test_tip_thickness_and_undercut_radius_match_the_profile_maths() -> None:
+def test_undercut_radius_matches_the_profile_maths() -> None:
     d = Design()
-    alpha = math.radians(d.pressure_angle_deg)
-    from rvcad.geometry import PLANET_SHIFT, SUN_SHIFT
-
-    for z, x, b in ((d.z_sun, SUN_SHIFT, 0.0), (d.z_planet, PLANET_SHIFT, 0.3)):
-        g = InvoluteGear(z, d.module_mm, alpha, x, b)
-        assert d.tooth_tip_thickness_mm(z, x, b) == pytest.approx(2 * g.tip_radius * g.tip_half_angle(), abs=1e-12)
-    # the pointed-tip limit of the issue's example: backlash 1.0 mm > the 0.99 mm the planet's tip allows
-    assert d.tooth_tip_thickness_mm(d.z_planet, PLANET_SHIFT, 1.0) < 0 < d.tooth_tip_thickness_mm(d.z_planet, PLANET_SHIFT, 0.9)
     prof = CycloidProfile(d.pin_circle_radius_mm, d.eccentricity_mm, d.z_pins, d.pin_radius_mm)
     assert d.min_convex_radius_mm == pytest.approx(prof.min_convex_radius, rel=1e-4)
     assert 4.5 < d.min_convex_radius_mm < 4.7  # conventions: "about 4.6 mm"
@@ -331,8 +320,8 @@ def test_rvcad_export_refuses_before_writing(tmp_path: Path, capsys: pytest.Capt
 
     out = tmp_path / "o"
     for text, needle in (('{"design": {"crank_angles_deg": 0}}', "design.crank_angles_deg 0"),
-                         ('{"design": {"stage1_backlash_mm": 1.0}}', "design.stage1_backlash_mm 1.0"),
-                         ('{"design": {"crank_angles_deg": [0, 0]}}', "design.crank_angles_deg [0.0, 0.0]"),
+                         ('{"design": {"stage1_backlash_mm": 1.0}}', "design.stage1_backlash_mm 1 mm"),
+                         ('{"design": {"crank_angles_deg": [0, 0]}}', "design.crank_angles_deg [0, 0]"),
                          ('{"errors": {}, "errors": {}}', "key 'errors' appears twice")):
         _one_line_exit_2(capsys, main(["export", str(_case_file(tmp_path, text)), "--out", str(out)]), needle)
     assert not out.exists()
