@@ -45,6 +45,10 @@ INTERFERENCE_STATES = 12
 MIN_TOOTH_LAND_MM = 1e-3
 
 
+# DesignError: the case cannot give valid, assemblable solids; the message names the field. It is the
+# validation layer's class (rvcad.validation), so Design.validate and this check raise one family.
+
+
 # ----------------------------------------------------------------------------- stage I teeth
 def _tooth_lands(gear) -> tuple[float, float]:
     """(tip land, root gap) of an involute gear, mm: chord widths at the tip and root circles."""
@@ -56,13 +60,24 @@ def _tooth_lands(gear) -> tuple[float, float]:
 
 
 def _check_gears(g: ReducerGeometry) -> None:
-    """Root gaps of both gears (the tip lands are checked by ``Design.validate``)."""
     d = g.design
-    for name, gear in (("z_sun", g.sun), ("z_planet", g.planet)):
-        gap = _tooth_lands(gear)[1]
+    tip, root = _tooth_lands(g.planet)
+    if tip < MIN_TOOTH_LAND_MM:
+        b_max = d.stage1_backlash_mm + 2.0 * g.planet.pitch_radius * (g.planet.tip_half_angle()
+                                                                        - MIN_TOOTH_LAND_MM / (2 * g.planet.tip_radius))
+        raise DesignError(
+            f"design.stage1_backlash_mm {d.stage1_backlash_mm:g} mm thins the planet teeth to a point (tip land "
+            f"{tip * 1e3:.1f} um): the planet is not a valid solid; allowed: below {max(b_max, 0.0):.4f} mm")
+    stip, sroot = _tooth_lands(g.sun)
+    if stip < MIN_TOOTH_LAND_MM:
+        raise DesignError(
+            f"design.z_sun {d.z_sun} with module_mm {d.module_mm:g} and pressure_angle_deg "
+            f"{d.pressure_angle_deg:g} gives pointed sun teeth (tip land {stip * 1e3:.1f} um); allowed: more "
+            "teeth or a smaller pressure angle")
+    for name, gap in (("z_sun", sroot), ("z_planet", root)):
         if gap < MIN_TOOTH_LAND_MM:
-            reject(f"design.{name}", getattr(d, name), "a tooth count with a positive root gap",
-                   f"makes neighbouring teeth overlap at the root circle (gap {gap * 1e3:.1f} um)", DesignError)
+            raise DesignError(f"design.{name} {getattr(d, name)}: neighbouring teeth overlap at the root circle "
+                              f"(gap {gap * 1e3:.1f} um); allowed: a tooth count with a positive root gap")
 
 
 # ----------------------------------------------------------------------------- crank holes

@@ -8,7 +8,9 @@ import argparse
 import json
 import math
 import sys
+from rvcad import validation
 from rvcad.errors import load_case
+from rvcad.validation import MAX_ANGLE_DEG
 from rvcad.export import DEFAULT_TOLERANCE_UM, FORMATS, TOLERANCE_RANGE_UM, ExportedFile, export_case
 
 _EXPORT_EPILOG = """\
@@ -71,6 +73,9 @@ def _angle(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number of degrees") from None
     if v != v or v in (float("inf"), float("-inf")):
         raise argparse.ArgumentTypeError(f"{text} must be a finite number of degrees")
+    if abs(v) > MAX_ANGLE_DEG:
+        raise argparse.ArgumentTypeError(f"{text} deg is out of range; allowed: |angle| <= {MAX_ANGLE_DEG:g} deg "
+                                         "(float64 keeps sub-arcsecond positions there)")
     return v
 
 
@@ -86,7 +91,7 @@ def _state(text: str) -> list[float]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``rvcad`` (subcommand ``export``)."""
-    p = argparse.ArgumentParser(
+    p = validation.ArgumentParser(
         prog="rvcad",
         description="Error-perturbed CAD of the RV reducer: exact parts as STEP and STL files.",
         epilog="Run 'rvcad export --help' for the export options. Lengths in mm, angles in degrees, "
@@ -127,6 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _export(args: argparse.Namespace) -> int:
+    validation.output_dir(args.out)
     case = load_case(args.case)
     state = None
     if args.state is not None:
@@ -175,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return _export(args)
     except ValueError as exc:
-        print(f"rvcad {args.command}: error: {exc}", file=sys.stderr)
+        print(f"rvcad {args.command}: error: {validation.one_line(exc)}", file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"rvcad {args.command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "),
