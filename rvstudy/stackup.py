@@ -1,0 +1,259 @@
+"""Monte Carlo tolerance stack-up through the full solver (``rv-stackup`` stage ``mc``).
+
+Every draw of every toleranced feature (:mod:`rvstudy.features`) is a case solved by the quasi-static
+solver (rvdyn): the analytic contact provider for all draws, the fcl provider again on a check
+subsample, with their agreement reported. Responses a user puts a specification on:
+
+* ``te_pp_arcmin`` -- TE peak-to-peak over one output revolution at the study's load (the industry's
+  angular transmission error), arcmin;
+* ``play_3pct_arcmin`` -- a named proxy for lost motion, *not* the maker's lost motion: at each of
+  :func:`play_positions` input positions evenly spread over one output revolution, the output angle
+  under +3 % of rated torque minus that under -3 % (TE of direction -1 minus TE of direction +1 at a
+  load of 3 % rated, input held at the position, quasi-static and frictionless unless the case's
+  model adds friction), largest over the positions, arcmin. Without friction the hysteresis curve
+  has no width, so this equals the conventions' lost motion at those positions; with friction or a
+  hysteresis curve it does not, which is why it carries another name;
+* ``te_mean_abs_arcmin`` -- the paper's mean |TE| (for the paper reproduction; no specification by
+  default).
+
+Draws: ``mc_draws`` independent draws (seed ``[seed, 2]``) give every distribution statistic. The
+contributors come from a designed sample (Saltelli): A and B are the first two blocks of
+``mc_sobol`` independent draws, and for every tolerance one more block of ``mc_sobol`` cases, A with
+that tolerance's features taken from B (:func:`rvstudy.capability.sobol_from_design`). Tolerance
+allocation re-weights the independent draws (:func:`rvstudy.capability.allocation`; no new solves).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from rvcad.errors import ERROR_TYPES
+from rvcad.params import Design
+from rvstudy.capability import allocation, capability, recommend, sobol_from_design
+from rvstudy.features import Feature, draw, features, group_columns, make_draw_case
+
+ARCSEC_PER_ARCMIN = 60.0
+#: Fraction of the rated torque at which lost motion is read (conventions: +-3 %).
+PLAY_LOAD_FRACTION = 0.03
+#: Responses of the full-solver Monte Carlo and their labels.
+MC_RESPONSES = {
+    "te_pp_arcmin": "TE peak-to-peak [arcmin]",
+    "play_3pct_arcmin": "two-direction play at +-3 % rated torque [arcmin] (lost-motion proxy)",
+    "te_mean_abs_arcmin": "mean |TE| [arcmin] (paper's response)",
+}
+
+Runner = Callable[[list, str], list[dict[str, Any]]]
+
+
+def play_positions(design: Design) -> int:
+    """Number of input positions of the play proxy: the first of 37, 41, 43, 47, 53 that divides none of
+    Zp, Zc and the rounded ratio, so that the positions fall at distinct crank phases."""
+    for p in (37, 41, 43, 47, 53):
+        if all(int(v) % p for v in (design.z_pins, design.z_disc, round(design.ratio))):
+            return p
+    return 59
+
+
+def factor_values(feats: list[Feature], X: pd.DataFrame, fs: Any) -> pd.DataFrame | None:
+    """Each RSM factor's value in the draws as the surface knows it: the default-instance feature (pin 0's
+    pitch, disc 0 hole 0, ...), or the mean over the pins for an all-pins error or an ``all`` pattern;
+    None when a factor has no such reading (an ``alternate`` pattern)."""
+    out = {}
+    for f in fs.names:
+        key, pat = fs.errors[f], fs.patterns.get(f)
+        et = ERROR_TYPES[key]
+        cols = [ft for ft in feats if ft.tolerance == key and ft.component == "value"]
+        if pat == "alternate":
+            return None
+        if not cols:
+            out[f] = np.zeros(len(X))
+            continue
+        all_pins = pat == "all" or (et.pinwise and et.defaults.get("pin", 0) is None)
+        if all_pins:
+            out[f] = X[[c.name for c in cols]].to_numpy(float).mean(axis=1)
+            continue
+        d = tuple(sorted((k, v) for k, v in et.defaults.items() if v is not None))
+        hit = [c for c in cols if d in c.instances]
+        out[f] = X[hit[0].name].to_numpy(float) if hit else np.zeros(len(X))
+    return pd.DataFrame(out)
+
+
+def _cases(feats, X: pd.DataFrame, design: Design, prefix: str, load: float, direction: int,
+           base_model: dict, notes: list[str]) -> tuple[list, list[int]]:
+    cases, idx = [], []
+    vals = X.to_numpy(float)
+    for i in range(len(X)):
+        try:
+            cases.append(make_draw_case(feats, vals[i], design, f"{prefix}-{i + 1}", load, direction, base_model))
+            idx.append(i)
+        except ValueError as exc:
+            if direction == 1:
+                notes.append(f"Monte Carlo draw {prefix}-{i + 1} is not a valid case (counted as a failed "
+                             f"draw): {exc}")
+    return cases, idx
+
+
+def _solve(runner: Runner, feats, X: pd.DataFrame, design: Design, prefix: str, load: float, direction: int,
+           base_model: dict, notes: list[str], desc: str) -> list[dict[str, Any] | None]:
+    cases, idx = _cases(feats, X, design, prefix, load, direction, base_model, notes)
+    out: list[dict[str, Any] | None] = [None] * len(X)
+    for i, r in zip(idx, runner(cases, desc) if cases else []):
+        out[i] = r
+    return out
+
+
+def _stat(r: dict[str, Any] | None, k: str) -> float:
+    if r is None or r.get("status", "ok") != "ok":
+        return float("nan")
+    return float(r["stats"][k]) / ARCSEC_PER_ARCMIN
+
+
+def _play(rp: dict | None, rm: dict | None) -> float:
+    if rp is None or rm is None or rp.get("status") != "ok" or rm.get("status") != "ok":
+        return float("nan")
+    plus, minus = np.asarray(rp["te_arcsec"], float), np.asarray(rm["te_arcsec"], float)[::-1]
+    return float(np.max(minus - plus)) / ARCSEC_PER_ARCMIN
+
+
+def responses_of(feats, X: pd.DataFrame, design: Design, cfg: Any, runners: dict[str, Runner], base_model: dict,
+                 notes: list[str], prefix: str) -> pd.DataFrame:
+    """Solve the draws ``X`` (TE at the study load; play at +-3 % rated) and return the responses."""
+    te = _solve(runners["te"], feats, X, design, prefix, cfg.load_Nm, 1, base_model, notes,
+                f"MC {prefix}: TE ({len(X)} draws)")
+    load = PLAY_LOAD_FRACTION * cfg.rated_Nm
+    rp = _solve(runners["play"], feats, X, design, prefix, load, 1, base_model, notes, f"MC {prefix}: play +")
+    rm = _solve(runners["play"], feats, X, design, prefix, load, -1, base_model, notes, f"MC {prefix}: play -")
+    return pd.DataFrame({
+        "te_pp_arcmin": [_stat(r, "pp") for r in te],
+        "play_3pct_arcmin": [_play(a, b) for a, b in zip(rp, rm)],
+        "te_mean_abs_arcmin": [_stat(r, "mean_abs") for r in te],
+        "status": ["ok" if r is not None and r.get("status") == "ok" else "failed" for r in te],
+        "error_message": ["invalid case" if r is None else r.get("error", "") for r in te],
+    })
+
+
+def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], fits: dict[str, Any],
+                notes: list[str], base_model: dict | None = None, workers: int = 1) -> dict[str, Any]:
+    """The full-solver Monte Carlo of the study (see the module docstring).
+
+    Parameters
+    ----------
+    cfg : StudyConfig
+        Uses ``tolerances, mc_draws, mc_sobol, mc_check, seed, load_Nm, rated_Nm, specs()``.
+    fs : FactorSet
+        The RSM factors (for the surface comparison).
+    design : Design
+        The reducer.
+    runners : dict
+        ``te`` (analytic, ``cfg.steps``), ``play`` (analytic, :func:`play_positions` steps) and ``check``
+        (fcl, ``cfg.steps``) runners, ``runner(cases, desc) -> results``.
+    fits : dict
+        Response -> FitBundle of the design stage (surface comparison), may be empty.
+    notes : list
+        Notes of the run (appended to).
+    """
+    t0 = time.perf_counter()
+    tols = cfg.tolerances
+    base_model = dict(base_model or {})
+    feats = features(tols, design)
+    X = draw(tols, feats, cfg.mc_draws, np.random.default_rng([cfg.seed, 2]))
+    Y = responses_of(feats, X, design, cfg, runners, base_model, notes, "mc")
+    specs = cfg.specs()
+    out: dict[str, Any] = {"tolerances": tols, "n_features": len(feats), "specs": specs,
+                           "play_positions": play_positions(design), "play_load_Nm": PLAY_LOAD_FRACTION * cfg.rated_Nm,
+                           "features": pd.DataFrame([{"feature": f.name, "tolerance": f.tolerance,
+                                                      "component": f.component} for f in feats])}
+    groups = {g: c for g, c in group_columns(feats).items() if tols[g].std > 0}
+    # designed sample for the contributors: A, B = first two blocks of the independent draws
+    n_s = min(int(cfg.mc_sobol), len(X) // 2)
+    sob_rows = []
+    n_design = 0
+    if n_s >= 2 and groups:
+        A, B = X.iloc[:n_s].reset_index(drop=True), X.iloc[n_s:2 * n_s].reset_index(drop=True)
+        AB = []
+        for g, cols in groups.items():
+            m = A.copy()
+            m[cols] = B[cols].to_numpy()
+            AB.append(m)
+        Xab = pd.concat(AB, ignore_index=True)
+        Yab = responses_of(feats, Xab, design, cfg, runners, base_model, notes, "sobol")
+        n_design = len(Xab)
+        for resp in MC_RESPONSES:
+            yA, yB = Y[resp].to_numpy()[:n_s], Y[resp].to_numpy()[n_s:2 * n_s]
+            yab = {g: Yab[resp].to_numpy()[j * n_s:(j + 1) * n_s] for j, g in enumerate(groups)}
+            s = sobol_from_design(yA, yB, yab, var=float(np.nanvar(Y[resp].to_numpy())), seed=cfg.seed)
+            s.insert(0, "response", resp)
+            sob_rows.append(s)
+    out["sobol"] = pd.concat(sob_rows, ignore_index=True) if sob_rows else pd.DataFrame()
+    out["sobol_n"] = n_s
+    per: dict[str, Any] = {}
+    alloc_rows = []
+    for resp in MC_RESPONSES:
+        lsl, usl = specs.get(resp, (None, None))
+        c = capability(Y[resp].to_numpy(), lsl, usl)
+        s = out["sobol"]
+        c["contributors"] = ([{"tolerance": r.tolerance, "first_order": r.first_order, "total": r.total}
+                              for r in s[s["response"] == resp].itertuples()] if len(s) else [])
+        if lsl is not None or usl is not None:
+            a = allocation(X, groups, tols, Y[resp].to_numpy(), lsl, usl)
+            if len(a):
+                a.insert(0, "response", resp)
+                alloc_rows.append(a)
+                c["allocation"] = recommend(a, target=cfg.yield_target)
+        per[resp] = c
+    out["responses"] = per
+    out["allocation"] = pd.concat(alloc_rows, ignore_index=True) if alloc_rows else pd.DataFrame()
+    # the quadratic surface on the same draws (comparison only)
+    Z = factor_values(feats, X, fs)
+    surf = {}
+    for resp, key in (("te_pp_arcmin", "pp_arcmin"), ("te_mean_abs_arcmin", "mean_abs_arcmin")):
+        b = fits.get(key)
+        if Z is None or b is None or getattr(b, "results", None) is None:
+            continue
+        pred = np.asarray(b.results.surface.predict(Z, units="actual"), float)
+        Y[f"{resp}_surface"] = pred
+        ok = np.isfinite(Y[resp].to_numpy())
+        e = pred[ok] - Y[resp].to_numpy()[ok]
+        lsl, usl = specs.get(resp, (None, None))
+        surf[resp] = {"n": int(ok.sum()), "rmse": float(np.sqrt(np.mean(e ** 2))), "bias": float(np.mean(e)),
+                      "max_abs": float(np.max(np.abs(e))), "negative_fraction": float(np.mean(pred < 0)),
+                      "corr": float(np.corrcoef(pred[ok], Y[resp].to_numpy()[ok])[0, 1]) if ok.sum() > 2 else None,
+                      "yield_surface": (capability(pred, lsl, usl)["yield"] if lsl is not None or usl is not None
+                                        else None)}
+    out["surface"] = surf
+    # fcl on a check subsample of the independent draws
+    n_chk = min(int(cfg.mc_check), len(X))
+    if n_chk > 0 and "check" in runners:
+        chk = _solve(runners["check"], feats, X.iloc[:n_chk], design, "mc", cfg.load_Nm, 1, base_model, [],
+                     f"MC check: fcl ({n_chk} draws)")
+        cdf = pd.DataFrame({"draw": np.arange(1, n_chk + 1),
+                            "te_pp_arcmin_analytic": Y["te_pp_arcmin"].to_numpy()[:n_chk],
+                            "te_pp_arcmin_fcl": [_stat(r, "pp") for r in chk],
+                            "te_mean_abs_arcmin_analytic": Y["te_mean_abs_arcmin"].to_numpy()[:n_chk],
+                            "te_mean_abs_arcmin_fcl": [_stat(r, "mean_abs") for r in chk]})
+        out["check"] = cdf
+        agr = {}
+        for r in ("te_pp_arcmin", "te_mean_abs_arcmin"):
+            d = (cdf[f"{r}_fcl"] - cdf[f"{r}_analytic"]).to_numpy()
+            d = d[np.isfinite(d)]
+            agr[r] = {"n": int(d.size), "max_abs_diff": float(np.max(np.abs(d))) if d.size else None,
+                      "rms_diff": float(np.sqrt(np.mean(d ** 2))) if d.size else None}
+        out["check_agreement"] = agr
+    out["draws"] = pd.concat([X, Y], axis=1)
+    wall = time.perf_counter() - t0
+    n_eval = len(X) + n_design
+    out["timing"] = {"wall_s": wall, "full_solver_draws": n_eval, "independent_draws": len(X),
+                     "design_draws": n_design, "solves_per_draw": 3, "workers": workers,
+                     "draws_per_s_per_worker": n_eval / wall / max(1, workers) if wall > 0 else float("nan")}
+    return out
+
+
+def closed_form_lever_mm(design: Design) -> float:
+    """The largest pin lever ``(i Z1/Z2) e`` of the clearance closed form (docs/physics.md section 6), mm:
+    an upper bound of max_i lambda_i (52.4 mm for the paper's design)."""
+    return design.ratio * design.z_sun / design.z_planet * design.eccentricity_mm
+
