@@ -219,7 +219,20 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps({**s, "report": str(report)}))
     else:
         print(_human(s, report))
+    if not useful(res):
+        print(f"rv-stackup: error: no stage gave a result ({res.counters.get('failed', 0)} cases failed, no fit); "
+              f"the report says what failed: {report}", file=sys.stderr)
+        return 1
     return 0
+
+
+def useful(res: Any) -> bool:
+    """Whether the run produced anything to read: a screen, a fitted surface or Monte Carlo statistics."""
+    fitted = any(b.results is not None for b in res.fits.values())
+    mc_ok = bool(res.mc) and any(c.get("n_failed", 0) < c.get("n_solver_draws", 0)
+                                 for c in res.mc.get("responses", {}).values())
+    screen_ok = res.screen is not None and bool(res.screen.screen["pp_arcsec"].notna().any())
+    return fitted or mc_ok or screen_ok
 
 
 if __name__ == "__main__":  # pragma: no cover

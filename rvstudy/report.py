@@ -295,12 +295,13 @@ def conclusions(res: StudyResult) -> pd.DataFrame:
         best = max(ss, key=ss.get)
         add("ea_main_effect", "main + quadratic sum of squares: " + ", ".join(f"{f}={v:.3g}" for f, v in ss.items()),
             "yes" if best == "EA" else "no", f"{best} has the largest own effect" + ("" if best == "EA" else "." + ea_note))
-        kept = set(b.comparison.paper.terms) - {"Intercept"}
+        kept = set(b.comparison.paper.terms) - {"Intercept"} if b.comparison is not None else set()
         p9 = set(paper.EQ9_TERMS) - {"Intercept"}
-        add("eq9_terms", "significant (p < 0.05): " + (", ".join(sorted(kept)) or "none"),
-            "yes" if kept == p9 else ("partly" if kept & p9 else "no"),
-            "same term set" if kept == p9 else
-            f"paper-only: {', '.join(sorted(p9 - kept)) or 'none'}; ours only: {', '.join(sorted(kept - p9)) or 'none'}")
+        if b.comparison is not None:
+            add("eq9_terms", "significant (p < 0.05): " + (", ".join(sorted(kept)) or "none"),
+                "yes" if kept == p9 else ("partly" if kept & p9 else "no"),
+                "same term set" if kept == p9 else
+                f"paper-only: {', '.join(sorted(p9 - kept)) or 'none'}; ours only: {', '.join(sorted(kept - p9)) or 'none'}")
         if b.validation:
             v = b.validation["full"]
             rng = float(res.design.loc[res.design["status"] == "ok", PRIMARY].agg(lambda s: s.max() - s.min()))
@@ -366,8 +367,8 @@ def summary(res: StudyResult) -> dict[str, Any]:
         st = b.results.fit_statistics()
         s[resp] = {"r2": st["r2"], "r2_adj": st["r2_adj"], "r2_pred": st["r2_pred"],
                    "coefficients_actual": b.results.params_actual.to_dict(),
-                   "paper_mode_terms": list(b.comparison.paper.terms),
-                   "backward_terms": list(b.comparison.backward.terms),
+                   "paper_mode_terms": list(b.comparison.paper.terms) if b.comparison is not None else [],
+                   "backward_terms": list(b.comparison.backward.terms) if b.comparison is not None else [],
                    "validation": {k: v.to_dict() for k, v in b.validation.items()}}
     s["reducer"] = {"design": res.reducer.to_dict(), "ratio": res.reducer.ratio,
                     "description": report_mc.reducer_text(res.reducer), "source": res.config.reducer or "paper default"}
@@ -520,6 +521,10 @@ def write_report(res: StudyResult) -> Path:
             "keeping hierarchy.\n")
         for resp, b in res.fits.items():
             if b.results is None:
+                continue
+            if b.comparison is None:
+                add(f"### {RESPONSE_LABEL[resp]}\n")
+                add("No reduced models: " + "; ".join(n for n in b.notes if n.startswith("reduced models")) + "\n")
                 continue
             e9 = eq9_compare(b, with_paper and resp == PRIMARY)
             tab(e9, f"eq9_compare_{resp}")

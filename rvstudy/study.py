@@ -528,8 +528,12 @@ def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitB
                     names.remove(m.group(1))
                     dropped.append(m.group(1))
             b.results = model.fit(alpha=alpha)
-            b.comparison = rsm.compare_reductions(b.results, alpha=alpha, alpha_out=alpha)
-        b.notes = list(dict.fromkeys([str(x.message) for x in w] + list(b.results.notes)))
+            try:
+                b.comparison = rsm.compare_reductions(b.results, alpha=alpha, alpha_out=alpha)
+            except ValueError as exc:  # the full fit stands; only the reduced models are missing
+                b.comparison = None
+                b.notes.append(f"reduced models (Eq. 9) could not be formed from the {len(ok)} solved runs: {exc}")
+        b.notes = list(dict.fromkeys(b.notes + [str(x.message) for x in w] + list(b.results.notes)))
         if dropped:
             b.notes.insert(0, f"{len(ok)} of {len(data)} runs solved; terms not estimable from them and left out "
                               f"of the model: {', '.join(dropped)}")
@@ -662,6 +666,9 @@ def _validation(cfg: StudyConfig, fs: FactorSet, runner: CachedRunner, res: Stud
         df[f"{resp}_pred_full"] = pred["mean"].to_numpy()
         df[f"{resp}_pi_lower"] = pred["obs_ci_lower"].to_numpy()
         df[f"{resp}_pi_upper"] = pred["obs_ci_upper"].to_numpy()
+        if b.comparison is None:
+            b.validation = {"full": b.results.validate(ok, response=resp, units="coded")}
+            continue
         df[f"{resp}_pred_paper_mode"] = b.comparison.paper.predict(df, units="coded")
         df[f"{resp}_pred_backward"] = b.comparison.backward.results.predict(df, units="coded")["mean"].to_numpy()
         b.validation = {
