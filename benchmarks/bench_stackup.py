@@ -29,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
-from rvdyn.screen import make_case  # noqa: E402
+from rvstudy.screen import make_case  # noqa: E402
 from rvdyn.te import run_te  # noqa: E402
 
 CASES = {

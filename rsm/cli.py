@@ -3,7 +3,8 @@
 ``rsm fit DATA.csv --factors F1 F2 ... --response Y [--levels LEVELS.csv]
 [--units coded|actual] [--model quadratic|linear|2fi] [--terms T ...]
 [--reduce none|backward|paper] [--alpha A] [--alpha-out A] [--no-hierarchy]
-[--validate HOLDOUT.csv] [--plots DIR] [--json]``
+[--validate HOLDOUT.csv] [--plots DIR] [--augment [--new-data NEW.csv] [--max-add N]
+[--no-physical]] [--json]``
 
 Prints a human summary; with ``--json`` prints one JSON object instead::
 
@@ -16,7 +17,28 @@ Prints a human summary; with ``--json`` prints one JSON object instead::
      "coefficient_table": {"coded": {term: {coef, std_err, t, p, ci_lower, ci_upper}}, "actual": ...},
      "pure_error_is_zero": false, "notes": [...],
      "reduction": {...} (with --reduce), "comparison": {...} (with --reduce),
-     "validation": {...} (with --validate), "plots": [...] (with --plots)}
+     "validation": {...} (with --validate), "plots": [...] (with --plots),
+     "augment": {...} (with --augment, below)}
+
+``--augment`` runs :func:`rsm.augment.augment` on the full fit: lack of fit (and, with
+``--new-data``, Chow's predictive test of the fit on the new runs) -> the supported higher-order
+or physical term -> refit, before and after. Its JSON block::
+
+    "augment": {
+      "added": ["EB^2:EC"],                       # display names, in the order added
+      "verdict": "...",                           # one paragraph, as printed
+      "before": FIT, "after": FIT,                # the starting / augmented model on all runs
+      "iterations": [[TEST, ...], ...],           # candidate tests of each iteration
+      "new_runs": null | {"n", "F", "df_num", "df_den", "p", "rmse_pred", "bias", "lack_of_fit"},
+      "rule": {"alpha", "require_bic", "prefer_physical", "max_add"}}
+    FIT  = {"terms", "n_runs", "ssr", "df_resid", "rmse", "r2", "r2_adj", "r2_pred", "press",
+            "bic", "lack_of_fit": {"ss", "df", "F", "p"}, "pure_error": {"ss", "df"},
+            "residuals": [...]}
+    TEST = {"term", "kind" (polynomial|physical), "meaning", "estimable", "reason", "ssr", "F",
+            "p", "p_bonferroni", "delta_bic", "lack_of_fit_F", "lack_of_fit_p", "r2_pred",
+            "aliases": [...]}
+
+``ssr`` is the residual sum of squares (response units squared), ``rmse = sqrt(ssr / n_runs)``.
 
 NaN (undefined F/p, "/" in the paper) is written as ``null``.
 
@@ -92,6 +114,15 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--validate", metavar="HOLDOUT.csv",
                    help="held-out runs (same columns) for RMSE / max error / PI coverage")
     f.add_argument("--plots", metavar="DIR", help="write PNG figures into DIR")
+    f.add_argument("--augment", action="store_true",
+                   help="lack of fit -> test higher-order and physical terms -> add the supported ones")
+    f.add_argument("--new-data", metavar="NEW.csv",
+                   help="with --augment: new runs or measured responses (same columns) to test the fit on "
+                        "and to judge the terms on together with DATA")
+    f.add_argument("--max-add", type=int, default=2, metavar="N",
+                   help="with --augment: add at most N terms (default 2)")
+    f.add_argument("--no-physical", action="store_true",
+                   help="with --augment: polynomial candidates only (no pin clearance terms)")
     f.add_argument("--json", action="store_true", help="print one JSON object")
 
     d = sub.add_parser("design", help="generate a design",
@@ -132,6 +163,21 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     path = Path(args.data)
     if not path.is_file():
         raise ValueError(f"data file '{path}' does not exist")
+    if not args.augment:
+        for flag, given in (("--new-data", args.new_data is not None), ("--max-add", args.max_add != 2),
+                            ("--no-physical", args.no_physical)):
+            if given:
+                raise ValueError(f"{flag} needs --augment")
+    if args.max_add < 1:
+        raise ValueError(f"--max-add must be an integer >= 1, got {args.max_add}")
+    new_data = None
+    if args.new_data is not None:
+        npath = Path(args.new_data)
+        if not npath.is_file():
+            raise ValueError(f"--new-data file '{npath}' does not exist")
+        new_data = pd.read_csv(npath)
+        if len(new_data) == 0:
+            raise ValueError(f"--new-data file '{npath}' has no rows")
     data = pd.read_csv(path)
     terms = args.terms if args.terms else args.model
     model = ResponseSurfaceModel(data, args.factors, args.response, terms=terms,
@@ -192,6 +238,21 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         paths = plot_all(final, args.plots, validation=vdata)
         out["plots"] = [str(p) for p in paths]
         text += ["", f"wrote {len(paths)} figures to {args.plots}"]
+    if args.augment:
+        from .augment import SelectionRule, augment, format_augment
+        from .candidates import default_candidates
+
+        try:
+            aug = augment(res, new_data=new_data,
+                          candidates=default_candidates(res.factors, res.levels, physical=not args.no_physical),
+                          rule=SelectionRule(alpha=args.alpha, max_add=args.max_add))
+        except ValueError as exc:
+            msg = str(exc)
+            if msg.startswith("new data: "):
+                msg = f"--new-data '{args.new_data}': {msg[len('new data: '):]}"
+            raise ValueError(msg) from None
+        out["augment"] = aug.to_dict()
+        text += ["", format_augment(aug)]
     if args.json:
         print(json.dumps(jsonable(out), allow_nan=False))
     else:

@@ -7,15 +7,17 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from rvcad.errors import load_case
+from rvcad.check import check_case
+from rvcad.errors import Case, load_case
+from rvcad.geometry import ReducerGeometry
 from rvcad.export import DEFAULT_TOLERANCE_UM, FORMATS, TOLERANCE_RANGE_UM, ExportedFile, export_case
 
 _EXPORT_EPILOG = """\
 files written to DIR:
   <part>.step, <part>.stl  one per part: sun, planet0, planet1, crank0, crank1, flange,
                            disc0, disc1, carrier, housing, pin00..pin39
-  assembly.step            every part placed at --theta-in-deg, one labelled solid per part
-  assembly.stl             every part placed at --theta-in-deg, one mesh
+  assembly.step            every part placed at --theta-in-deg (--pose), one labelled solid per part
+  assembly.stl             every part placed at --theta-in-deg (--pose), one mesh
   case.json, manifest.json the exported case and the cache manifest
 
 frames: moving parts (sun, planets, cranks, plates, discs) are written in their own frame:
@@ -27,8 +29,16 @@ accuracy: every STL vertex lies on the exact outline and every chord deviates fr
   the tolerance (binary STL stores float32: about 0.004 um more at 64 mm); STEP lines and circles
   are exact, the cycloid envelope and involute flanks are cubic B-splines within the tolerance.
 
+checks: a case that cannot give valid solids (pointed teeth, overlapping crank holes, pins that
+  overlap the discs beyond the solver's 100 um elastic limit in every pose) is refused before
+  anything is written, naming the field; every STEP solid passes OpenCASCADE's BRepCheck or the
+  export stops with an error. The summary reports overlaps of the placed parts (pin-disc,
+  crank-disc, stage I teeth).
+
 cache: a rerun skips every file whose content (case, tolerance, format, input angle for the
-  assembly) is unchanged; --force rewrites. Files are written atomically (temp file + rename).
+  assembly) is unchanged; --force rewrites. A folder holding another case's (or tolerance's)
+  export is refused; --force removes that export's files first. Files are written atomically
+  (temp file + rename) with the umask's permissions; temp files of a killed run are removed.
 
 exit codes: 0 done, 2 bad input (message on stderr), 1 unexpected failure.
 """
@@ -91,18 +101,45 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--theta-in-deg", type=_angle, default=0.0, metavar="DEG",
                    help="input (sun) angle at which the assembly files place the moving parts, degrees "
                         "(default 0; the others follow the ideal kinematics)")
+    e.add_argument("--pose", choices=("ideal", "solved"), default="ideal",
+                   help="place the assembly by the ideal kinematics (default) or at the equilibrium that rvdyn "
+                        "solves for the case's load and direction at --theta-in-deg (analytic contacts)")
     e.add_argument("--parts", default=None, metavar="PATTERNS",
                    help="comma separated shell patterns of the parts to write, e.g. 'disc*,pin0?,assembly' "
                         "(default: all)")
-    e.add_argument("--force", action="store_true", help="rewrite files even if the cache shows them up to date")
+    e.add_argument("--force", action="store_true",
+                   help="rewrite files even if the cache shows them up to date; clean a folder that holds the "
+                        "export of another case or tolerance (refused without --force)")
     e.add_argument("--json", action="store_true",
                    help="print one JSON object (files, sizes, seconds, design check) instead of the summary")
     e.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     return p
 
 
+def solved_state(case: Case, theta_in_deg: float) -> tuple[float, tuple[float, ...]]:
+    """Output and crank angles (rad) of the quasi-static equilibrium at one input angle (rvdyn).
+
+    rvdyn builds on rvcad, so no rvcad library module imports it; only this command line (the top
+    layer) reaches up to it, inside the function, for ``--pose solved``. The discs are placed on
+    their cams (a floating disc in a cam-bearing clearance, a model option, is not shown).
+    """
+    import numpy as np
+
+    from rvdyn.contacts import AnalyticContacts
+    from rvdyn.solver import QuasiStaticSolver
+
+    g = ReducerGeometry(case)
+    sol = QuasiStaticSolver(g, AnalyticContacts(g)).solve(np.radians([theta_in_deg]), direction=case.direction,
+                                                         load_Nm=case.load_Nm)
+    return float(sol.theta_out[0]), tuple(float(v) for v in sol.psi[0])
+
+
 def _export(args: argparse.Namespace) -> int:
     case = load_case(args.case)
+    state = None
+    if args.pose == "solved":
+        check_case(case)  # a case the geometry refuses is named before the solver sees it
+        state = solved_state(case, args.theta_in_deg)
     parts = [s.strip() for s in args.parts.split(",") if s.strip()] if args.parts else None
 
     def progress(f: ExportedFile) -> None:
@@ -111,7 +148,8 @@ def _export(args: argparse.Namespace) -> int:
             print(f"  {f.file:16s} {f.bytes / 1e6:8.2f} MB  {state}", file=sys.stderr, flush=True)
 
     rep = export_case(case, args.out, formats=args.format, tolerance_um=args.tolerance_um,
-                      theta_in_deg=args.theta_in_deg, parts=parts, force=args.force, progress=progress)
+                      theta_in_deg=args.theta_in_deg, parts=parts, force=args.force, progress=progress,
+                      state=state, pose=args.pose)
     if args.json:
         print(json.dumps(rep.to_dict(), indent=1))
     else:

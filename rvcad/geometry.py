@@ -21,13 +21,8 @@ import math
 import numpy as np
 
 from rvcad.errors import Case, ResolvedErrors
-from rvcad.params import Design
+from rvcad.params import PLANET_SHIFT, SUN_SHIFT, Design  # noqa: F401  (shifts re-exported)
 from rvcad.profile import CycloidProfile, InvoluteGear
-
-#: Profile shift coefficients of the stage I gears (assumption; x1 = -x2 keeps the 30 mm centre
-#: distance, and x1 = +0.4 keeps the planet tip off the 12-tooth sun's base circle).
-SUN_SHIFT = 0.4
-PLANET_SHIFT = -0.4
 
 
 def rot(a: np.ndarray) -> np.ndarray:

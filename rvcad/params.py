@@ -7,7 +7,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
 from typing import Any
+
+from rvcad.validation import DesignError, as_int, as_mapping, as_real, read_json_file, reject
+
+#: Profile shift coefficients of the stage I gears (assumption; x1 = -x2 keeps the 30 mm centre
+#: distance, and x1 = +0.4 keeps the planet tip off the 12-tooth sun's base circle).
+SUN_SHIFT = 0.4
+PLANET_SHIFT = -0.4
 
 
 @dataclass(frozen=True)
@@ -50,6 +58,12 @@ class Design:
         Radius of the central clearance hole of each cycloid disc, mm.
     housing_outer_radius_mm : float
         Outer radius of the pin housing, mm.
+    cam_bearing_rollers, cam_bearing_roller_diameter_mm, cam_bearing_roller_length_mm : int, float, float
+        Needle rollers of each cam bearing: count, diameter and effective length, mm (assumption:
+        16 x 2.5 mm x 8 mm in the 9 mm cam hole).
+    journal_bearing_rollers, journal_bearing_roller_diameter_mm, journal_bearing_roller_length_mm : int, float, float
+        Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
+        (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
     """
 
     z_sun: int = 12
@@ -71,6 +85,17 @@ class Design:
     crank_journal_radius_mm: float = 7.0
     disc_center_hole_radius_mm: float = 14.0
     housing_outer_radius_mm: float = 80.0
+    # ---- bearings and supports of the physical contact law (rvdyn, issue 11) -------------------------
+    # Assumptions of this implementation (not in the paper; README "Assumptions"): the cam bearings are
+    # needle bearings between cam and disc hole, the crank journal bearings are modelled as cylindrical
+    # roller bearings (one in the flange plate, one in the carrier), all rolling elements steel (GCr15).
+    cam_bearing_rollers: int = 16
+    cam_bearing_roller_diameter_mm: float = 2.5
+    cam_bearing_roller_length_mm: float = 8.0
+    journal_bearing_rollers: int = 12
+    journal_bearing_roller_diameter_mm: float = 3.0
+    journal_bearing_roller_length_mm: float = 6.0
+    # ---- end of the bearing block ---------------------------------------------------------------------
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -126,93 +151,253 @@ class Design:
         return d
 
     def validate(self) -> "Design":
-        """Raise ``ValueError`` naming the field if the design cannot be built.
+        """Raise :class:`~rvcad.validation.DesignError` naming the field if the design cannot be built.
+
+        Checks, in this order: the type of every field (integers, finite numbers, two crank
+        angles), the physical range of every field (:data:`FIELD_RANGES`), then the relations
+        between fields: Zc = Zp - 1, pins that do not overlap, the shortening coefficient
+        e Zp / Rp < 1, involute teeth with a tip land and a stage I contact ratio above 1, the two
+        planets and cam holes apart on the crank circle, the cam holes inside the disc root, and
+        the bearing, centre-hole and housing radii. Undercut (pin radius above the smallest
+        convex radius of curvature of the pin-centre curve, :attr:`min_convex_radius_mm`) is
+        allowed: the CAD trims the loops and the design check reports it (conventions).
 
         Returns
         -------
         Design
             ``self``, for chaining.
         """
-        for name in ("z_sun", "z_planet", "z_pins", "z_disc"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < 3:
-                raise ValueError(f"design.{name} {v!r} must be an integer >= 3")
-        if self.z_disc != self.z_pins - 1:
-            raise ValueError(
-                f"design.z_disc {self.z_disc} must equal z_pins - 1 = {self.z_pins - 1} "
-                "(single-tooth-difference cycloid drive)")
+        self._check_types()
+        self._check_ranges()
+        self._check_relations()
+        return self
+
+    def _check_types(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name.endswith("_mm") or f.name.endswith("_deg"):
-                vals = v if isinstance(v, tuple) else (v,)
-                for x in vals:
-                    if not isinstance(x, (int, float)) or isinstance(x, bool) or not math.isfinite(x):
-                        raise ValueError(f"design.{f.name} {x!r} must be a finite number")
-        positive = ("pin_circle_diameter_mm", "eccentricity_mm", "pin_radius_mm", "module_mm",
-                    "gear_width_mm", "disc_width_mm", "plate_width_mm", "cam_radius_mm",
-                    "crank_journal_radius_mm", "disc_center_hole_radius_mm", "housing_outer_radius_mm")
-        for name in positive:
-            if getattr(self, name) <= 0:
-                raise ValueError(f"design.{name} {getattr(self, name)} must be > 0")
-        if not 10.0 <= self.pressure_angle_deg <= 30.0:
-            raise ValueError(f"design.pressure_angle_deg {self.pressure_angle_deg} must be in [10, 30]")
-        if self.stage1_backlash_mm < 0:
-            raise ValueError(f"design.stage1_backlash_mm {self.stage1_backlash_mm} must be >= 0")
-        if self.disc_gap_mm < 0:
-            raise ValueError(f"design.disc_gap_mm {self.disc_gap_mm} must be >= 0")
+            default = f.default
+            where = f"design.{f.name}"
+            if f.name == "crank_angles_deg":
+                if not isinstance(v, (tuple, list)):
+                    reject(where, v, "a list of 2 angles in degrees", f"is of type {type(v).__name__}", DesignError)
+                for i, x in enumerate(v):
+                    as_real(x, f"{where}[{i}]", unit="deg", cls=DesignError)
+            elif isinstance(default, bool):
+                if not isinstance(v, bool):
+                    reject(where, v, "true or false", f"is of type {type(v).__name__}", DesignError)
+            elif isinstance(default, int):
+                as_int(v, where, cls=DesignError)
+            elif isinstance(default, float):
+                as_real(v, where, cls=DesignError)
+
+    def _check_ranges(self) -> None:
+        for name, (lo, hi, lo_open, why) in FIELD_RANGES.items():
+            v = getattr(self, name)
+            if name.startswith("z_"):
+                as_int(v, f"design.{name}", lo=int(lo), hi=int(hi), cls=DesignError, why=why)
+            elif name == "crank_angles_deg":
+                if len(v) != 2:
+                    reject(f"design.{name}", list(v), "exactly 2 crank angles (two crankshafts)",
+                           f"lists {len(v)}", DesignError)
+                for i, x in enumerate(v):
+                    as_real(x, f"design.{name}[{i}]", lo=lo, hi=hi, unit="deg", cls=DesignError, why=why)
+            else:
+                unit = "deg" if name.endswith("_deg") else "mm"
+                as_real(v, f"design.{name}", lo=lo, hi=hi, lo_open=lo_open, unit=unit, cls=DesignError, why=why)
+
+    def _check_relations(self) -> None:
+        def bad(name: str, value: Any, allowed: str, problem: str) -> None:
+            reject(f"design.{name}", value, allowed, problem, DesignError)
+
+        if self.z_disc != self.z_pins - 1:
+            bad("z_disc", self.z_disc, f"z_pins - 1 = {self.z_pins - 1}",
+                "does not match the pins (the cycloid drive has one lobe fewer than pins)")
         rp = self.pin_circle_radius_mm
         half_pitch = rp * math.sin(math.pi / self.z_pins)
         if self.pin_radius_mm >= half_pitch:
-            raise ValueError(
-                f"design.pin_radius_mm {self.pin_radius_mm} mm must be below half the pin chord pitch "
-                f"{half_pitch:.4f} mm: {self.z_pins} pins of that radius overlap on the "
-                f"{self.pin_circle_diameter_mm} mm circle")
+            bad("pin_radius_mm", self.pin_radius_mm, f"< half the pin chord pitch, {half_pitch:.4f} mm",
+                f"mm makes the {self.z_pins} pins overlap on the {self.pin_circle_diameter_mm:g} mm circle")
         k1 = self.eccentricity_mm * self.z_pins / rp
-        if not 0.0 < k1 < 1.0:
-            raise ValueError(
-                f"design.eccentricity_mm {self.eccentricity_mm} gives a shortening coefficient e*Zp/Rp = "
-                f"{k1:.4f}; it must be in (0, 1), i.e. eccentricity below {rp / self.z_pins:.4f} mm")
-        if len(self.crank_angles_deg) != 2:
-            raise ValueError(f"design.crank_angles_deg {self.crank_angles_deg} must list exactly 2 cranks")
+        if not k1 < 1.0:
+            bad("eccentricity_mm", self.eccentricity_mm, f"< Rp / Zp = {rp / self.z_pins:.4f} mm",
+                f"mm gives a shortening coefficient e*Zp/Rp = {k1:.4f} >= 1 (a looped, unusable profile)")
+        # stage I: a tip land on both gears (the planet thinned by the backlash) and a contact ratio > 1
+        for gear, z, shift, thin in (("sun", self.z_sun, SUN_SHIFT, 0.0),
+                                     ("planet", self.z_planet, PLANET_SHIFT, self.stage1_backlash_mm)):
+            land = self.tooth_tip_thickness_mm(z, shift, thin)
+            if land <= 0.0:
+                name, value = ("stage1_backlash_mm", thin) if thin > 0 and \
+                    self.tooth_tip_thickness_mm(z, shift, 0.0) > 0 else (f"z_{gear}", z)
+                bad(name, value, f"a {gear} tooth with a tip land (tip thickness > 0)",
+                    f"gives a pointed {gear} tooth (tip thickness {land:.4f} mm; module {self.module_mm:g} mm, "
+                    f"{z} teeth, profile shift {shift:+g})")
+        eps = self.stage1_contact_ratio
+        if not eps > 1.0:
+            bad("module_mm", self.module_mm, "a stage I contact ratio > 1 (continuous mesh)",
+                f"with z_sun {self.z_sun}, z_planet {self.z_planet} and pressure angle "
+                f"{self.pressure_angle_deg:g} deg gives a contact ratio {eps:.3f}")
+        # the two cranks on the crank circle (radius = stage I centre distance a)
         a = self.center_distance_mm
+        c0, c1 = self.crank_angles_deg
+        sep = abs((c1 - c0 + 180.0) % 360.0 - 180.0)
+        chord = 2.0 * a * math.sin(math.radians(sep) / 2.0)
+        planet_tip = self.planet_pitch_radius_mm + self.module_mm * (1.0 + PLANET_SHIFT)
+        need = max(2.0 * planet_tip, 2.0 * self.cam_radius_mm)
+        if chord <= need:
+            what = "planet tip circles" if 2.0 * planet_tip >= 2.0 * self.cam_radius_mm else "cam holes"
+            bad("crank_angles_deg", [c0, c1],
+                f"cranks at least {2.0 * math.degrees(math.asin(min(1.0, need / (2.0 * a)))):.2f} deg apart",
+                f"puts the two cranks {chord:.3f} mm apart on the {a:g} mm crank circle (the stage I centre "
+                f"distance): their {what} ({need:.3f} mm across) overlap")
         if self.cam_radius_mm + self.eccentricity_mm >= a:
-            raise ValueError(
-                f"design.cam_radius_mm {self.cam_radius_mm} mm plus eccentricity must stay below the crank "
-                f"radius {a} mm")
+            bad("cam_radius_mm", self.cam_radius_mm, f"< crank radius - eccentricity = {a - self.eccentricity_mm:g} mm",
+                "mm plus the eccentricity reaches the disc centre")
+        root = rp - self.eccentricity_mm - self.pin_radius_mm
+        if a + self.cam_radius_mm >= root:
+            bad("cam_radius_mm", self.cam_radius_mm, f"< disc root radius - crank radius = {root - a:.4f} mm",
+                f"mm puts the cam holes (at the {a:g} mm crank radius) through the disc's root circle "
+                f"{root:.4f} mm (Rp - e - pin radius)")
         if self.crank_journal_radius_mm >= self.cam_radius_mm - self.eccentricity_mm:
-            raise ValueError(
-                f"design.crank_journal_radius_mm {self.crank_journal_radius_mm} mm must be below "
-                f"cam_radius_mm - eccentricity_mm = {self.cam_radius_mm - self.eccentricity_mm} mm "
-                "so the crank can be assembled through the cam")
+            bad("crank_journal_radius_mm", self.crank_journal_radius_mm,
+                f"< cam_radius_mm - eccentricity_mm = {self.cam_radius_mm - self.eccentricity_mm:g} mm",
+                "mm does not pass through the cam (the crank cannot be assembled)")
+        # the input shaft through the discs, taken as large as the unshifted sun tip circle m (Z1 + 2) / 2
         sun_tip = self.sun_pitch_radius_mm + self.module_mm
         if self.disc_center_hole_radius_mm <= sun_tip + self.eccentricity_mm:
-            raise ValueError(
-                f"design.disc_center_hole_radius_mm {self.disc_center_hole_radius_mm} mm must exceed the sun "
-                f"tip radius plus eccentricity ({sun_tip + self.eccentricity_mm} mm)")
+            bad("disc_center_hole_radius_mm", self.disc_center_hole_radius_mm,
+                f"> sun tip radius + eccentricity = {sun_tip + self.eccentricity_mm:g} mm", "mm touches the sun")
         if self.disc_center_hole_radius_mm >= a - self.cam_radius_mm - self.eccentricity_mm:
-            raise ValueError(
-                f"design.disc_center_hole_radius_mm {self.disc_center_hole_radius_mm} mm must leave a web "
-                f"to the crank holes (below {a - self.cam_radius_mm - self.eccentricity_mm} mm)")
+            bad("disc_center_hole_radius_mm", self.disc_center_hole_radius_mm,
+                f"< crank radius - cam radius - eccentricity = {a - self.cam_radius_mm - self.eccentricity_mm:g} mm",
+                "mm leaves no web to the crank holes")
         if self.housing_outer_radius_mm <= rp + self.pin_radius_mm:
-            raise ValueError(
-                f"design.housing_outer_radius_mm {self.housing_outer_radius_mm} mm must exceed Rp + pin radius "
-                f"= {rp + self.pin_radius_mm} mm")
-        return self
+            bad("housing_outer_radius_mm", self.housing_outer_radius_mm,
+                f"> Rp + pin radius = {rp + self.pin_radius_mm:g} mm", "mm does not hold the pins")
+
+    def tooth_tip_thickness_mm(self, z: int, shift: float, thinning: float = 0.0) -> float:
+        """Tip thickness of a stage I gear, mm (standard formula, e.g. ISO 21771).
+
+        ``s_a = d_a (s / d + inv(alpha) - inv(alpha_a))`` with ``d = m z``, the tip diameter
+        ``d_a = d + 2 m (1 + x)``, the pitch tooth thickness ``s = m (pi/2 + 2 x tan alpha) - thinning``
+        and ``cos(alpha_a) = d cos(alpha) / d_a``. Negative: the tooth is pointed below its tip.
+        """
+        m, al = self.module_mm, math.radians(self.pressure_angle_deg)
+        d = m * z
+        da = d + 2.0 * m * (1.0 + shift)
+        s = m * (math.pi / 2.0 + 2.0 * shift * math.tan(al)) - thinning
+        aa = math.acos(min(1.0, d * math.cos(al) / da))
+        return da * (s / d + _inv(al) - _inv(aa))
+
+    @property
+    def stage1_contact_ratio(self) -> float:
+        """Transverse contact ratio of the stage I mesh (profile shifts sum to zero: working angle = alpha).
+
+        ``eps = (sqrt(ra1^2 - rb1^2) + sqrt(ra2^2 - rb2^2) - a sin(alpha)) / (pi m cos(alpha))``.
+        """
+        m, al = self.module_mm, math.radians(self.pressure_angle_deg)
+        out = -self.center_distance_mm * math.sin(al)
+        for z, x in ((self.z_sun, SUN_SHIFT), (self.z_planet, PLANET_SHIFT)):
+            rb = m * z / 2.0 * math.cos(al)
+            ra = m * z / 2.0 + m * (1.0 + x)
+            out += math.sqrt(max(ra * ra - rb * rb, 0.0))
+        return out / (math.pi * m * math.cos(al))
+
+    @property
+    def min_convex_radius_mm(self) -> float:
+        """Smallest convex radius of curvature of the pin-centre curve, mm (about 4.6 mm by default).
+
+        A pin radius above it undercuts the disc (the CAD trims the loops; the design check says so).
+        Evaluated on 4001 points of the rising half of lobe 0 of ``q(t) = Rp u(t) - e u(Zp t)``.
+        """
+        rp, e, zp = self.pin_circle_radius_mm, self.eccentricity_mm, self.z_pins
+        best = 0.0
+        n = 4001
+        for i in range(n):
+            t = math.pi / (zp - 1) * i / (n - 1)
+            dx = -rp * math.sin(t) + e * zp * math.sin(zp * t)
+            dy = rp * math.cos(t) - e * zp * math.cos(zp * t)
+            ddx = -rp * math.cos(t) + e * zp * zp * math.cos(zp * t)
+            ddy = -rp * math.sin(t) + e * zp * zp * math.sin(zp * t)
+            k = (dx * ddy - dy * ddx) / math.hypot(dx, dy) ** 3
+            best = max(best, k)
+        return 1.0 / best if best > 0 else math.inf
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any] | None) -> "Design":
+    def from_dict(cls, d: Any) -> "Design":
         """Build and validate from a dict (the ``design`` object of a case JSON).
 
-        Unknown keys raise ``ValueError`` naming the key.
+        ``None`` gives the default design. Unknown keys, wrong types (a crank angle list that is
+        not a list of 2 numbers, a tooth count that is not an integer) and values out of range raise
+        :class:`~rvcad.validation.DesignError` naming the field.
         """
-        d = dict(d or {})
-        names = {f.name for f in fields(cls)}
+        if d is None:
+            return cls().validate()
+        names = [f.name for f in fields(cls)]
+        d = as_mapping(d, "design", f"an object with keys from {names}", DesignError)
         for k in d:
             if k not in names:
-                raise ValueError(f"design key {k!r} is unknown; allowed: {sorted(names)}")
-        if "crank_angles_deg" in d:
-            d["crank_angles_deg"] = tuple(d["crank_angles_deg"])
-        for k, v in d.items():
-            if k.startswith("z_") and isinstance(v, float) and v.is_integer():
-                d[k] = int(v)
-        return cls(**d).validate()
+                reject("design key", k, f"{sorted(names)}", "is unknown", DesignError)
+        kw: dict[str, Any] = {}
+        for f in fields(cls):
+            if f.name not in d:
+                continue
+            v = d[f.name]
+            where = f"design.{f.name}"
+            if f.name == "crank_angles_deg":
+                if not isinstance(v, (list, tuple)):
+                    reject(where, v, "a list of 2 angles in degrees", f"is of type {type(v).__name__}, not a list",
+                           DesignError)
+                kw[f.name] = tuple(as_real(x, f"{where}[{i}]", unit="deg", cls=DesignError) for i, x in enumerate(v))
+            elif isinstance(f.default, bool):
+                kw[f.name] = v
+            elif isinstance(f.default, int):
+                kw[f.name] = as_int(v, where, cls=DesignError)
+            elif isinstance(f.default, float):
+                kw[f.name] = as_real(v, where, cls=DesignError)
+            else:
+                kw[f.name] = v
+        return cls(**kw).validate()
+
+
+def _inv(a: float) -> float:
+    """Involute function tan(a) - a."""
+    return math.tan(a) - a
+
+
+#: Physical range of every Design field: (low, high, low bound open?, reason). Relations between
+#: fields are checked in :meth:`Design.validate` after these.
+FIELD_RANGES: dict[str, tuple[float, float, bool, str]] = {
+    "z_sun": (6, 300, False, "an involute pinion below 6 teeth has no tip land"),
+    "z_planet": (6, 300, False, "stage I gears of 6 to 300 teeth"),
+    "z_pins": (6, 200, False, "cycloid drives of 6 to 200 pins"),
+    "z_disc": (5, 199, False, "z_pins - 1"),
+    "pin_circle_diameter_mm": (0.0, 2000.0, True, "a reducer below 2 m"),
+    "eccentricity_mm": (0.0, 100.0, True, "below Rp / Zp as well"),
+    "pin_radius_mm": (0.0, 100.0, True, "below half the pin pitch as well"),
+    "module_mm": (0.05, 50.0, False, "the ISO 54 module range"),
+    "pressure_angle_deg": (10.0, 30.0, False, "standard pressure angles 14.5 to 25 deg with margin"),
+    "stage1_backlash_mm": (0.0, 50.0, False, "below the planet's tip thickness as well"),
+    "crank_angles_deg": (-360.0, 360.0, False, "one turn either way"),
+    "gear_width_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "disc_width_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "disc_gap_mm": (0.0, 1000.0, False, "axial widths below 1 m"),
+    "plate_width_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "cam_radius_mm": (0.0, 1000.0, True, "inside the disc as well"),
+    "crank_journal_radius_mm": (0.0, 1000.0, True, "inside the cam as well"),
+    "disc_center_hole_radius_mm": (0.0, 1000.0, True, "between the sun and the crank holes as well"),
+    "housing_outer_radius_mm": (0.0, 2000.0, True, "a reducer below 2 m"),
+}
+
+
+def load_design(path: str | Path) -> Design:
+    """Read a design JSON file (the ``design`` object of a case: ``Design`` fields).
+
+    Raises
+    ------
+    DesignError
+        Naming the file or the field (a repeated key, a bad value, an unknown key).
+    """
+    d = read_json_file(path, "design file", DesignError)
+    if not isinstance(d, dict):
+        reject(f"design file {str(path)!r}", d, "a JSON object of Design fields", "is not an object", DesignError)
+    return Design.from_dict(d)

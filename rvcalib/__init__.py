@@ -16,8 +16,6 @@ Modules
     competitor, joint nonlinear fit, backward elimination, confidence intervals).
 :mod:`rvcalib.simulate`
     ``simulate_dataset(...)``: measured-like datasets with hidden effects (answer file kept apart).
-:mod:`rvcalib.rsm_loop`
-    ``rsm_closed_loop(...)``: lack of fit of a response surface -> supported higher-order/physical term.
 :mod:`rvcalib.report`, :mod:`rvcalib.cli`
     Markdown/PNG/JSON report; ``rv-calibrate DATASET --out DIR [--json] [--steps N]``.
 

@@ -1,4 +1,6 @@
-"""Command line of rvdyn: ``rvdyn te`` (TE of one case) and ``rvdyn screen`` (single-factor screen).
+"""Command line of rvdyn: ``rvdyn te`` (TE of one case).
+
+The single-factor screen and factor sweeps belong to the study: ``rv-stackup --stages screen``.
 
 Each command prints a human summary by default; ``--json`` prints one JSON object on stdout.
 Bad input prints a message naming the field to stderr and exits with status 2.
@@ -13,6 +15,8 @@ from typing import Any
 
 from rvcad.errors import load_case
 from rvdyn.contacts import ContactLaw
+from rvdyn.options import CONTACT_LAWS
+from rvdyn.solver import law_from_model
 from rvdyn.te import SOLVERS, lost_motion, run_te
 
 
@@ -20,8 +24,16 @@ def _finite(x: float) -> Any:
     return x if isinstance(x, (int, str)) or (isinstance(x, float) and math.isfinite(x)) else None
 
 
-def _law(args: argparse.Namespace) -> ContactLaw:
-    return ContactLaw(K=args.K, n=args.n, rigid=args.rigid)
+def _law(args: argparse.Namespace, case) -> ContactLaw:
+    """The contact law: the case's ``model`` (contact, contact_K_N_per_mm_n, contact_n), each overridden
+    by the command line's --contact, --K, --n, --rigid."""
+    base = law_from_model(case.model)
+    kind = args.contact if args.contact is not None else base.kind
+    if kind == "physical" and (args.K is not None or args.n is not None):
+        raise ValueError("--K and --n set the impact law; they need --contact impact (the physical law "
+                         "takes its stiffness from the geometry and the materials)")
+    return ContactLaw(K=base.K if args.K is None else args.K, n=base.n if args.n is None else args.n,
+                      rigid=args.rigid, kind=kind)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -40,30 +52,27 @@ def build_parser() -> argparse.ArgumentParser:
     te.add_argument("--load-Nm", dest="load_Nm", type=float, default=None,
                     help="output load torque in N m (default: the case's, 20); 0 = rigid single-flank limit")
     te.add_argument("--direction", type=int, choices=(1, -1), default=None, help="+1 or -1 (default: the case's)")
-    te.add_argument("--K", type=float, default=ContactLaw.K, help="contact stiffness, N/mm^n (default 2e5)")
-    te.add_argument("--n", type=float, default=ContactLaw.n, help="contact force exponent (default 1.5)")
+    te.add_argument("--contact", choices=CONTACT_LAWS, default=None,
+                    help="contact law: impact (paper Eq. 1, F = K delta^n) or physical (Hertz line contact, ISO 6336 "
+                         "mesh stiffness, bearing and crankshaft compliance); default: the case's model.contact")
+    te.add_argument("--K", type=float, default=None, help="impact-law stiffness, N/mm^n (default 2e5)")
+    te.add_argument("--n", type=float, default=None, help="impact-law force exponent (default 1.5)")
     te.add_argument("--rigid", action="store_true", help="rigid single-flank limit (K -> infinity)")
     te.add_argument("--lost-motion", action="store_true",
                     help="also compute lost motion = mean TE(-1) - mean TE(+1) at light load (rigid limit)")
     te.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
 
-    sc = sub.add_parser("screen", help="single-factor screen of the Table 4 errors and RSM factor sweeps",
-                        description="Paper Fig. 9 and Fig. 11: every Table 4 error alone at its paper value, "
-                                    "and sweeps of EA..ED over the Table 5 range; writes CSV tables and PNG plots.")
-    sc.add_argument("--out", required=True, help="output folder")
-    sc.add_argument("--solver", choices=SOLVERS, default="analytic")
-    sc.add_argument("--steps", type=int, default=720)
-    sc.add_argument("--sweep-points", type=int, default=7, help="points per factor sweep (default 7)")
-    sc.add_argument("--load-Nm", dest="load_Nm", type=float, default=20.0)
-    sc.add_argument("--json", action="store_true")
     return p
 
 
 def _te(args: argparse.Namespace) -> int:
     case = load_case(args.case)
-    law = _law(args)
+    law = _law(args, case)
     res = run_te(case, args.solver, args.steps, args.revolutions, args.load_Nm, args.direction, law)
-    out: dict[str, Any] = {"case": case.name, **{k: _finite(v) for k, v in res.stats.items()}}
+    out: dict[str, Any] = {"case": case.name, **{k: (v if k == "warnings" else _finite(v))
+                                                  for k, v in res.stats.items()}}
+    for w in res.stats["warnings"]:
+        print(f"rvdyn: warning: {w}", file=sys.stderr)
     if args.lost_motion:
         lm = lost_motion(case, args.solver, args.steps, law=law)
         out["lost_motion_arcsec"] = lm["lost_motion_arcsec"]
@@ -87,11 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``rvdyn``; returns the exit status."""
     args = build_parser().parse_args(argv)
     try:
-        if args.command == "te":
-            return _te(args)
-        from rvdyn.screen import screen_command
-
-        return screen_command(args)
+        return _te(args)
     except ValueError as exc:
         print(f"rvdyn: error: {exc}", file=sys.stderr)
         return 2

@@ -63,7 +63,8 @@ class TEResult:
         order of motion).
     stats : dict
         ``pp, mean, mean_abs, rms`` (arcsec), ``ratio`` (least-squares slope of input over output
-        angle), ``seconds``, ``steps``, ``direction``, ``load_Nm``.
+        angle), ``seconds``, ``steps``, ``direction``, ``load_Nm``, ``contact`` (law kind),
+        ``peak_pressure_MPa`` (largest Hertzian pin-disc pressure), ``warnings`` (list of str).
     """
 
     case: Case
@@ -116,7 +117,7 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     direction : {+1, -1} or None
         Default: the case's.
     law : ContactLaw or None
-        Contact law (default K = 2e5 N/mm^1.5, n = 1.5).
+        Contact law (default: the case's ``model.contact``, see :mod:`rvdyn.options`).
     geom : ReducerGeometry or None
         Pre-built geometry of the case (saves rebuilding).
     theta_in_deg : (N,) array or None
@@ -151,11 +152,16 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
         "te_arcsec": te,
         "contacts": sol.n_contacts.astype(int),
         "peak_force_N": sol.peak_force_N,
+        "peak_pressure_MPa": sol.peak_pressure_MPa,
     })
     slope = np.polyfit(sol.theta_in, sol.theta_out, 1)[0]
     stats: dict[str, Any] = te_stats(te)
     stats.update({"ratio": float(1.0 / slope), "seconds": secs, "steps": int(steps),
-                  "revolutions": float(revolutions), "direction": d, "load_Nm": load, "solver": solver})
+                  "revolutions": float(revolutions), "direction": d, "load_Nm": load, "solver": solver,
+                  "contact": s.law.kind,
+                  "peak_pressure_MPa": float(np.nanmax(sol.peak_pressure_MPa)) if np.any(
+                      np.isfinite(sol.peak_pressure_MPa)) else float("nan"),
+                  "warnings": list(sol.warnings)})
     return TEResult(case=case, solver=solver, table=table, stats=stats)
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from rvdyn.contacts import ContactLaw
+from rvdyn.runner import SchedulerError
 from rvdyn.te import SOLVERS
 from rvstudy.montecarlo import default_tolerances, load_tolerances, parse_tolerance
 from rvstudy.study import (
@@ -204,6 +205,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = config_from_args(args)
         res = run_study(cfg)
+    except SchedulerError as exc:
+        print(f"rv-stackup: error: --scheduler {exc.address!r}: {exc.reason}", file=sys.stderr)
+        return 2
     except ValueError as exc:
         print(f"rv-stackup: error: {exc}", file=sys.stderr)
         return 2

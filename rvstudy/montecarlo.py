@@ -17,9 +17,8 @@ A tolerance is written ``KEY=DIST:PARAMS`` (``--tolerance``) or as a CSV row ``e
 * ``none`` -- the error is absent (0).
 
 Values are in the error's unit (um or deg, ``ERROR_TYPES[key].unit``). A model effect of rvdyn
-(:data:`rvcad.errors.MODEL_OPTIONS`, e.g. the cam-bearing clearance) is written ``model.KEY`` and drawn
-in its option's unit; a draw outside the option's range is refused by the case check, so give such
-effects a bounded distribution (uniform, truncnormal, triangular).
+(:data:`rvdyn.options.MODEL_OPTIONS`, numeric options only, e.g. the cam-bearing clearance) is written ``model.KEY`` and drawn
+in its option's unit; its distribution must stay inside the option's range (normal: mean +- 6 sigma).
 
 Scope (which instances of an error type a tolerance draws, written ``KEY[SCOPE]=...`` or in a ``scope``
 column): ``each`` (default) -- every feature of the drawing independently: each pin's radius, pitch
@@ -41,7 +40,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from rvcad.errors import ERROR_TYPES, MODEL_OPTIONS
+from rvcad.errors import ERROR_TYPES, MAX_ABS
+from rvdyn.options import MODEL_OPTIONS
+from rvcad.validation import TableError, read_json_file
 
 DISTRIBUTIONS = ("normal", "uniform", "truncnormal", "triangular", "fixed", "none")
 _NPARAMS = {"normal": (1, 2), "uniform": (2, 2), "truncnormal": (3, 4), "triangular": (3, 3), "fixed": (1, 1),
@@ -50,6 +51,8 @@ _NPARAMS = {"normal": (1, 2), "uniform": (2, 2), "truncnormal": (3, 4), "triangu
 SCOPES = ("each", "common", "default")
 #: Prefix of a model-effect tolerance key (``model.cam_bearing_clearance_um``).
 MODEL_PREFIX = "model."
+#: Columns of a tolerance CSV file.
+CSV_COLUMNS = ("error", "dist", "p1", "p2", "p3", "p4", "scope")
 
 
 def tolerance_unit(key: str) -> str:
@@ -81,9 +84,10 @@ class Tolerance:
     def __post_init__(self) -> None:
         where = f"tolerance {self.error}"
         model = self.error.startswith(MODEL_PREFIX)
-        if model and self.error[len(MODEL_PREFIX):] not in MODEL_OPTIONS:
-            raise ValueError(f"{where}: model effect {self.error!r} is unknown; allowed: "
-                             f"{sorted(MODEL_PREFIX + k for k in MODEL_OPTIONS)}")
+        if model and (self.error[len(MODEL_PREFIX):] not in MODEL_OPTIONS
+                      or MODEL_OPTIONS[self.error[len(MODEL_PREFIX):]].choices):
+            raise ValueError(f"{where}: model effect {self.error!r} is unknown or not a number; allowed: "
+                             f"{sorted(MODEL_PREFIX + k for k, o in MODEL_OPTIONS.items() if not o.choices)}")
         if not model and self.error not in ERROR_TYPES:
             raise ValueError(f"{where}: error key {self.error!r} is unknown; allowed: {sorted(ERROR_TYPES)} "
                              f"or model.OPTION")
@@ -116,6 +120,22 @@ class Tolerance:
         """Whether this is a model effect (``model.KEY``) rather than a Table 4 error."""
         return self.error.startswith(MODEL_PREFIX)
 
+    def support(self) -> tuple[float, float]:
+        """Smallest and largest value a draw can take (normal: mean -+ 6 sigma, beyond which a draw has
+        probability 2e-9)."""
+        p = self.params
+        if self.dist == "normal":
+            m = p[1] if len(p) > 1 else 0.0
+            return m - 6.0 * p[0], m + 6.0 * p[0]
+        if self.dist in ("uniform",):
+            return p[0], p[1]
+        if self.dist == "truncnormal":
+            return p[1], p[2]
+        if self.dist == "triangular":
+            return p[0], p[2]
+        v = p[0] if self.dist == "fixed" else 0.0
+        return v, v
+
     def _tn(self) -> Any:
         p = self.params
         mu = p[3] if len(p) > 3 else 0.0
@@ -126,13 +146,15 @@ class Tolerance:
         x = np.asarray(x, float)
         p = self.params
         if self.dist == "normal":
-            return stats.norm.pdf(x, p[1] if len(p) > 1 else 0.0, p[0]) if p[0] > 0 else (x == (p[1] if len(p) > 1 else 0.0)) * 1.0
+            m = p[1] if len(p) > 1 else 0.0
+            return stats.norm.pdf(x, m, p[0]) if p[0] > 0 else (x == m) * 1.0
         if self.dist == "uniform":
             return np.where((x >= p[0]) & (x <= p[1]), 1.0 / (p[1] - p[0]), 0.0) if p[1] > p[0] else (x == p[0]) * 1.0
         if self.dist == "truncnormal":
             return self._tn().pdf(x)
         if self.dist == "triangular":
-            return stats.triang.pdf(x, (p[1] - p[0]) / (p[2] - p[0]), p[0], p[2] - p[0]) if p[2] > p[0] else (x == p[0]) * 1.0
+            return (stats.triang.pdf(x, (p[1] - p[0]) / (p[2] - p[0]), p[0], p[2] - p[0]) if p[2] > p[0]
+                    else (x == p[0]) * 1.0)
         return (x == (p[0] if self.dist == "fixed" else 0.0)) * 1.0
 
     def tightened(self, factor: float) -> "Tolerance":
@@ -213,14 +235,16 @@ def default_tolerances() -> dict[str, Tolerance]:
 
 
 def parse_tolerance(text: str) -> Tolerance:
-    """Parse ``KEY[SCOPE]=DIST:P1:P2...`` (e.g. ``pin_pitch=normal:0.005``); ValueError names the option."""
+    """Parse ``KEY[SCOPE]=DIST:P1:P2...`` (e.g. ``pin_pitch=normal:0.005``); TableError names the option."""
     if "=" not in text:
-        raise ValueError(f"--tolerance {text!r} must look like KEY=DIST:PARAMS, e.g. pin_radius=normal:1.5")
+        raise TableError(f"--tolerance {text!r} must look like KEY=DIST:PARAMS, e.g. pin_radius=normal:1.5",
+                         field="--tolerance", value=text, allowed="KEY=DIST:PARAMS")
     key, spec = text.split("=", 1)
     return _parse_spec(key.strip(), spec.strip(), f"--tolerance {text!r}")
 
 
-def _split_scope(key: str, where: str) -> tuple[str, str]:
+def _split_scope(key: str) -> tuple[str, str]:
+    """``pin_radius[common]`` -> (``pin_radius``, ``common``); no brackets -> scope ``each``."""
     key = key.strip()
     if key.endswith("]") and "[" in key:
         k, sc = key[:-1].split("[", 1)
@@ -229,47 +253,84 @@ def _split_scope(key: str, where: str) -> tuple[str, str]:
 
 
 def _parse_spec(key: str, spec: str, where: str, scope: str | None = None) -> Tolerance:
-    key, sc = _split_scope(key, where)
+    key, sc = _split_scope(key)
     parts = [s for s in spec.split(":")]
     dist = parts[0].strip().lower()
     try:
         params = tuple(float(s) for s in parts[1:] if s.strip() != "")
     except ValueError:
-        raise ValueError(f"{where}: parameters must be numbers, got {spec!r}") from None
+        raise TableError(f"{where}: parameters must be numbers, got {spec!r}", field=where, value=spec,
+                         allowed="DIST:NUMBER[:NUMBER...]") from None
     try:
-        return Tolerance(key, dist, params, scope or sc)
+        tol = Tolerance(key, dist, params, scope or sc)
     except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from None
+        raise TableError(f"{where}: {exc}", field=where, value=spec) from None
+    if tol.is_model:  # a model effect's draws must stay inside its option's range
+        o = MODEL_OPTIONS[tol.error[len(MODEL_PREFIX):]]
+        lo, hi = tol.support()
+        if lo < o.low or hi > o.high:
+            raise TableError(f"{where}: {tol.describe()} reaches {lo:g}..{hi:g} {tol.unit}; allowed: draws within "
+                             f"[{o.low:g}, {o.high:g}] {o.unit} (for normal: mean -+ 6 sigma; use uniform, "
+                             "truncnormal or triangular)", field=where, value=spec,
+                             allowed=f"[{o.low:g}, {o.high:g}] {o.unit}")
+        return tol
+    # physical range: every drawn value must stay a valid case value (|value| <= MAX_ABS of the unit);
+    # a normal distribution within 6 sigma (a draw beyond it has probability 2e-9)
+    lim = MAX_ABS[tol.unit]
+    p = tol.params
+    reach = abs(p[1] if len(p) > 1 else 0.0) + 6.0 * p[0] if tol.dist == "normal" else max(
+        (abs(x) for x in p), default=0.0)
+    if reach > lim:
+        raise TableError(f"{where}: {tol.describe()} reaches {reach:g} {tol.unit}; allowed: draws within "
+                         f"|value| <= {lim:g} {tol.unit} (for normal: |mean| + 6 sigma)", field=where, value=spec,
+                         allowed=f"|value| <= {lim:g} {tol.unit}")
+    return tol
 
 
 def load_tolerances(path: str | Path) -> dict[str, Tolerance]:
-    """Read a tolerance file: CSV ``error,dist,p1[,p2[,p3]]`` or JSON ``{key: "dist:p1:p2"}``."""
+    """Read a tolerance file: CSV ``error,dist,p1[,p2[,p3]]`` or JSON ``{key: "dist:p1:p2"}``.
+
+    Raises TableError naming the file, row and field (a key given twice, an unknown column, a bad value).
+    """
     p = Path(path)
     if not p.is_file():
-        raise ValueError(f"--tolerances file {str(p)!r} does not exist")
+        raise TableError(f"--tolerances file {str(p)!r} does not exist", field="--tolerances", value=str(p),
+                         allowed="an existing CSV or JSON file")
     out: dict[str, Tolerance] = {}
     if p.suffix.lower() == ".json":
-        import json
-
-        try:
-            d = json.loads(p.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"--tolerances file {str(p)!r} is not valid JSON: {exc}") from None
+        d = read_json_file(p, "--tolerances file", TableError)
         if not isinstance(d, dict):
-            raise ValueError(f"--tolerances file {str(p)!r} must hold an object {{error: 'dist:params'}}")
+            raise TableError(f"--tolerances file {str(p)!r} must hold an object {{error: 'dist:params'}}",
+                             field="--tolerances", value=str(p), allowed="a JSON object")
         for k, v in d.items():
-            t = _parse_spec(k, str(v), f"--tolerances {p.name} key {k!r}")
+            if not isinstance(v, str):
+                raise TableError(f"--tolerances {p.name} key {k!r}: {v!r} is not a string; allowed: 'dist:params'",
+                                 field=k, value=v, allowed="'dist:params'")
+            t = _parse_spec(k, v, f"--tolerances {p.name} key {k!r}")
             out[t.error] = t
         return out
-    df = pd.read_csv(p, dtype=str).fillna("")
+    try:
+        df = pd.read_csv(p, dtype=str).fillna("")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        raise TableError(f"--tolerances file {str(p)!r} cannot be read as CSV: {' '.join(str(exc).split())}",
+                         field="--tolerances", value=str(p), allowed="CSV error,dist,p1,p2,p3") from None
+    df.columns = [str(c).strip() for c in df.columns]
     for c in ("error", "dist"):
         if c not in df.columns:
-            raise ValueError(f"--tolerances file {str(p)!r} needs columns error,dist,p1..p3; '{c}' is missing")
+            raise TableError(f"--tolerances file {str(p)!r} needs columns error,dist,p1..p3; '{c}' is missing",
+                             field="--tolerances", value=list(df.columns), allowed="error,dist,p1,p2,p3")
+    for c in df.columns:
+        if c not in CSV_COLUMNS:
+            raise TableError(f"--tolerances file {str(p)!r}: column {c!r} is unknown; allowed: {','.join(CSV_COLUMNS)}",
+                             field=c, value=c, allowed=",".join(CSV_COLUMNS))
     for i, r in df.iterrows():
         spec = ":".join([r["dist"]] + [r[c] for c in ("p1", "p2", "p3", "p4") if c in df.columns and r[c] != ""])
-        sc = str(r["scope"]).strip().lower() if "scope" in df.columns and str(r["scope"]).strip() else None
-        t = _parse_spec(r["error"], spec, f"--tolerances {p.name} row {i + 1}", sc)
-        out[t.error] = t
+        sc = r["scope"].strip().lower() if "scope" in df.columns and r["scope"].strip() else None
+        key = _split_scope(r["error"])[0]
+        if key in out:
+            raise TableError(f"--tolerances {p.name} row {i + 1}: error {key!r} is given twice; allowed: each "
+                             "error once", field=key, value=key, allowed="each error once")
+        out[key] = _parse_spec(r["error"], spec, f"--tolerances {p.name} row {i + 1}", sc)
     return out
 
 

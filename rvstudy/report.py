@@ -27,10 +27,12 @@ import pandas as pd
 
 from rvcad.atomic import atomic_path
 from rvcad.errors import ERROR_TYPES
-from rvdyn.screen import plot_screen, plot_sweeps
+from rvstudy.screen import plot_screen, plot_sweeps
 from rvdyn.te import write_table_atomic
 import rvpaper as paper
-from rvstudy.cache import write_text_atomic
+from rvdyn.cache import write_text_atomic
+from rvstudy.augment_section import augment_section
+from rvstudy.paper_readings import readings_section
 from rvstudy import report_mc
 from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyResult
 
@@ -560,6 +562,15 @@ def write_report(res: StudyResult) -> Path:
         add(md_table(res.validation[cols]) + "\n")
         for resp in res.fits:
             fig_link(f"predicted_vs_observed_{resp}", f"predicted vs observed, {resp}")
+
+    # ---------------------------------------------------------------- 8b/8c: rvstudy.augment_section, rvstudy.paper_readings
+    for sec in filter(None, (augment_section(res) if res.design is not None else None, readings_section(res))):
+        L.extend([sec.heading, sec.intro])
+        for name, df in {**sec.tables, **sec.data}.items():
+            tab(df, name)
+            if name in sec.tables:
+                add(md_table(df) + "\n")
+        L.extend(sec.findings)
 
     # ---------------------------------------------------------------- Monte Carlo
     if res.mc:

@@ -167,7 +167,7 @@ def reducer_text(d: Any) -> str:
 
 # ---------------------------------------------------------------------------------------------- figures
 def _save(fig: Any, path: Path) -> Path:
-    from rvdyn.screen import save_figure_atomic
+    from rvstudy.screen import save_figure_atomic
 
     return save_figure_atomic(fig, path)
 

@@ -1,9 +1,9 @@
 """The default study of ``rv-stackup``: the paper's sections 4.2-5 end to end, plus a tolerance stack-up.
 
-Stages (each one a list of cases solved through a cached, parallel :class:`rvstudy.executor.CachedRunner`):
+Stages (each one a list of cases solved through the cached, parallel :class:`rvdyn.runner.Runner`):
 
 1. ``screen`` -- every Table 4 error alone at +-its paper value and case A (Fig. 9), and the four RSM
-   factors swept over their Table 5 range (Fig. 11) (:mod:`rvdyn.screen`).
+   factors swept over their Table 5 range (Fig. 11) (:mod:`rvstudy.screen`).
 2. ``doe`` -- the response-surface design (Box-Behnken by default, from :func:`rsm.make_design`,
    in the paper's Table 6 run order when the point sets agree) on the factors of the levels table;
    responses ``mean_abs_arcmin`` (mean of |TE| over the revolution: our reading of the paper's
@@ -37,10 +37,11 @@ import pandas as pd
 
 import rsm
 from rsm.terms import preset_terms
-from rvcad.errors import ERROR_TYPES, Case
+from rvcad.errors import ERROR_TYPES, MAX_ABS, Case
 from rvcad.params import Design
+from rvcad.validation import TableError
 from rvdyn.contacts import ContactLaw
-from rvdyn.screen import (
+from rvstudy.screen import (
     ARCSEC_PER_ARCMIN,
     RSM_FACTORS,
     ScreenResult,
@@ -49,12 +50,14 @@ from rvdyn.screen import (
 )
 from rvdyn.te import SOLVERS
 import rvpaper as paper
-from rvstudy.cache import CaseCache
-from rvstudy.executor import CachedRunner, Executor, make_executor
+from rvdyn.cache import CaseCache
+from rvdyn.runner import Executor, make_executor
+from rvdyn.runner import Runner as CachedRunner
+from rvstudy.paper_readings import READINGS_STEPS, run_readings
 from rvstudy.montecarlo import Tolerance, default_tolerances
 from rvstudy.stackup import MC_RESPONSES, play_positions, run_full_mc
 
-STAGES = ("screen", "doe", "validation", "mc")
+STAGES = ("screen", "doe", "validation", "mc", "readings")
 DESIGNS = ("bbd", "ccd")
 #: Responses of the design, in arcmin: the paper's statistic first.
 RESPONSES = ("mean_abs_arcmin", "pp_arcmin")
@@ -346,26 +349,27 @@ def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSe
     else:
         p = Path(levels_path)
         if not p.is_file():
-            raise ValueError(f"--levels file {str(p)!r} does not exist")
+            raise TableError(f"--levels file {str(p)!r} does not exist")
         try:
             df = pd.read_csv(p)
-        except Exception as exc:  # noqa: BLE001 - any parse problem is a bad option
-            raise ValueError(f"--levels file {str(p)!r} cannot be read as CSV: {exc}") from None
+        except Exception as exc:  # noqa: BLE001 - any parse problem is a bad option (messages on one line)
+            exc = " ".join(str(exc).split())
+            raise TableError(f"--levels file {str(p)!r} cannot be read as CSV: {exc}") from None
     df.columns = [str(c).strip() for c in df.columns]
     if "factor" not in df.columns:
-        raise ValueError(f"--levels file needs a 'factor' column; columns are {list(df.columns)}")
+        raise TableError(f"--levels file needs a 'factor' column; columns are {list(df.columns)}")
     try:
         levels = rsm.Levels.from_frame(df)
     except ValueError as exc:
-        raise ValueError(f"--levels: {exc}") from None
+        raise TableError(f"--levels: {exc}") from None
     names = levels.names if not factors else list(factors)
     for f in names:
         if f not in levels:
-            raise ValueError(f"--factors {f!r} is not in the levels table; it lists {levels.names}")
+            raise TableError(f"--factors {f!r} is not in the levels table; it lists {levels.names}")
     if len(set(names)) != len(names):
-        raise ValueError(f"--factors {names} lists a factor twice")
+        raise TableError(f"--factors {names} lists a factor twice")
     if not 3 <= len(names) <= 7:
-        raise ValueError(f"--factors: the designs need 3 to 7 factors, got {len(names)} ({names})")
+        raise TableError(f"--factors: the designs need 3 to 7 factors, got {len(names)} ({names})")
     errors: dict[str, str] = {}
     patterns: dict[str, str | None] = {}
     for f in names:
@@ -377,21 +381,27 @@ def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSe
         if m:
             key, pattern = m.group(1), m.group(2)
             if pattern not in PIN_PATTERNS:
-                raise ValueError(f"--levels: factor {f!r} has pin pattern {pattern!r}; allowed: {list(PIN_PATTERNS)}")
+                raise TableError(f"--levels: factor {f!r} has pin pattern {pattern!r}; allowed: {list(PIN_PATTERNS)}")
             if key in ERROR_TYPES and not ERROR_TYPES[key].pinwise:
-                raise ValueError(f"--levels: factor {f!r}: a pin pattern needs a pin-wise error "
+                raise TableError(f"--levels: factor {f!r}: a pin pattern needs a pin-wise error "
                                  f"({sorted(k for k, e in ERROR_TYPES.items() if e.pinwise)}), not {key!r}")
         patterns[f] = pattern
         if key not in ERROR_TYPES:
-            raise ValueError(f"--levels: factor {f!r} maps to no Table 4 error (error {key!r}); add an 'error' "
+            raise TableError(f"--levels: factor {f!r} maps to no Table 4 error (error {key!r}); add an 'error' "
                              f"column with one of {sorted(ERROR_TYPES)}")
         unit = str(row["unit"]).strip() if "unit" in df.columns and pd.notna(row.get("unit")) else ""
         if unit and unit != ERROR_TYPES[key].unit:
-            raise ValueError(f"--levels: factor {f!r} ({key}) has unit {unit!r}; the error's unit is "
+            raise TableError(f"--levels: factor {f!r} ({key}) has unit {unit!r}; the error's unit is "
                              f"{ERROR_TYPES[key].unit!r}")
+        lim = MAX_ABS[ERROR_TYPES[key].unit]
+        for lev in ("low", "center", "high"):
+            x = getattr(levels[f], lev)
+            if not (math.isfinite(x) and abs(x) <= lim):
+                raise TableError(f"--levels: factor {f!r} ({key}) {lev} {x!r} {ERROR_TYPES[key].unit}; allowed: a finite "
+                                 f"value with |value| <= {lim:g} {ERROR_TYPES[key].unit}", field=f"{f}.{lev}", value=x)
         errors[f] = key
     if len(set(errors.values())) != len(errors):
-        raise ValueError(f"--levels: two factors map to the same error type ({errors})")
+        raise TableError(f"--levels: two factors map to the same error type ({errors})")
     levels = levels.subset(names)
     ptab = paper.table5_levels().set_index("factor")
     is_paper = names == list(ptab.index) and all(
@@ -436,6 +446,7 @@ class StudyResult:
     notes: list[str] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
     reducer: Design = field(default_factory=Design)
+    readings: Any = None                   # rvstudy.paper_readings.ReadingsResult
 
 
 def _responses(results: list[dict[str, Any]]) -> pd.DataFrame:
@@ -500,9 +511,6 @@ def _design(cfg: StudyConfig, fs: FactorSet) -> tuple[pd.DataFrame, bool]:
     return coded, False
 
 
-_NOT_ESTIMABLE = re.compile(r"term '([^']+)' cannot be estimated")
-
-
 def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitBundle:
     """Full quadratic fit of the solved runs and its reductions.
 
@@ -521,12 +529,12 @@ def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitB
                 try:
                     model = rsm.ResponseSurfaceModel(ok, fs.names, response, names, levels=fs.levels, units="coded")
                     break
-                except ValueError as exc:
-                    m = _NOT_ESTIMABLE.search(str(exc))
-                    if m is None or m.group(1) not in names or len(names) <= 1:
+                except rsm.NotEstimableError as exc:
+                    bad = [t for t in exc.terms if t in names]
+                    if not bad or len(bad) >= len(names):
                         raise
-                    names.remove(m.group(1))
-                    dropped.append(m.group(1))
+                    names = [t for t in names if t not in bad]
+                    dropped.extend(bad)
             b.results = model.fit(alpha=alpha)
             try:
                 b.comparison = rsm.compare_reductions(b.results, alpha=alpha, alpha_out=alpha)
@@ -622,6 +630,12 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
                     runners["check"] = make_runner("fcl", cfg.steps)
             res.mc = run_full_mc(cfg, fs, design, runners, res.fits, res.notes, workers=getattr(ex, "workers", 1))
             res.timings["mc"] = time.perf_counter() - t0
+        if "readings" in cfg.stages and fs.is_paper:  # Table 6 as measurements (rvstudy.paper_readings)
+            t0 = time.perf_counter()
+            res.readings = run_readings(fs, ex, cache, min(cfg.steps, READINGS_STEPS), cfg.load_Nm,
+                                        ContactLaw(cfg.K, cfg.n), progress=cfg.progress, **kw)
+            res.notes.extend(res.readings.notes)
+            res.timings["readings"] = time.perf_counter() - t0
     finally:
         if own:
             ex.close()

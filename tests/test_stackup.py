@@ -16,10 +16,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import rvstudy.executor as executor_mod
+import rvdyn.runner as executor_mod
 import rvpaper as paper
 from rvstudy import cli
-from rvstudy.cache import CaseCache, Job
+from rvdyn.cache import CaseCache, Job
 from rvstudy.montecarlo import (
     Tolerance,
     load_tolerances,
@@ -158,7 +158,7 @@ def _children(pid: int) -> list[int]:
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to list child processes")
 def test_pool_workers_exit_when_the_run_is_killed(tmp_path):
     """A SIGKILLed run cannot shut its pool down; its workers must not stay behind (they watch their parent)."""
-    from rvstudy.executor import PARENT_POLL_S
+    from rvdyn.runner import PARENT_POLL_S
 
     argv = [a if a != "1" else "2" for a in DOE]  # --workers 2: a real process pool
     proc, _, _, _ = _start_run(tmp_path / "run", argv, 2)
@@ -341,11 +341,12 @@ def _levels_with(tmp_path: Path, ea_error: str) -> Path:
     ("alternate", [0.06 if i % 2 == 0 else 0.0 for i in range(40)]),
 ])
 def test_pin_pattern_of_a_factor_reaches_the_case(tmp_path, pattern, expect):
-    from rvstudy.study import StudyConfig, _cases_for, load_factors
+    from rvstudy.screen import make_case
+    from rvstudy.study import load_factors
     fs = load_factors(str(_levels_with(tmp_path, f"pin_pitch[{pattern}]")), None)
     assert fs.errors["EA"] == "pin_pitch" and fs.patterns["EA"] == pattern and not fs.is_paper
     assert fs.spec("EA") == f"pin_pitch[{pattern}]"
-    case = _cases_for(fs, np.array([[0.06, 0.0, 0.0, 0.0]]), "t", StudyConfig())[0]
+    case = make_case(fs.case_errors({fs.errors[f]: v for f, v in zip(fs.names, [0.06, 0.0, 0.0, 0.0])}), "t")
     assert case.to_dict()["errors"] == {"pin_pitch": expect}
     # other error types (as in the Monte Carlo check) keep their default instance
     assert fs.case_errors({"pin_pitch": 0.01, "pin_radius": 2.0}) == {

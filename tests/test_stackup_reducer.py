@@ -11,7 +11,7 @@ import pytest
 
 from rvcad.params import Design
 from rvstudy import cli
-from rvstudy.cache import CaseCache
+from rvdyn.cache import CaseCache
 
 STEPS = 24
 SMALL = ["--solver", "analytic", "--steps", str(STEPS), "--workers", "1", "--no-progress", "--no-figures",

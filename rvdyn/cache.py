@@ -2,8 +2,9 @@
 
 A *job* is one quasi-static TE solve: a case (:class:`rvcad.errors.Case`), the contact provider
 (``solver``), the number of ``steps`` per output revolution, the ``revolutions`` and the contact
-``law`` (K, n, rigid). Its key is the sha256 of ``Case.key()`` (design, errors, load, direction,
-model options), those settings and a fingerprint of the physics source files
+``law`` (K, n, rigid), or instead of steps and revolutions explicit input angles (``theta_in_deg``,
+e.g. the readings of a test rig). Its key is the sha256 of ``Case.key()`` (design, errors, load,
+direction, model options), those settings and a fingerprint of the physics source files
 (:func:`code_fingerprint`), so a changed solver never serves stale numbers.
 
 Each entry is one JSON file ``<dir>/<key[:2]>/<key>.json`` holding the statistics, the TE curve
@@ -23,6 +24,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rvcad.atomic import atomic_path
 from rvcad.errors import Case
 from rvdyn.contacts import ContactLaw
@@ -34,7 +37,7 @@ CACHE_VERSION = 1
 PHYSICS_MODULES = ("rvcad.params", "rvcad.errors", "rvcad.profile", "rvcad.geometry", "rvcad.tolerances",
                    "rvdyn.contacts", "rvdyn.solver", "rvdyn.te")
 #: Added to the fingerprint of fcl jobs.
-FCL_MODULES = ("rvcad.collision", "rvdyn.fcl_contacts")
+FCL_MODULES = ("rvdyn.collision", "rvdyn.fcl_contacts")
 
 
 @lru_cache(maxsize=4)
@@ -73,6 +76,9 @@ class Job:
         Output revolutions (default 1).
     law : ContactLaw
         Contact law (K in N/mm^n, exponent n, rigid flag).
+    theta_in_deg : tuple of float or None
+        Explicit input angles, deg, in the order of motion (they replace ``steps`` and
+        ``revolutions``; see :func:`rvdyn.te.run_te`). Their float64 bytes enter the key.
     """
 
     case: Case
@@ -80,11 +86,20 @@ class Job:
     steps: int
     revolutions: float = 1.0
     law: ContactLaw = field(default_factory=ContactLaw)
+    theta_in_deg: tuple[float, ...] | None = None
 
     def settings(self) -> dict[str, Any]:
         """Solver settings that enter the key (besides the case)."""
-        return {"solver": self.solver, "steps": int(self.steps), "revolutions": float(self.revolutions),
-                "law": {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}}
+        law = {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}
+        if self.law.kind != "impact":  # the law's kind reaches the worker and the key (impact keys unchanged)
+            law["kind"] = self.law.kind
+        d: dict[str, Any] = {"solver": self.solver, "steps": int(self.steps), "revolutions": float(self.revolutions),
+                             "law": law}
+        if self.theta_in_deg is not None:
+            th = np.asarray(self.theta_in_deg, dtype=np.float64)
+            d["steps"] = int(th.size)
+            d["theta_in_deg_sha256"] = hashlib.sha256(th.tobytes()).hexdigest()
+        return d
 
     def key(self) -> str:
         """Cache key: sha256 (32 hex) of the case key, the settings, the code fingerprint and the version."""
@@ -93,8 +108,11 @@ class Job:
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:32]
 
     def to_payload(self) -> dict[str, Any]:
-        """Picklable, JSON-ready description for a worker (see :func:`rvstudy.executor.solve_job`)."""
-        return {"case": self.case.to_dict(), **self.settings(), "key": self.key()}
+        """Picklable, JSON-ready description for a worker (see :func:`rvdyn.runner.solve_job`)."""
+        d = {"case": self.case.to_dict(), **self.settings(), "key": self.key()}
+        if self.theta_in_deg is not None:
+            d["theta_in_deg"] = [float(x) for x in self.theta_in_deg]
+        return d
 
 
 def _checksum(payload: dict[str, Any]) -> str:
