@@ -64,6 +64,11 @@ class Design:
     journal_bearing_rollers, journal_bearing_roller_diameter_mm, journal_bearing_roller_length_mm : int, float, float
         Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
         (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
+    profile_equidistant_mm, profile_shift_mm, profile_rotation_deg : float
+        Profile modification of both discs: the disc is cut by a wheel of radius ``pin_radius_mm +
+        equidistant`` whose centre runs on the circle ``pin_circle_radius + shift``, and the profile is
+        turned by ``rotation`` (+z) relative to the crank holes. Positive equidistant and negative shift
+        remove material (backlash); 0 by default.
     """
 
     z_sun: int = 12
@@ -95,6 +100,12 @@ class Design:
     journal_bearing_rollers: int = 12
     journal_bearing_roller_diameter_mm: float = 3.0
     journal_bearing_roller_length_mm: float = 6.0
+    # Profile modification of the cycloid discs (rvcad.profile.modified_profile_parameters): the
+    # grinding wheel's radius rp + equidistant, its centre circle Rp + shift, the profile turned by
+    # rotation. Zero by default (the paper's unmodified, zero-backlash profile).
+    profile_equidistant_mm: float = 0.0
+    profile_shift_mm: float = 0.0
+    profile_rotation_deg: float = 0.0
     # ---- end of the bearing block ---------------------------------------------------------------------
 
     # ------------------------------------------------------------------ derived values

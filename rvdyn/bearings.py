@@ -18,7 +18,8 @@ Formulas and sources:
   ``F_r = Z J_r(0.5) K_n delta_r^(10/9)`` with ``J_r(0.5) = 0.2453`` (line contact).
 - Crankshaft bending: simply supported beam between the journals, point loads at the cam planes
   (Roark, Table 8.1 case 1e): ``y(x) = Q b x (L^2 - b^2 - x^2) / (6 E I L)`` for ``x <= a``.
-- Crankshaft torsion between the planet and the mean cam plane: ``phi = M_t l / (G J_p)``.
+- Crankshaft torsion between the planet and the mean cam plane: ``phi = M_t l / (G J_p)``, i.e. a spring
+  ``G J_p / (l r_b2^2)`` along the stage I line of action, in series with the mesh (in the equilibrium).
 """
 from __future__ import annotations
 
@@ -171,14 +172,14 @@ class Supports:
         return float(np.mean(self.z_cams) - self.z_planet)
 
     # ------------------------------------------------------------------ wind-up
-    def wind_up(self, B: np.ndarray, stage1_F: np.ndarray, rb2: float, b: np.ndarray,
-                stage1_f: np.ndarray) -> dict[str, np.ndarray]:
-        """Output wind-up of each support kind (N,), rad (unit-load method: theta = sum f . delta(F)).
+    def wind_up(self, B: np.ndarray, b: np.ndarray) -> dict[str, np.ndarray]:
+        """Output wind-up of the cam and journal bearings and the crank bending (N,), rad (unit-load method:
+        theta = sum f . delta(F)).
 
-        ``B``: cam-bearing forces (N, nd, nc, 2), N; ``stage1_F``: loaded-flank mesh force of each planet
-        (N, nc), N, ``rb2`` the planet base radius (mm); ``b``, ``stage1_f``: the same per unit output
-        torque (1/mm). Each part deflects under its actual load (bearings ``delta = (F/K)^0.9`` along F,
-        beams linearly)."""
+        ``B``: cam-bearing forces (N, nd, nc, 2), N; ``b``: the same per unit output torque (1/mm). Each
+        part deflects under its actual load (bearings ``delta = (F/K)^0.9`` along F, beams linearly). The
+        crank torsion is not here: it is a spring in series with the stage I mesh inside the equilibrium
+        (``QuasiStaticSolver.k_stage1``)."""
         def bearing(Fv, fv, K):
             fn = np.linalg.norm(Fv, axis=-1)
             dvec = Fv * ((fn / K) ** (1.0 / BEARING_EXP) / np.maximum(fn, 1e-300))[..., None]
@@ -189,7 +190,4 @@ class Supports:
         y = self.bending_deflections(B)
         q = -np.swapaxes(b, 1, 2)
         bend = np.einsum("njkx,njkx->n", q, y)
-        Mt = np.nan_to_num(stage1_F) * rb2
-        mt = np.nan_to_num(stage1_f) * rb2
-        tors = (mt * Mt * self.torsion_lever_mm() / self.GJ).sum(axis=1)
-        return {"cam_bearings": cam, "journal_bearings": journal, "crank_bending": bend, "crank_torsion": tors}
+        return {"cam_bearings": cam, "journal_bearings": journal, "crank_bending": bend}

@@ -36,11 +36,13 @@ SOLVER_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
     ModelOption("supports", "", 0.0, 0.0, "elastic",
                 "bearings and crankshafts with contact 'physical': 'elastic' (series compliance of the cam and "
                 "journal bearings and crankshaft bending/torsion) or 'rigid'", choices=("elastic", "rigid")),
-    ModelOption("pin_friction_coefficient", "", 0.0, 1.0, 0.0,
-                "Coulomb friction coefficient at the pin-disc contacts (hysteresis of the stiffness sweep)"),
-    ModelOption("bearing_friction_coefficient", "", 0.0, 1.0, 0.0,
-                "Coulomb friction coefficient of the cam and journal bearings, referred to the bore "
-                "(hysteresis of the stiffness sweep)"),
+    ModelOption("pin_friction_coefficient", "", 0.0, 1.0, 0.05,
+                "Coulomb friction coefficient at the pin-disc contacts, used by the stiffness sweep (assumption "
+                "0.05: grease-lubricated hardened steel in boundary lubrication)"),
+    ModelOption("bearing_friction_coefficient", "", 0.0, 1.0, 0.0025,
+                "Coulomb friction coefficient of the cam and journal bearings referred to the roller pitch "
+                "radius, used by the stiffness sweep (assumption 0.0025: SKF's constant coefficient of needle "
+                "roller bearings)"),
     ModelOption("contact_pressure_limit_MPa", "MPa", 100.0, 20000.0, 4000.0,
                 "largest Hertzian contact pressure the materials bear (ISO 76 static limit of roller bearing "
                 "steel, 4000 MPa); a solution above it carries a warning"),

@@ -82,6 +82,9 @@ class Solution:
         compliance); empty in the rigid limit and with floating discs (cam-bearing clearance).
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
     warnings : list of str
+    pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
+    cam_force_N : (N, n_discs, n_cranks, 2) N or None, forces of the cams on the discs (fixed frame)
+    n_pin_contacts : (N,) int, pin-disc contacts (both discs) that touch (penetration > 0)
     """
 
     theta_in: np.ndarray
@@ -97,6 +100,9 @@ class Solution:
     parts_rad: dict = field(default_factory=dict)
     peak_pressure_MPa: np.ndarray = field(default_factory=lambda: np.zeros(0))
     warnings: list = field(default_factory=list)
+    pin_force_N: np.ndarray | None = field(default=None, repr=False)
+    cam_force_N: np.ndarray | None = field(default=None, repr=False)
+    n_pin_contacts: np.ndarray | None = field(default=None, repr=False)
 
 
 class QuasiStaticSolver:
@@ -150,8 +156,14 @@ class QuasiStaticSolver:
         self.c_gamma = iso_mesh_stiffness(self.c_single, self.eps_alpha)      # N/(mm um)
         self.k_mesh = self.c_gamma * 1e3 * d.gear_width_mm                     # N/mm along the line of action
         self.supports = None
+        self.k_stage1 = self.k_mesh
+        self.torsion_share = 0.0
         if self.law.kind == "physical" and model_choice(m, "supports") == "elastic" and not self.float_discs:
             self.supports = Supports.from_design(d)
+            # crank torsion between planet and cams in series with the mesh, seen along the line of action
+            k_t = self.supports.GJ / (self.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
+            self.k_stage1 = 1.0 / (1.0 / self.k_mesh + 1.0 / k_t)
+            self.torsion_share = self.k_stage1 / k_t                           # share of the stage I deflection
         self._C_last: np.ndarray | None = None
         self._R_last: np.ndarray | None = None
         self._R_all: np.ndarray | None = None
@@ -349,7 +361,7 @@ class QuasiStaticSolver:
         if not law.physical:
             return law
         n1 = self.nd * self.zp
-        return PhysicalLaw(LineContact(1.0 / (math.pi * self.pin_estar), C, self.face_width), n1, self.k_mesh)
+        return PhysicalLaw(LineContact(1.0 / (math.pi * self.pin_estar), C, self.face_width), n1, self.k_stage1)
 
     def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200) -> np.ndarray:
         """Minimise the linearised potential around x0; returns the step (N, ndof).
@@ -543,14 +555,19 @@ class QuasiStaticSolver:
         n1 = self.nd * self.zp
         parts: dict[str, np.ndarray] = {}
         warnings: list[str] = []
+        cam_F = None
+        if not law.rigid and not self.float_discs:
+            cam_F = self.disc_cam_forces(th, x, F, nrm)
         if not law.rigid:
             te = te - direction * T * self.compliance_rad_per_Nmm
             if not self.float_discs:
                 f = self._unit_load_forces(law, delta, direction)               # dF/dT, N per N mm
                 work = f * np.maximum(delta, 0.0)
                 parts = {"pins": work[:, :n1].sum(axis=1), "gears": work[:, n1:].sum(axis=1)}
-                if self.supports is not None:
-                    sup = self._support_windup(th, x, F, f, nrm)
+                if self.supports is not None and law.kind == "physical":
+                    parts["crank_torsion"] = self.torsion_share * parts["gears"]
+                    parts["gears"] = parts["gears"] - parts["crank_torsion"]
+                    sup = self._support_windup(th, x, F, f, nrm, cam_F)
                     parts.update(sup)
                     te = te - direction * sum(sup.values())
         nan = law.rigid
@@ -569,7 +586,9 @@ class QuasiStaticSolver:
             peak_force_N=np.full(th.size, np.nan) if nan else F.max(axis=1),
             max_penetration_mm=pen,
             stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:n1 + self.nc],
-            iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings)
+            iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings,
+            pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F,
+            n_pin_contacts=(delta[:, :n1] > (1e-12 if not law.rigid else 0.0)).sum(axis=1))
 
     def _pin_pressure(self, F: np.ndarray, law) -> np.ndarray:
         """Peak Hertzian pressure p0 = sqrt(P E*/(pi R)) of every pin contact (N, 2 Zp), MPa, with the
@@ -591,7 +610,7 @@ class QuasiStaticSolver:
         dx = -np.linalg.solve(H, np.broadcast_to(db, (J.shape[0], self.ndof))[..., None])[..., 0]
         return -k * np.einsum("nmi,ni->nm", J, dx)
 
-    def _disc_cam_forces(self, th, x, F, nrm) -> np.ndarray:
+    def disc_cam_forces(self, th, x, F, nrm) -> np.ndarray:
         """Cam-bearing forces on the discs (N, nd, nc, 2) that balance the contact forces F (N, M)."""
         n1 = self.nd * self.zp
         to, ps, _, _ = self._unpack(th, x)
@@ -604,15 +623,12 @@ class QuasiStaticSolver:
         cams = np.swapaxes(self.geom.cam_centers(to, ps), 1, 2)                # (N, nd, nc, 2)
         return Supports.cam_forces(F_disc, M_disc, cams - cen[:, :, None])
 
-    def _support_windup(self, th, x, F, f, nrm) -> dict[str, np.ndarray]:
-        """Series wind-up of the supports (rad per step): the deflections under the actual loads F,
-        weighted by the unit-load forces f (bearings.Supports.wind_up)."""
+    def _support_windup(self, th, x, F, f, nrm, B) -> dict[str, np.ndarray]:
+        """Series wind-up of the supports (rad per step): the deflections under the actual loads F
+        (cam forces B), weighted by the unit-load forces f (bearings.Supports.wind_up)."""
         n1 = self.nd * self.zp
-        B = self._disc_cam_forces(th, x, F, nrm)
-        b = self._disc_cam_forces(th, x, f, nrm)
-        self._cam_forces_last = B
-        return self.supports.wind_up(B, F[:, n1:n1 + self.nc], self.geom.planet.base_radius, b,
-                                     f[:, n1:n1 + self.nc])
+        b = self.disc_cam_forces(th, x, f, nrm)
+        return self.supports.wind_up(B, b)
 
 
 def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:

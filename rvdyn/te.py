@@ -28,7 +28,7 @@ SOLVERS = ("analytic", "fcl")
 #: measured 4.0 s CPU per 720-step revolution against 4.9 s for one batch and 4.5 s for chunks of 30.
 FCL_CHUNK = 120
 
-#: Light load (N m) at which lost motion is evaluated by default (conventions: "the same light load").
+#: Light load (N m) at which the backlash is evaluated by default (0: the rigid limit).
 LIGHT_LOAD_NM = 0.0
 
 
@@ -165,15 +165,17 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     return TEResult(case=case, solver=solver, table=table, stats=stats)
 
 
-def lost_motion(case: Case, solver: str = "analytic", steps: int = 720, load_Nm: float = LIGHT_LOAD_NM,
-                law: ContactLaw | None = None) -> dict[str, float]:
-    """Lost motion = mean TE(direction -1) - mean TE(direction +1) at the same light load, arcsec.
+def backlash(case: Case, solver: str = "analytic", steps: int = 720, load_Nm: float = LIGHT_LOAD_NM,
+             law: ContactLaw | None = None) -> dict[str, float]:
+    """Backlash = mean TE(direction -1) - mean TE(direction +1) at the same light load, arcsec.
 
-    The default light load 0 N m is the rigid single-flank limit (pure geometric clearance).
+    The default light load 0 N m is the rigid single-flank limit: the geometric play at zero torque, the
+    datasheet's *backlash* (conventions.md). The datasheet's *lost motion* (+-3 % of rated torque on the
+    hysteresis curve) is :func:`rvdyn.stiffness.hysteresis`.
     """
     g = ReducerGeometry(case)
     plus = run_te(case, solver, steps, 1.0, load_Nm, 1, law, geom=g)
     minus = run_te(case, solver, steps, 1.0, load_Nm, -1, law, geom=g)
-    return {"lost_motion_arcsec": minus.stats["mean"] - plus.stats["mean"],
+    return {"backlash_arcsec": minus.stats["mean"] - plus.stats["mean"],
             "te_plus_mean_arcsec": plus.stats["mean"], "te_minus_mean_arcsec": minus.stats["mean"],
             "load_Nm": load_Nm}

@@ -12,7 +12,7 @@ from rvcad.geometry import ReducerGeometry
 from rvdyn.cli import main as rvdyn_main
 from rvdyn.contacts import AnalyticContacts, ContactLaw
 from rvdyn.solver import ARCSEC_PER_RAD, InterferenceError, QuasiStaticSolver
-from rvdyn.te import lost_motion, run_te
+from rvdyn.te import backlash, run_te
 
 STEPS = 144
 
@@ -61,7 +61,7 @@ def _lever_arms(geom: ReducerGeometry, theta_in: np.ndarray) -> np.ndarray:
     return lam
 
 
-def test_pin_radius_reduction_clearance_to_angle_and_lost_motion() -> None:
+def test_pin_radius_reduction_clearance_to_angle_and_backlash() -> None:
     dr_um = 5.0
     case = Case.from_dict({"errors": {"pin_radius": -dr_um}})
     g = ReducerGeometry(case)
@@ -72,8 +72,8 @@ def test_pin_radius_reduction_clearance_to_angle_and_lost_motion() -> None:
     assert r.table["te_arcsec"].to_numpy() == pytest.approx(expect, rel=2e-3)
     # the largest lever is close to e * i * Z1/Z2 = 52.43 mm (the pin whose normal lines up with u')
     assert lam_max.min() == pytest.approx(1.3 * 121 / 3, rel=5e-3)
-    lm = lost_motion(case, "analytic", STEPS)
-    assert lm["lost_motion_arcsec"] == pytest.approx(-2 * expect.mean(), rel=2e-3)
+    lm = backlash(case, "analytic", STEPS)
+    assert lm["backlash_arcsec"] == pytest.approx(-2 * expect.mean(), rel=2e-3)
 
 
 def test_stage1_error_reduced_by_stage2_ratio() -> None:
@@ -107,15 +107,15 @@ def test_pin_ring_rotation_shifts_te_by_120_over_121_of_it(delta_deg: float) -> 
     assert np.max(np.abs(shift - expected)) < 0.01, (shift.min(), shift.max(), expected)
 
 
-def test_cam_bearing_clearance_lost_motion_is_geometric_slack() -> None:
-    """At the rigid limit a cam-bearing clearance c is pure geometric slack: the lost motion is
+def test_cam_bearing_clearance_backlash_is_geometric_slack() -> None:
+    """At the rigid limit a cam-bearing clearance c is pure geometric slack: the backlash is
     symmetric (TE +-LM/2 in the two directions), proportional to c, zero without a clearance."""
-    lm = {c: lost_motion(Case.from_dict({"model": {"cam_bearing_clearance_um": c}} if c else {}), steps=60)
+    lm = {c: backlash(Case.from_dict({"model": {"cam_bearing_clearance_um": c}} if c else {}), steps=60)
           for c in (0.0, 2.0, 4.0)}
-    assert abs(lm[0.0]["lost_motion_arcsec"]) < 1e-6
+    assert abs(lm[0.0]["backlash_arcsec"]) < 1e-6
     for c in (2.0, 4.0):
         assert lm[c]["te_plus_mean_arcsec"] == pytest.approx(-lm[c]["te_minus_mean_arcsec"], rel=1e-6)
-    assert lm[4.0]["lost_motion_arcsec"] == pytest.approx(2.0 * lm[2.0]["lost_motion_arcsec"], rel=1e-4)
+    assert lm[4.0]["backlash_arcsec"] == pytest.approx(2.0 * lm[2.0]["backlash_arcsec"], rel=1e-4)
 
 
 def test_cam_bearing_clearance_slack_between_its_closed_form_bounds() -> None:
@@ -342,18 +342,25 @@ def physical_nominal():
 
 
 def test_physical_budget_is_the_wind_up(physical_nominal) -> None:
-    """Virtual work: with rigid supports the TE is the pins' and the gears' deflection work per unit
-    torque (to 1e-3); with elastic supports the supports add their series terms exactly; the supports
+    """Virtual work: the TE is the sum of every part's deflection work per unit torque (to 1e-3): with
+    rigid supports the pins' and the gears', with elastic supports also the bearings', the crank bending
+    (series, after the equilibrium) and the crank torsion (a spring in series with the mesh, inside the
+    equilibrium: its share of the stage I deflection is c_torsion / (c_mesh + c_torsion)). The supports
     and the Hertz contact make the wind-up grow slightly less than linearly with the load."""
-    for L, sol in physical_nominal["rigid"].items():
-        te = sol.te_rad
-        assert set(sol.parts_rad) == {"pins", "gears"}
-        assert -te == pytest.approx(sol.parts_rad["pins"] + sol.parts_rad["gears"], rel=1e-3)
-    for L, sol in physical_nominal["elastic"].items():
-        rigid = physical_nominal["rigid"][L]
-        sup = sum(v for k, v in sol.parts_rad.items() if k not in ("pins", "gears"))
-        assert sol.te_rad == pytest.approx(rigid.te_rad - sup, rel=1e-9)
-        assert sol.parts_rad["journal_bearings"].min() > 0 and sol.parts_rad["crank_bending"].min() > 0
+    for sup, parts in (("rigid", {"pins", "gears"}),
+                       ("elastic", {"pins", "gears", "cam_bearings", "journal_bearings", "crank_bending",
+                                    "crank_torsion"})):
+        for L, sol in physical_nominal[sup].items():
+            assert set(sol.parts_rad) == parts
+            assert -sol.te_rad == pytest.approx(sum(sol.parts_rad.values()), rel=1e-3)
+    el = physical_nominal["elastic"][20.0]
+    assert el.parts_rad["journal_bearings"].min() > 0 and el.parts_rad["crank_bending"].min() > 0
+    g = ReducerGeometry(Case.from_dict({"model": {"contact": "physical"}}))
+    s = QuasiStaticSolver(g, AnalyticContacts(g))
+    k_t = s.supports.GJ / (s.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
+    assert s.k_stage1 == pytest.approx(s.k_mesh * k_t / (s.k_mesh + k_t), rel=1e-12)
+    ratio = el.parts_rad["crank_torsion"] / (el.parts_rad["crank_torsion"] + el.parts_rad["gears"])
+    assert ratio == pytest.approx(s.k_mesh / (s.k_mesh + k_t), rel=1e-9)
     e20, e40 = (physical_nominal["elastic"][L].te_rad.mean() for L in (20.0, 40.0))
     assert 1.6 < e40 / e20 < 2.0
 
@@ -366,3 +373,42 @@ def test_physical_law_pressure_and_gap_to_impact(physical_nominal) -> None:
     assert not sol.warnings
     imp = run_te(Case.from_dict({}), "analytic", 6, law=ContactLaw())
     assert 10 < imp.stats["mean"] / sol.te_rad.mean() / ARCSEC_PER_RAD < 40
+
+
+def test_cli_backlash_flag_and_old_name(capsys) -> None:
+    assert rvdyn_main(["te", "--steps", "4", "--backlash", "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert abs(js["backlash_arcsec"]) < 1e-6 and "lost_motion_arcsec" not in js
+    assert rvdyn_main(["te", "--steps", "4", "--lost-motion", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert "backlash_arcsec" in json.loads(cap.out) and "--lost-motion is now --backlash" in cap.err
+
+
+def test_load_and_interference_messages_name_the_cause() -> None:
+    """Issue 14 item 11: a huge load is not blamed on the errors; the rigid limit suggests the elastic law,
+    an elastic law does not; a gross misfit under the physical law is refused naming the errors."""
+    with pytest.raises(InterferenceError, match=r"the load 1e\+12 N m presses the contacts .* reduce load_Nm") as ei:
+        run_te(Case.from_dict({}), steps=4, load_Nm=1e12)
+    assert "errors" not in str(ei.value)
+    with pytest.raises(InterferenceError, match=r"reduce the errors that close the clearance") as ei:
+        run_te(Case.from_dict({"errors": {"disc_phase": 0.1}}), steps=4, law=ContactLaw(kind="physical"))
+    assert "use the elastic contact law" not in str(ei.value)
+    with pytest.raises(InterferenceError, match=r"rigid limit.*elastic contact law under load"):
+        g = ReducerGeometry(Case.from_dict({"errors": {"pin_circle_diameter": -14}}))
+        QuasiStaticSolver(g, AnalyticContacts(g), ContactLaw(rigid=True)).solve(np.zeros(2), 1, 20.0)
+
+
+def test_pressure_above_the_limit_warns(tmp_path, capsys) -> None:
+    """Peak Hertz pressure against the stated limit (model.contact_pressure_limit_MPa): one pin 0.02 deg
+    out of pitch (22 um into a zero-backlash disc) under the physical law reaches about 4.2 GPa > 4 GPa:
+    a warning in the result and on stderr; the nominal case stays far below."""
+    r = run_te(Case.from_dict({"errors": {"pin_pitch": 0.02}, "model": {"contact": "physical"}}), steps=4)
+    assert r.stats["peak_pressure_MPa"] > 4000
+    assert any("exceeds the stated limit 4000 MPa" in w for w in r.stats["warnings"])
+    ok = run_te(Case.from_dict({"model": {"contact": "physical"}}), steps=4)
+    assert ok.stats["warnings"] == [] and 100 < ok.stats["peak_pressure_MPa"] < 4000
+    cf = tmp_path / "c.json"
+    cf.write_text(json.dumps({"errors": {"pin_pitch": 0.02}}))
+    assert rvdyn_main(["te", str(cf), "--contact", "physical", "--steps", "4", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert "rvdyn: warning: peak pin-disc contact pressure" in cap.err and json.loads(cap.out)["warnings"]
