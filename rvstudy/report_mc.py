@@ -79,10 +79,13 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
         "Failed solves and invalid draws count as out of spec.\n")
     add(f"Responses: **TE peak-to-peak** (the angular transmission error); **two-direction play at +-3 % of rated "
         f"torque** ({PLAY_LOAD_FRACTION * cfg.rated_Nm:.3g} N m of {cfg.rated_Nm:g} N m rated): at {mc['play_positions']} "
-        "input positions over one output revolution, TE(direction -1) - TE(direction +1) at that load, the largest "
-        "over the positions. This is a *proxy* for lost motion, not the maker's lost motion read off a hysteresis "
-        "curve (without friction the two coincide at the sampled positions); **mean |TE|**, the paper's response, "
-        "without a specification.\n")
+        "locked input positions over one output revolution, output angle at +3 % minus that at -3 % (TE of direction "
+        "-1 minus TE of direction +1 at that load), the largest over the positions: a *proxy* for lost motion, read "
+        "on rvdyn.stiffness's elastic (friction-free) curve, not its lost-motion figure (which adds the curve's "
+        "friction band and is read at one input angle; rvdyn.stiffness cannot be run per draw: its rigid "
+        "zero-torque point refuses preloaded draws); **torsional rigidity** b/a on the same elastic curve (secant "
+        "3 %..100 % of rated torque, both sides averaged), the smallest over the positions; **mean |TE|**, the "
+        "paper's response, without a specification.\n")
     add(md_table(tt) + "\n")
     cap = capability_table(mc)
     tab(cap, "mc_capability")

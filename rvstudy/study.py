@@ -126,6 +126,8 @@ class StudyConfig:
         ``{response: (LSL, USL)}`` overriding the above (``--spec RESPONSE=LSL:USL``).
     rated_Nm : float
         Rated output torque, N m (``--rated-Nm``; 167 = the RV-20E class of the paper's reducer).
+    rigidity_lsl : float
+        LSL of the torsional rigidity, N m/arcmin (``--rigidity-lsl``; 49 = the RV-20E datasheet figure).
     yield_target : float
         Yield the tolerance allocation aims at (``--yield-target``).
     reducer : str or None
@@ -169,6 +171,7 @@ class StudyConfig:
     play_spec_arcmin: float = 1.0
     spec_limits: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
     rated_Nm: float = 167.0
+    rigidity_lsl: float = 49.0
     yield_target: float = 0.9973
     reducer: str | None = None
     cache_dir: Path | None = None
@@ -195,7 +198,8 @@ class StudyConfig:
         integer(self.mc_draws, "--mc-draws", 2)
         integer(self.mc_sobol, "--mc-sobol", 0)
         integer(self.mc_check, "--mc-check", 0)
-        for opt, v in (("--rated-Nm", self.rated_Nm), ("--play-spec-arcmin", self.play_spec_arcmin)):
+        for opt, v in (("--rated-Nm", self.rated_Nm), ("--play-spec-arcmin", self.play_spec_arcmin),
+                       ("--rigidity-lsl", self.rigidity_lsl)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{opt} {v!r} must be a finite number > 0")
         if not 0 < self.yield_target < 1:
@@ -233,7 +237,7 @@ class StudyConfig:
         """``{response: (LSL, USL)}`` of the Monte Carlo responses (None = no limit)."""
         d: dict[str, tuple[float | None, float | None]] = {
             "te_pp_arcmin": (None, float(self.spec_arcmin)), "play_3pct_arcmin": (None, float(self.play_spec_arcmin)),
-            "te_mean_abs_arcmin": (None, None)}
+            "torsional_rigidity_Nm_per_arcmin": (float(self.rigidity_lsl), None), "te_mean_abs_arcmin": (None, None)}
         d.update(self.spec_limits)
         return d
 
