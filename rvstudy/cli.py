@@ -89,6 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rated output torque, N m (default 167, the RV-20E class); the play is read at 3 %% of it")
     p.add_argument("--rigidity-lsl", type=float, default=49.0,
                    help="LSL of the torsional rigidity, N m/arcmin (default 49, the RV-20E datasheet figure)")
+    p.add_argument("--mc-contact", choices=ContactLaw.KINDS, default="impact",
+                   help="contact law of the Monte Carlo solves: impact (paper Eq. 1, --K/--n; default, as every "
+                        "paper-reproduction section) or physical (Hertz, ISO 6336, elastic supports)")
     p.add_argument("--yield-target", type=float, default=0.9973,
                    help="yield the tolerance allocation aims at (default 0.9973)")
     p.add_argument("--reducer", default=None, metavar="DESIGN.json",
@@ -122,7 +125,7 @@ def config_from_args(args: argparse.Namespace) -> StudyConfig:
         levels=args.levels, factors=args.factors, sweep_points=args.sweep_points, n_validation=args.n_validation,
         seed=args.seed, mc_draws=args.mc_draws, mc_sobol=args.mc_sobol, mc_check=args.mc_check, tolerances=tols,
         spec_arcmin=args.spec_arcmin, play_spec_arcmin=args.play_spec_arcmin, spec_limits=limits,
-        rated_Nm=args.rated_Nm, rigidity_lsl=args.rigidity_lsl, yield_target=args.yield_target, reducer=args.reducer, cache_dir=Path(args.cache) if args.cache else None,
+        rated_Nm=args.rated_Nm, rigidity_lsl=args.rigidity_lsl, mc_contact=args.mc_contact, yield_target=args.yield_target, reducer=args.reducer, cache_dir=Path(args.cache) if args.cache else None,
         use_cache=not args.no_cache, stages=stages, K=args.K, n=args.n,
         progress=not args.no_progress and sys.stderr.isatty(), figures=not args.no_figures)
     cfg.validate()

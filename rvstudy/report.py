@@ -411,7 +411,12 @@ def write_report(res: StudyResult) -> Path:
                                      + (f" (from {cfg.reducer})" if cfg.reducer else " (the paper's, default)")},
         {"item": "solver / steps per output revolution", "value": f"{cfg.solver} / {cfg.steps}"},
         {"item": "output load [N m] / direction", "value": f"{cfg.load_Nm:g} / +1"},
-        {"item": "contact law", "value": f"F = {cfg.K:g} delta^{cfg.n:g} (N, mm)"},
+        {"item": "contact model of the paper-reproduction sections (screen, design, validation, readings)",
+         "value": f"impact: F = {cfg.K:g} delta^{cfg.n:g} (N, mm), paper Eq. 1 without damping"},
+        {"item": "contact model of the Monte Carlo (section 9)",
+         "value": (f"impact: F = {cfg.K:g} delta^{cfg.n:g} (N, mm)" if cfg.mc_contact == "impact" else
+                   "physical: Hertz line contact at the pins, ISO 6336-1 mesh stiffness, elastic supports")
+         + " (--mc-contact)"},
         {"item": "executor", "value": res.executor},
         {"item": "design / factors", "value": f"{res.design_kind or '-'} / " + ", ".join(
             f"{f}={fs.spec(f)}" for f in fs.names)},

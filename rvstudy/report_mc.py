@@ -69,8 +69,10 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
     tab(mc["features"], "mc_features")
     t = mc["timing"]
     add("## 9. Monte Carlo tolerance stack-up through the full solver\n")
+    law = (f"impact contact law F = {cfg.K:g} delta^{cfg.n:g}" if cfg.mc_contact == "impact" else
+           "physical contact law (Hertz, ISO 6336-1, elastic supports)")
     add(f"Reducer: {reducer_text(d)}. Every draw is a case solved by the quasi-static solver (analytic contact "
-        f"provider, {cfg.steps} steps per output revolution, contact law F = {cfg.K:g} delta^{cfg.n:g}, load "
+        f"provider, {cfg.steps} steps per output revolution, {law}, load "
         f"{cfg.load_Nm:g} N m); {mc['n_features']} toleranced features are drawn per case (each pin's radius, pitch "
         "and radial position, each cam, crank, hole and disc, as the scope of each tolerance says; positional "
         "errors as independent x and y components). "
@@ -180,17 +182,31 @@ def _histograms(mc: dict[str, Any], path: Path) -> Path:
 
     draws = mc["draws"]
     resp = list(MC_RESPONSES)
-    fig = Figure(figsize=(5 * len(resp), 4))
+    cols = 2
+    rows = math.ceil(len(resp) / cols)
+    fig = Figure(figsize=(6.5 * cols, 4 * rows))
     for i, r in enumerate(resp):
-        ax = fig.add_subplot(1, len(resp), i + 1)
+        ax = fig.add_subplot(rows, cols, i + 1)
         y = draws[r].to_numpy(float)
         y = y[np.isfinite(y)]
         c = mc["responses"][r]
         if y.size:
-            ax.hist(y, bins=50, color="0.55", edgecolor="white", label=f"full solver (n={y.size})")
+            ax.hist(y, bins=min(50, max(5, y.size // 10)), color="0.55", edgecolor="white",
+                    label=f"full solver (n={y.size})")
+        span = float(np.ptp(y)) if y.size > 1 else 0.0
+        off = []
         for v, lab, col in ((c["lsl"], "LSL", "tab:blue"), (c["usl"], "USL", "tab:red")):
-            if v is not None:
+            if v is None:
+                continue
+            if y.size and span > 0 and (v < y.min() - 2 * span or v > y.max() + 2 * span):
+                # a limit far from every draw would squash the histogram: name it instead of drawing it
+                k = (v - c["mean"]) / c["std"] if c["std"] else float("nan")
+                off.append(f"{lab} {v:g} off scale ({k:+.1f} sigma from the mean)")
+            else:
                 ax.axvline(v, color=col, ls="--", lw=1.5, label=f"{lab} {v:g}")
+        if off:
+            ax.text(0.98, 0.97, "\n".join(off), transform=ax.transAxes, ha="right", va="top", fontsize=7,
+                    color="tab:red")
         ax.axvline(c["mean"], color="k", lw=1, label=f"mean {c['mean']:.3g}")
         ax.set_xlabel(MC_RESPONSES[r], fontsize=8)
         ax.set_ylabel("draws")
@@ -206,9 +222,11 @@ def _pareto(sob: pd.DataFrame, path: Path) -> Path:
     from matplotlib.figure import Figure
 
     resp = [r for r in MC_RESPONSES if (sob["response"] == r).any()]
-    fig = Figure(figsize=(5.5 * len(resp), 4.6))
+    cols = 2
+    rows = math.ceil(len(resp) / cols)
+    fig = Figure(figsize=(7 * cols, 4.8 * rows))
     for i, r in enumerate(resp):
-        ax = fig.add_subplot(1, len(resp), i + 1)
+        ax = fig.add_subplot(rows, cols, i + 1)
         s = sob[sob["response"] == r].sort_values("total", ascending=False)
         x = np.arange(len(s))
         tot = s["total"].clip(lower=0).to_numpy()
@@ -220,7 +238,7 @@ def _pareto(sob: pd.DataFrame, path: Path) -> Path:
                         fmt="none", ecolor="k", lw=0.8, capsize=2)
         ax.set_xticks(x)
         ax.set_xticklabels(s["tolerance"], rotation=60, ha="right", fontsize=7)
-        ax.set_ylabel("share of variance (full model)")
+        ax.set_ylabel("index (share of variance)")
         ax.set_title(MC_RESPONSES[r], fontsize=9)
         ax2 = ax.twinx()
         cum = np.cumsum(tot) / tot.sum() if tot.sum() > 0 else np.zeros_like(tot)

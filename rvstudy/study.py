@@ -126,6 +126,10 @@ class StudyConfig:
         ``{response: (LSL, USL)}`` overriding the above (``--spec RESPONSE=LSL:USL``).
     rated_Nm : float
         Rated output torque, N m (``--rated-Nm``; 167 = the RV-20E class of the paper's reducer).
+    mc_contact : str
+        Contact law of the Monte Carlo solves (``--mc-contact``): ``impact`` (the paper's Eq. 1 with
+        ``K``, ``n``, as every paper-reproduction section uses) or ``physical`` (Hertz line contact,
+        ISO 6336 mesh stiffness, elastic supports; ``rvdyn.contacts.ContactLaw``).
     rigidity_lsl : float
         LSL of the torsional rigidity, N m/arcmin (``--rigidity-lsl``; 49 = the RV-20E datasheet figure).
     yield_target : float
@@ -172,6 +176,7 @@ class StudyConfig:
     spec_limits: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
     rated_Nm: float = 167.0
     rigidity_lsl: float = 49.0
+    mc_contact: str = "impact"
     yield_target: float = 0.9973
     reducer: str | None = None
     cache_dir: Path | None = None
@@ -202,6 +207,8 @@ class StudyConfig:
                        ("--rigidity-lsl", self.rigidity_lsl)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{opt} {v!r} must be a finite number > 0")
+        if self.mc_contact not in ContactLaw.KINDS:
+            raise ValueError(f"--mc-contact {self.mc_contact!r} is unknown; allowed: {list(ContactLaw.KINDS)}")
         if not 0 < self.yield_target < 1:
             raise ValueError(f"--yield-target {self.yield_target!r} must lie in (0, 1)")
         for r, (lo, hi) in self.spec_limits.items():
@@ -581,7 +588,7 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
 
     made: list[CachedRunner] = []
 
-    def make_runner(solver: str, steps: int) -> CachedRunner:
+    def make_runner(solver: str, steps: int, law: ContactLaw = law) -> CachedRunner:
         made.append(CachedRunner(ex, cache, solver, steps, law, progress=cfg.progress, **kw))
         return made[-1]
 
@@ -624,14 +631,16 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
             res.timings["validation"] = time.perf_counter() - t0
         if "mc" in cfg.stages:
             t0 = time.perf_counter()
-            runners = {"te": make_runner("analytic", cfg.steps), "play": make_runner("analytic", play_positions(design))}
+            mc_law = law if cfg.mc_contact == "impact" else ContactLaw(cfg.K, cfg.n, kind=cfg.mc_contact)
+            runners = {"te": make_runner("analytic", cfg.steps, mc_law),
+                       "play": make_runner("analytic", play_positions(design), mc_law)}
             if cfg.mc_check > 0:
                 import importlib.util
 
                 if importlib.util.find_spec("fcl") is None or importlib.util.find_spec("rvdyn.fcl_contacts") is None:
                     res.notes.append("the fcl check of the Monte Carlo is skipped: python-fcl is not installed")
                 else:
-                    runners["check"] = make_runner("fcl", cfg.steps)
+                    runners["check"] = make_runner("fcl", cfg.steps, mc_law)
             res.mc = run_full_mc(cfg, fs, design, runners, res.fits, res.notes, workers=getattr(ex, "workers", 1))
             res.timings["mc"] = time.perf_counter() - t0
         if "readings" in cfg.stages and fs.is_paper:  # Table 6 as measurements (rvstudy.paper_readings)
