@@ -159,9 +159,13 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
             "value (pin 0's pitch, disc 0 hole 0) or the mean over the pins (all-pins errors). Difference = surface - "
             "full solver, arcmin:\n")
         add(md_table(st) + "\n")
-    add(f"Throughput: {t['full_solver_draws']} full-solver draws ({t['solves_per_draw']} solves each: TE and the "
-        f"play's two directions) in {t['wall_s']:.1f} s on {t['workers']} worker(s): "
-        f"{t['draws_per_s_per_worker']:.3g} draws per second per worker.\n")
+    add(f"Throughput: {t['full_solver_draws']} full-solver draws ({t['solves_per_draw']} solves each: the TE "
+        "revolution, and +-3 % and +-100 % of rated torque at the locked positions) in "
+        f"{t['wall_s']:.1f} s on {t['workers']} worker(s): {t['draws_per_s_per_worker']:.3g} draws per second per "
+        f"worker, with {t['analytic_solves_computed']} analytic solves computed now and "
+        f"{t['analytic_solves_reused']} taken from the cache"
+        + (" (a rerun: the figure is not the solver's speed)" if t['analytic_solves_reused'] else "")
+        + ", plus the fcl check.\n")
 
 
 def reducer_text(d: Any) -> str:

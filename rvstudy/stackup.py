@@ -194,6 +194,7 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
         Notes of the run (appended to).
     """
     t0 = time.perf_counter()
+    done0 = {k: (getattr(r, "computed", 0), getattr(r, "reused", 0)) for k, r in runners.items()}
     tols = cfg.tolerances
     base_model = dict(base_model or {})
     feats = features(tols, design)
@@ -283,7 +284,10 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
     out["draws"] = pd.concat([X, Y], axis=1)
     wall = time.perf_counter() - t0
     n_eval = len(X) + n_design
+    computed = sum(getattr(r, "computed", 0) - done0[k][0] for k, r in runners.items() if k != "check")
+    reused = sum(getattr(r, "reused", 0) - done0[k][1] for k, r in runners.items() if k != "check")
     out["timing"] = {"wall_s": wall, "full_solver_draws": n_eval, "independent_draws": len(X),
+                     "analytic_solves_computed": computed, "analytic_solves_reused": reused,
                      "design_draws": n_design, "solves_per_draw": 5, "workers": workers,
                      "draws_per_s_per_worker": n_eval / wall / max(1, workers) if wall > 0 else float("nan")}
     return out
