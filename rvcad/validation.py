@@ -102,6 +102,10 @@ MAX_CENTER_RUNS = 1_000
 #: (88 bytes per draw); the Sobol estimator holds A, B and k + 2 <= 9 evaluation sets for up to
 #: 7 factors, about 11 * 88 = 1 kB per draw, so 2,000,000 draws = 2 GB = MEMORY_BUDGET_BYTES.
 MAX_MC_SAMPLES = 2_000_000
+#: Largest number of full-solver Monte Carlo draws: each draw keeps one row of its drawn features
+#: (every pin, hole, cam and crank: about 250 float64 = 2 kB) and its responses, so 1,000,000 draws hold
+#: about 2 GB = MEMORY_BUDGET_BYTES; at ~0.2 s a solve that is ~55 worker-hours, a Dask cluster's job.
+MAX_MC_DRAWS = 1_000_000
 #: Largest number of local worker processes: each holds about 160 MB before solving (the 156 MB
 #: peak of a 360-step run above) plus up to MEMORY_BUDGET_BYTES per solve at MAX_STEPS; 32 workers
 #: at the default steps need 32 * 0.16 = 5 GB.

@@ -22,7 +22,8 @@ DOE_ARGV = ["--solver", "analytic", "--steps", str(STUDY_STEPS), "--workers", "1
             "--no-progress", "--no-figures"]
 #: Every stage with small counts, figures included.
 SMALL_STUDY_ARGV = ["--solver", "analytic", "--steps", str(STUDY_STEPS), "--workers", "1", "--sweep-points", "3",
-                    "--validation-cases", "4", "--mc-check", "2", "--mc-samples", "500", "--no-progress"]
+                    "--validation-cases", "4", "--mc-check", "1", "--mc-draws", "6", "--mc-sobol", "2",
+                    "--no-progress"]
 
 
 def _run_stackup(argv: list[str]) -> str:

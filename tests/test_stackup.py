@@ -258,14 +258,16 @@ def test_full_pipeline_small(small_study):
                     "Fig. 12", "Fig. 13", "Monte Carlo", "reproduced or not"):
         assert section in rep, section
     for name in ("screen", "sweeps", "table6_compare", "table7_compare_mean_abs_arcmin", "eq8_compare_mean_abs_arcmin",
-                 "eq9_compare_mean_abs_arcmin", "validation_metrics", "mc_distribution", "mc_yield", "mc_sobol",
-                 "mc_oat_shares", "conclusions"):
+                 "eq9_compare_mean_abs_arcmin", "validation_metrics", "mc_capability", "mc_contributors", "mc_draws",
+                 "mc_fcl_check", "mc_surface_comparison", "conclusions"):
         assert (out / "tables" / f"{name}.csv").is_file(), name
         assert (out / "tables" / f"{name}.parquet").is_file(), name
     for link in [line.split("](")[1].rstrip(")") for line in rep.splitlines() if line.startswith("![")]:
         assert (out / link).is_file(), link
     s = json.loads((out / "summary.json").read_text())
-    assert s["monte_carlo"]["yield_surface"]["n"] == 500
+    assert s["monte_carlo"]["te_pp_arcmin"]["n_solver_draws"] == 6
+    assert s["monte_carlo"]["fcl_check"]["te_pp_arcmin"]["n"] == 1
+    assert text.strip().splitlines()[2].startswith("  full solver, 6 draws: te_pp_arcmin")  # the solver's figures lead
     cc = pd.read_csv(out / "tables" / "conclusions.csv")
     assert set(cc["reproduced"]) <= {"yes", "no", "partly", "untestable"}
     assert "lack_of_fit_ns" in set(cc["claim"])
@@ -285,7 +287,13 @@ def test_full_pipeline_small(small_study):
     (["--stages", "doe,bogus"], "--stages"),
     (["--load-Nm", "-1"], "--load-Nm"),
     (["--spec-arcmin", "0"], "--spec-arcmin"),
-    (["--mc-samples", "5"], "--mc-samples"),
+    (["--mc-draws", "1"], "--mc-draws"),
+    (["--mc-sobol", "-1"], "--mc-sobol"),
+    (["--spec", "bogus=:1"], "--spec"),
+    (["--spec", "te_pp_arcmin=2:1"], "--spec"),
+    (["--spec", "te_pp_arcmin"], "--spec"),
+    (["--rated-Nm", "0"], "--rated-Nm"),
+    (["--reducer", "/nonexistent/design.json"], "--reducer"),
     (["--design", "plackett"], "--design"),
     (["--solver", "magic"], "--solver"),
     (["--steps", "many"], "--steps"),

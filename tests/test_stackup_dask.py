@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 from rvstudy import cli
+from rvstudy.montecarlo import parse_tolerance
 from rvstudy.study import StudyConfig, run_study
 
 from conftest import STUDY_STEPS
@@ -37,6 +38,18 @@ def serial(doe_reference) -> pd.DataFrame:
     assert summary["executor"].startswith("serial")
     d = pd.read_parquet(out / "tables" / "design_runs.parquet")
     return d[["run", "mean_abs_arcmin", "pp_arcmin", "status"]].reset_index(drop=True)
+
+
+def _mc_cfg(tmp_path, **kw) -> StudyConfig:
+    """A tiny full-solver Monte Carlo: every feature of three tolerances, 4 draws, a designed sample of 2."""
+    tols = {k: parse_tolerance(f"{k}=normal:{v}") for k, v in
+            (("pin_radius", 1.5), ("pin_pitch", 0.003), ("disc_hole_eccentricity", 3.0))}
+    return _cfg(tmp_path, stages=("mc",), mc_draws=4, mc_sobol=2, mc_check=0, tolerances=tols, **kw)
+
+
+@pytest.fixture(scope="module")
+def serial_mc(tmp_path_factory):
+    return run_study(_mc_cfg(tmp_path_factory.mktemp("serial_mc"))).mc
 
 
 def test_local_pool_equals_serial(serial, tmp_path):
@@ -66,3 +79,17 @@ def test_dask_local_cluster_equals_serial(serial, tmp_path, capsys):
     assert s1["cases"]["computed"] == 0 and s1["cases"]["reused"] == 25
     d = pd.read_parquet(out / "tables" / "design_runs.parquet")  # full precision (the CSV keeps 10 digits)
     np.testing.assert_array_equal(d["mean_abs_arcmin"].to_numpy(), serial["mean_abs_arcmin"].to_numpy())
+
+
+def test_monte_carlo_same_numbers_serial_pool_and_dask(serial_mc, tmp_path):
+    """The full-solver Monte Carlo gives bit-identical draws and responses on a local pool and a Dask
+    LocalCluster as in this process (the draws are seeded; each solve is deterministic)."""
+    pool = run_study(_mc_cfg(tmp_path / "pool", workers=2)).mc
+    pd.testing.assert_frame_equal(pool["draws"], serial_mc["draws"], check_exact=True)
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        dk = run_study(_mc_cfg(tmp_path / "dask", scheduler=cluster.scheduler_address)).mc
+    pd.testing.assert_frame_equal(dk["draws"], serial_mc["draws"], check_exact=True)
+    pd.testing.assert_frame_equal(dk["sobol"], serial_mc["sobol"], check_exact=True)
+    assert dk["responses"]["te_pp_arcmin"]["mean"] == serial_mc["responses"]["te_pp_arcmin"]["mean"]

@@ -296,7 +296,7 @@ def test_rv_stackup_refusals(tmp_path: Path, capsys: pytest.CaptureFixture) -> N
                      "--steps 1000000000 is out of range; allowed: an integer in [2, 100000]")
     for argv, needle in ((["--workers", "1000"], "--workers 1000 is out of range"),
                          (["--mc-check", "100000"], "--mc-check 100000 is out of range"),
-                         (["--mc-samples", "1000000000"], "--mc-samples 1000000000 is out of range"),
+                         (["--mc-draws", "1000000000"], "--mc-draws 1000000000 is out of range"),
                          (["--sweep-points", "100000"], "--sweep-points 100000 is out of range")):
         _one_line_exit_2(capsys, main(["--out", str(out), "--solver", "analytic", "--no-progress", *argv]), needle)
     assert not out.exists()
