@@ -1,8 +1,10 @@
 """Benchmark of ``rvcad export``: one case, every part, STEP + STL.
 
 Run: ``python benchmarks/bench_export.py [CASE.json] [--tolerance-um 0.1] [--out DIR] [--keep]``.
-Prints the wall time of the whole export (including the CAD-kernel import, as a user sees it) and
-per file (seconds, faces or triangles, size), then reads the disc and gear STEP files back with
+Prints the wall time of the whole export (including the CAD-kernel import, as a user sees it; the
+design check, BRepCheck of every solid and the overlap report are part of it) and per file
+(seconds, faces or triangles, size), the time of the design check alone and of the build123d parts
+(``rvcad.reducer``), then reads the disc and gear STEP files back with
 OpenCASCADE and samples their B-rep edges to measure the largest deviation from the exact cycloid
 envelope and involute flanks (um), next to the STL figure (vertices and chord midpoints, float32).
 """
@@ -20,9 +22,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
+import rvcad  # noqa: E402
+from rvcad.check import check_case  # noqa: E402
 from rvcad.errors import load_case  # noqa: E402
-from rvcad.export import edge_samples, export_case, read_step  # noqa: E402
+from rvcad.export import export_case  # noqa: E402
+from rvcad.overlap import overlap_summary  # noqa: E402
 from rvcad.parts import Assembly, CycloidDisc, _Gear  # noqa: E402
+from rvcad.step import edge_samples, read_step  # noqa: E402
 
 
 def main() -> None:
@@ -54,6 +60,16 @@ def main() -> None:
         print(f"{key + n:16s} {sec:8.2f} {faces:8d} {mb:8.2f} {dev:8.4f}")
     by_fmt = {fmt: sum(f.seconds for f in rep.files if f.format == fmt) for fmt in ("step", "stl")}
     print(f"time by format: STEP {by_fmt['step']:.2f} s, STL {by_fmt['stl']:.2f} s")
+    print(f"{overlap_summary(rep.overlaps)}; smallest reachable pin penetration "
+          f"{rep.design_check['geometry']['pin_penetration_mm'] * 1e3:.3f} um")
+    t = time.perf_counter()
+    check_case(case, cache=False)
+    print(f"design check alone: {time.perf_counter() - t:.2f} s")
+    t = time.perf_counter()
+    r = rvcad.reducer(case, check=False)
+    vol = sum(r.parts[n].volume for n in r.names)
+    print(f"rvcad.reducer: {len(r.names)} build123d solids in {time.perf_counter() - t:.2f} s (total volume "
+          f"{vol:.1f} mm^3)")
 
     asm = Assembly(case)
     tol = a.tolerance_um * 1e-3

@@ -1,6 +1,6 @@
 """Benchmark of the TE solvers: one output revolution at 720 steps, two discs, one core.
 
-Run: ``python benchmarks/bench_te.py [--solver analytic fcl] [--steps 720]``. Prints seconds per
+Run: ``python benchmarks/bench_te.py [--solver analytic fcl] [--contact impact physical] [--steps 720]``. Prints seconds per
 revolution (best of --repeat), outer iterations, peak resident memory, and for fcl the agreement
 with the analytic solver (RMS and max TE difference, arcsec) on the nominal case and on each Table 4
 error at its paper value.
@@ -23,6 +23,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
 from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
+from rvdyn.contacts import ContactLaw  # noqa: E402
 from rvdyn.te import run_te  # noqa: E402
 
 
@@ -32,28 +33,31 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=720)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--compare", action="store_true", help="fcl vs analytic on every Table 4 error")
+    ap.add_argument("--contact", nargs="+", default=["impact", "physical"],
+                    help="contact laws to time (physical: bearings and crankshafts on)")
     a = ap.parse_args()
     cases = {"nominal": Case.from_dict({"name": "nominal"}),
              "pin_pitch 0.01 deg": Case.from_dict({"errors": {"pin_pitch": 0.01}}),
              "cam clearance 6 um": Case.from_dict({"model": {"cam_bearing_clearance_um": 6.0}})}
     for solver in a.solver:
-        for name, case in cases.items():
-            best = cpu = np.inf
-            for _ in range(a.repeat):
-                t, c = time.perf_counter(), time.process_time()
-                r = run_te(case, solver, a.steps)
-                best = min(best, time.perf_counter() - t)
-                cpu = min(cpu, time.process_time() - c)
-            print(f"{solver:8s} {name:20s} {a.steps} steps: {best:6.3f} s/rev wall, {cpu:6.3f} s CPU  pp {r.stats['pp']:8.4f} arcsec  "
-                  f"mean {r.stats['mean']:9.4f} arcsec")
+        for contact in a.contact:
+            for name, case in cases.items():
+                best = cpu = np.inf
+                for _ in range(a.repeat):
+                    t, c = time.perf_counter(), time.process_time()
+                    r = run_te(case, solver, a.steps, law=ContactLaw(kind=contact))
+                    best = min(best, time.perf_counter() - t)
+                    cpu = min(cpu, time.process_time() - c)
+                print(f"{solver:8s} {contact:8s} {name:20s} {a.steps} steps: {best:6.3f} s/rev wall, {cpu:6.3f} s CPU  "
+                      f"pp {r.stats['pp']:8.4f} arcsec  mean {r.stats['mean']:9.4f} arcsec")
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
     if a.compare and "fcl" in a.solver:
-        print("fcl vs analytic, TE difference (arcsec):")
+        print(f"fcl vs analytic ({a.contact[-1]} law), TE difference (arcsec):")
         all_cases = {"nominal": {}} | {k: {k: et.paper_value} for k, et in ERROR_TYPES.items()}
         for name, errs in all_cases.items():
             c = Case.from_dict({"errors": errs})
-            ra = run_te(c, "analytic", a.steps)
-            rf = run_te(c, "fcl", a.steps)
+            ra = run_te(c, "analytic", a.steps, law=ContactLaw(kind=a.contact[-1]))
+            rf = run_te(c, "fcl", a.steps, law=ContactLaw(kind=a.contact[-1]))
             d = rf.table["te_arcsec"].to_numpy() - ra.table["te_arcsec"].to_numpy()
             print(f"  {name:28s} rms {np.sqrt(np.mean(d ** 2)):.4f}  max {np.abs(d).max():.4f}  "
                   f"(analytic pp {ra.stats['pp']:.3f}, fcl {rf.stats['seconds']:.2f} s)")

@@ -2,7 +2,8 @@
 
 Designs (:mod:`rsm.design`), coded/actual units (:mod:`rsm.coding`), least-squares fit with
 the paper's ANOVA (:mod:`rsm.model`, :mod:`rsm.results`), model reduction
-(:mod:`rsm.reduce`), surface analysis and validation (:mod:`rsm.surface`), figures
+(:mod:`rsm.reduce`), augmenting a model with supported higher-order or physical terms
+(:mod:`rsm.augment`, candidates in :mod:`rsm.candidates`), surface analysis and validation (:mod:`rsm.surface`), figures
 (:mod:`rsm.plots`) and the ``rsm`` command line (:mod:`rsm.cli`).
 
 Quick start
@@ -15,11 +16,15 @@ Quick start
 >>> res.params_actual             # Eq. 8                                 # doctest: +SKIP
 >>> rsm.paper_reduction(res).coefficients   # Eq. 9                       # doctest: +SKIP
 >>> res.predict({"EA": [0.5], "EB": [0], "EC": [0], "ED": [0]})          # doctest: +SKIP
+>>> rsm.augment(res).added        # lack of fit -> ['EB^2:EC']            # doctest: +SKIP
 
 Term syntax for user-chosen models: see :mod:`rsm.terms` (``EA``, ``EA:EB``, ``EA^2``,
 ``EA^3``, ``EA:EB:EC``, presets ``linear``/``2fi``/``quadratic``).
 """
 
+from .augment import AugmentResult, SelectionRule, TermTest, augment, fit_block, format_augment
+from .candidates import CandidateTerm, DerivedColumn, default_candidates, polynomial_candidates
+from .checks import NotEstimableError, check_numeric_column
 from .coding import FactorLevels, Levels
 from .design import Design, box_behnken, central_composite, full_factorial_3, make_design
 from .model import ResponseSurfaceModel, ZeroPureErrorWarning, fit
@@ -43,7 +48,9 @@ from .surface import (
 from .terms import parse_terms, term_name
 
 __all__ = [
-    "FactorLevels", "Levels",
+    "AugmentResult", "SelectionRule", "TermTest", "augment", "fit_block", "format_augment",
+    "CandidateTerm", "DerivedColumn", "default_candidates", "polynomial_candidates",
+    "NotEstimableError", "check_numeric_column", "FactorLevels", "Levels",
     "Design", "box_behnken", "central_composite", "full_factorial_3", "make_design",
     "ResponseSurfaceModel", "RSMResults", "ZeroPureErrorWarning", "fit",
     "BackwardResult", "PaperReduction", "ReductionComparison", "backward_elimination",

@@ -3,7 +3,8 @@
 ``rsm fit DATA.csv --factors F1 F2 ... --response Y [--levels LEVELS.csv]
 [--units coded|actual] [--model quadratic|linear|2fi] [--terms T ...]
 [--reduce none|backward|paper] [--alpha A] [--alpha-out A] [--no-hierarchy]
-[--validate HOLDOUT.csv] [--plots DIR] [--json]``
+[--validate HOLDOUT.csv] [--plots DIR] [--augment [--new-data NEW.csv] [--max-add N]
+[--no-physical]] [--json]``
 
 Prints a human summary; with ``--json`` prints one JSON object instead::
 
@@ -16,7 +17,28 @@ Prints a human summary; with ``--json`` prints one JSON object instead::
      "coefficient_table": {"coded": {term: {coef, std_err, t, p, ci_lower, ci_upper}}, "actual": ...},
      "pure_error_is_zero": false, "notes": [...],
      "reduction": {...} (with --reduce), "comparison": {...} (with --reduce),
-     "validation": {...} (with --validate), "plots": [...] (with --plots)}
+     "validation": {...} (with --validate), "plots": [...] (with --plots),
+     "augment": {...} (with --augment, below)}
+
+``--augment`` runs :func:`rsm.augment.augment` on the full fit: lack of fit (and, with
+``--new-data``, Chow's predictive test of the fit on the new runs) -> the supported higher-order
+or physical term -> refit, before and after. Its JSON block::
+
+    "augment": {
+      "added": ["EB^2:EC"],                       # display names, in the order added
+      "verdict": "...",                           # one paragraph, as printed
+      "before": FIT, "after": FIT,                # the starting / augmented model on all runs
+      "iterations": [[TEST, ...], ...],           # candidate tests of each iteration
+      "new_runs": null | {"n", "F", "df_num", "df_den", "p", "rmse_pred", "bias", "lack_of_fit"},
+      "rule": {"alpha", "require_bic", "prefer_physical", "max_add"}}
+    FIT  = {"terms", "n_runs", "ssr", "df_resid", "rmse", "r2", "r2_adj", "r2_pred", "press",
+            "bic", "lack_of_fit": {"ss", "df", "F", "p"}, "pure_error": {"ss", "df"},
+            "residuals": [...]}
+    TEST = {"term", "kind" (polynomial|physical), "meaning", "estimable", "reason", "ssr", "F",
+            "p", "p_bonferroni", "delta_bic", "lack_of_fit_F", "lack_of_fit_p", "r2_pred",
+            "aliases": [...]}
+
+``ssr`` is the residual sum of squares (response units squared), ``rmse = sqrt(ssr / n_runs)``.
 
 NaN (undefined F/p, "/" in the paper) is written as ``null``.
 
@@ -64,9 +86,33 @@ def jsonable(obj: Any) -> Any:
     return obj
 
 
+#: Largest number of centre runs of a generated design (each is one run of the experiment or solver;
+#: the same bound as rvcad.validation.MAX_CENTER_RUNS, kept here so rsm imports nothing of rvcad).
+MAX_CENTER_RUNS = 1000
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line on stderr, exit status 2 (like the other command lines)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+def _output_path(path: str, opt: str, folder: bool) -> None:
+    """Refuse an output path that is the wrong kind of existing thing, before any work (ValueError)."""
+    p = Path(path)
+    if folder and p.exists() and not p.is_dir():
+        raise ValueError(f"{opt} '{p}' is an existing file; allowed: a folder (created if missing)")
+    if not folder and p.is_dir():
+        raise ValueError(f"{opt} '{p}' is an existing folder; allowed: a file path")
+    for parent in p.parents:
+        if parent.exists() and not parent.is_dir():
+            raise ValueError(f"{opt} '{p}' lies under the file '{parent}'; allowed: a path whose folders are folders")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for documentation tools)."""
-    p = argparse.ArgumentParser(prog="rsm", description="Response-surface designs and fits.")
+    p = _Parser(prog="rsm", description="Response-surface designs and fits.")
     sub = p.add_subparsers(dest="command", required=True)
 
     f = sub.add_parser("fit", help="fit a response surface to a CSV of runs",
@@ -92,6 +138,15 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--validate", metavar="HOLDOUT.csv",
                    help="held-out runs (same columns) for RMSE / max error / PI coverage")
     f.add_argument("--plots", metavar="DIR", help="write PNG figures into DIR")
+    f.add_argument("--augment", action="store_true",
+                   help="lack of fit -> test higher-order and physical terms -> add the supported ones")
+    f.add_argument("--new-data", metavar="NEW.csv",
+                   help="with --augment: new runs or measured responses (same columns) to test the fit on "
+                        "and to judge the terms on together with DATA")
+    f.add_argument("--max-add", type=int, default=2, metavar="N",
+                   help="with --augment: add at most N terms (default 2)")
+    f.add_argument("--no-physical", action="store_true",
+                   help="with --augment: polynomial candidates only (no pin clearance terms)")
     f.add_argument("--json", action="store_true", help="print one JSON object")
 
     d = sub.add_parser("design", help="generate a design",
@@ -132,6 +187,23 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     path = Path(args.data)
     if not path.is_file():
         raise ValueError(f"data file '{path}' does not exist")
+    if args.plots:
+        _output_path(args.plots, "--plots", folder=True)
+    if not args.augment:
+        for flag, given in (("--new-data", args.new_data is not None), ("--max-add", args.max_add != 2),
+                            ("--no-physical", args.no_physical)):
+            if given:
+                raise ValueError(f"{flag} needs --augment")
+    if args.max_add < 1:
+        raise ValueError(f"--max-add must be an integer >= 1, got {args.max_add}")
+    new_data = None
+    if args.new_data is not None:
+        npath = Path(args.new_data)
+        if not npath.is_file():
+            raise ValueError(f"--new-data file '{npath}' does not exist")
+        new_data = pd.read_csv(npath)
+        if len(new_data) == 0:
+            raise ValueError(f"--new-data file '{npath}' has no rows")
     data = pd.read_csv(path)
     terms = args.terms if args.terms else args.model
     model = ResponseSurfaceModel(data, args.factors, args.response, terms=terms,
@@ -192,6 +264,21 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         paths = plot_all(final, args.plots, validation=vdata)
         out["plots"] = [str(p) for p in paths]
         text += ["", f"wrote {len(paths)} figures to {args.plots}"]
+    if args.augment:
+        from .augment import SelectionRule, augment, format_augment
+        from .candidates import default_candidates
+
+        try:
+            aug = augment(res, new_data=new_data,
+                          candidates=default_candidates(res.factors, res.levels, physical=not args.no_physical),
+                          rule=SelectionRule(alpha=args.alpha, max_add=args.max_add))
+        except ValueError as exc:
+            msg = str(exc)
+            if msg.startswith("new data: "):
+                msg = f"--new-data '{args.new_data}': {msg[len('new data: '):]}"
+            raise ValueError(msg) from None
+        out["augment"] = aug.to_dict()
+        text += ["", format_augment(aug)]
     if args.json:
         print(json.dumps(jsonable(out), allow_nan=False))
     else:
@@ -203,6 +290,10 @@ def _cmd_design(args: argparse.Namespace) -> int:
     from .coding import Levels
     from .design import make_design
 
+    if args.out:
+        _output_path(args.out, "--out", folder=False)
+    if args.center is not None and not 0 <= args.center <= MAX_CENTER_RUNS:
+        raise ValueError(f"--center {args.center} is out of range; allowed: an integer in [0, {MAX_CENTER_RUNS}]")
     levels = Levels.coerce(args.levels)
     k = args.factors
     if k is None:
@@ -259,5 +350,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_fit(args)
         return _cmd_design(args)
     except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        print(f"rsm: error: {exc}", file=sys.stderr)
+        print(f"rsm: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"rsm: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
         return 2

@@ -21,65 +21,22 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 from scipy import linalg
 
+from .checks import NotEstimableError, check_numeric_column
 from .coding import Levels
+from .results import RSMResults
 from .terms import Monomial, model_matrix, parse_terms, term_name, validate_factor_names
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .results import RSMResults
-
-__all__ = ["ResponseSurfaceModel", "ZeroPureErrorWarning", "fit", "check_numeric_column"]
+#: ``check_numeric_column`` and ``NotEstimableError`` live in :mod:`rsm.checks` (re-exported here).
+__all__ = ["ResponseSurfaceModel", "ZeroPureErrorWarning", "fit", "check_numeric_column", "NotEstimableError"]
 
 
 class ZeroPureErrorWarning(UserWarning):
     """Replicated runs have identical responses (a deterministic simulator)."""
-
-
-def check_numeric_column(df: pd.DataFrame, column: str, role: str = "factor") -> np.ndarray:
-    """Return a column as float array or raise a ValueError that names it.
-
-    Parameters
-    ----------
-    df : DataFrame
-        The data.
-    column : str
-        Column name.
-    role : str
-        ``factor`` or ``response``; used in the messages.
-
-    Returns
-    -------
-    ndarray of float
-
-    Raises
-    ------
-    ValueError
-        If the column is missing or holds a missing, non-numeric or infinite cell
-        (the message names the column, the row (1-based) and the value).
-    """
-    if column not in df.columns:
-        raise ValueError(
-            f"{role} column '{column}' not found in the data; columns are {list(df.columns)}"
-        )
-    raw = df[column]
-    if isinstance(raw, pd.DataFrame):
-        raise ValueError(f"{role} column '{column}' appears more than once in the data")
-    values = pd.to_numeric(raw, errors="coerce")
-    bad = values.isna() | ~np.isfinite(values.to_numpy(dtype=float, na_value=np.nan))
-    if bad.any():
-        pos = int(np.flatnonzero(bad.to_numpy())[0])
-        cell = raw.iloc[pos]
-        if pd.isna(cell):
-            raise ValueError(f"{role} column '{column}' has a missing value in data row {pos + 1}")
-        raise ValueError(
-            f"{role} column '{column}' has a non-numeric value {str(cell)!r} in data row {pos + 1}"
-        )
-    return values.to_numpy(dtype=float)
 
 
 class ResponseSurfaceModel:
@@ -108,7 +65,8 @@ class ResponseSurfaceModel:
     ValueError
         Missing/non-numeric/constant factor column, missing/constant response, a levels
         table without a factor, a term naming an unknown factor, fewer runs than
-        coefficients + 1, or a term that the runs cannot estimate.
+        coefficients + 1, or a term that the runs cannot estimate
+        (:class:`rsm.checks.NotEstimableError`, a ValueError carrying the terms).
     """
 
     def __init__(
@@ -170,20 +128,24 @@ class ResponseSurfaceModel:
 
     # ------------------------------------------------------------------ helpers
     def _check_estimable(self) -> None:
-        """Raise ValueError naming the first term that is a combination of earlier ones."""
+        """Raise :class:`NotEstimableError` naming every term whose column depends on earlier ones.
+
+        Terms are taken in model order; a term is not estimable when its (norm-scaled) column
+        does not raise the rank of the columns kept before it.
+        """
         X = self.exog
         scale = np.linalg.norm(X, axis=0)
         Xs = X / np.where(scale > 0, scale, 1.0)
         if np.linalg.matrix_rank(Xs) == Xs.shape[1]:
             return
-        for j in range(1, Xs.shape[1] + 1):
-            if np.linalg.matrix_rank(Xs[:, :j]) < j:
-                bad = self.term_names[j - 1]
-                raise ValueError(
-                    f"term '{bad}' cannot be estimated from these runs: its column is a linear "
-                    "combination of the earlier terms (e.g. a factor with only two levels "
-                    "cannot carry a square term); remove it or add runs"
-                )
+        kept: list[int] = []
+        bad: list[str] = []
+        for j in range(Xs.shape[1]):
+            if np.linalg.matrix_rank(Xs[:, kept + [j]]) < len(kept) + 1:
+                bad.append(self.term_names[j])
+            else:
+                kept.append(j)
+        raise NotEstimableError(bad)
 
     @property
     def nobs(self) -> int:
@@ -223,8 +185,6 @@ class ResponseSurfaceModel:
         -------
         RSMResults
         """
-        from .results import RSMResults
-
         X, y = self.exog, self.y
         Q, R = np.linalg.qr(X)
         beta = linalg.solve_triangular(R, Q.T @ y)

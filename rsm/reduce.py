@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from .checks import check_numeric_column
 from .results import RSMResults
 from .surface import PolynomialSurface, ValidationResult, validation_metrics
 from .terms import INTERCEPT, Monomial, contains
@@ -116,7 +117,6 @@ class PaperReduction:
 
     def validate(self, data: pd.DataFrame, response: str, units: str | None = None) -> ValidationResult:
         """RMSE, max error etc. on held-out runs (``pi_coverage`` is NaN)."""
-        from .model import check_numeric_column
 
         obs = check_numeric_column(data, response, "response")
         return validation_metrics(obs, self.predict(data, units))

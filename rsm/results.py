@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
+from .checks import check_numeric_column
 from .surface import (
     CanonicalAnalysis,
     Optimum,
@@ -35,9 +36,6 @@ from .surface import (
     points_to_coded,
     validation_metrics,
 )
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .model import ResponseSurfaceModel
 
 __all__ = ["RSMResults", "PURE_ERROR_ZERO_RTOL", "ANOVA_COLUMNS"]
 
@@ -87,11 +85,16 @@ class RSMResults:
         True if replicated runs exist and their pure-error SS is zero.
     alpha : float
         Default significance level for intervals.
+    llf, aic, bic : float
+        Gaussian log-likelihood (at the ML variance ``SS_res / n``), AIC ``-2 llf + 2p`` and
+        BIC ``-2 llf + p ln n``, with p the number of coefficients (statsmodels' OLS convention).
+    ss_lack_of_fit, df_lack_of_fit, ss_pure_error, df_pure_error : float, int
+        The lack-of-fit split of the residual (also in ``anova``).
     """
 
     def __init__(
         self,
-        model: "ResponseSurfaceModel",
+        model: Any,  # rsm.model.ResponseSurfaceModel (not imported: model imports this module)
         beta: np.ndarray,
         xtx_inv: np.ndarray,
         leverage: np.ndarray,
@@ -153,6 +156,16 @@ class RSMResults:
         avg_var = p * self.mse_resid / n
         self.adeq_precision = spread / math.sqrt(avg_var) if avg_var > 0 else float("nan")
         self.influence = self._influence()
+        # Gaussian log-likelihood at the ML variance SS_res/n, as statsmodels' OLS.llf
+        if self.ssr > 0:
+            self.llf = -0.5 * n * (math.log(2 * math.pi) + math.log(self.ssr / n) + 1.0)
+        else:
+            self.llf = float("inf")
+        #: Akaike and Bayesian information criteria, ``-2 llf + 2p`` and ``-2 llf + p ln n``
+        #: (p counts the intercept; statsmodels' OLS convention). Only differences between models
+        #: fitted to the same runs mean anything.
+        self.aic = -2.0 * self.llf + 2.0 * p
+        self.bic = -2.0 * self.llf + p * math.log(n)
 
     # ------------------------------------------------------------------ ANOVA parts
     def _pure_error(self) -> None:
@@ -378,6 +391,56 @@ class RSMResults:
             "obs_ci_lower": mean - q * se_obs, "obs_ci_upper": mean + q * se_obs,
         })
 
+    def prediction_test(
+        self,
+        data: pd.DataFrame,
+        response: str | None = None,
+        units: str | None = None,
+    ) -> dict[str, float]:
+        """Do new runs agree with this fit? Chow's predictive test.
+
+        With ``e = y_new - X_new b`` the prediction errors of ``m`` new runs and
+        ``V = I + X_new (X'X)^-1 X_new'`` their covariance in units of ``sigma^2``,
+        ``F = e' V^-1 e / (m s^2)`` follows ``F(m, df_resid)`` when the new runs come from the
+        fitted model (G. C. Chow, Econometrica 28 (1960) 591-605, the predictive form). A small
+        ``p`` says the new runs show a lack of fit that the fitted runs could not.
+
+        Parameters
+        ----------
+        data : DataFrame
+            New runs with every factor column and the response column.
+        response : str, optional
+            Response column (default the model's response).
+        units : {'coded', 'actual'}, optional
+            Units of the factor columns (default the fitted data's units).
+
+        Returns
+        -------
+        dict
+            ``n`` (new runs), ``F``, ``df_num`` (= n), ``df_den`` (= df_resid), ``p``,
+            ``rmse_pred`` (root-mean-square prediction error, response units) and ``bias``
+            (mean of observed - predicted). F and p are NaN for an exact fit.
+        """
+        from .terms import model_matrix
+
+        response = self.model.response if response is None else response
+        units = self.model.units if units is None else units
+        if len(data) == 0:
+            raise ValueError("the new runs are empty")
+        obs = check_numeric_column(data, response, "response")
+        z = points_to_coded(data, self.factors, self.levels, units)
+        Xn = model_matrix(z, self.model.monomials)
+        e = obs - Xn @ self.params.to_numpy()
+        m = len(e)
+        V = np.eye(m) + Xn @ self._xtx_inv @ Xn.T
+        if self.exact_fit:
+            F = p = float("nan")
+        else:
+            F = float(e @ np.linalg.solve(V, e) / (m * self.mse_resid))
+            p = _f_sf(F, m, self.df_resid)
+        return {"n": int(m), "F": F, "df_num": int(m), "df_den": int(self.df_resid), "p": p,
+                "rmse_pred": float(np.sqrt(np.mean(e**2))), "bias": float(np.mean(e))}
+
     def validate(
         self,
         data: pd.DataFrame,
@@ -404,8 +467,6 @@ class RSMResults:
             RMSE, MAE, max error, bias, R2 and the fraction of observations inside the
             ``1 - alpha`` prediction interval.
         """
-        from .model import check_numeric_column
-
         response = self.model.response if response is None else response
         alpha = self.alpha if alpha is None else alpha
         obs = check_numeric_column(data, response, "response")
@@ -446,13 +507,13 @@ class RSMResults:
 
     # ------------------------------------------------------------------ reporting
     def fit_statistics(self) -> dict[str, float]:
-        """``r2, r2_adj, r2_pred, press, adeq_precision, std_dev, mean, cv_percent, rmse``."""
+        """``r2, r2_adj, r2_pred, press, adeq_precision, std_dev, mean, cv_percent, rmse, aic, bic``."""
         mean = float(np.mean(self.model.y))
         return {
             "r2": self.r2, "r2_adj": self.r2_adj, "r2_pred": self.r2_pred, "press": self.press,
             "adeq_precision": self.adeq_precision, "std_dev": self.sigma, "mean": mean,
             "cv_percent": 100 * self.sigma / abs(mean) if mean else float("nan"),
-            "rmse": self.rmse,
+            "rmse": self.rmse, "aic": self.aic, "bic": self.bic,
         }
 
     def to_dict(self) -> dict:

@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 from scipy import optimize
 
+from .checks import check_numeric_column
 from .coding import Levels
 from .terms import Monomial, affine_transform_matrix, model_matrix, term_name
 
@@ -49,8 +50,6 @@ def points_to_coded(
     units : {'coded', 'actual'}
         Units of ``points``.
     """
-    from .model import check_numeric_column
-
     if units not in ("coded", "actual"):
         raise ValueError(f"units must be 'coded' or 'actual', not '{units}'")
     if isinstance(points, Mapping) and not isinstance(points, pd.DataFrame):

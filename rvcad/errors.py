@@ -3,7 +3,8 @@
 A case is ``{"name", "design", "errors", "load_Nm", "direction"}``; every key is optional.
 Error values are in um or degrees exactly as the paper's Table 4 gives them (see
 ``ERROR_TYPES``). :func:`load_case` and :meth:`Case.from_dict` validate everything and raise
-``ValueError`` naming the offending field; :class:`ResolvedErrors` turns the case into plain
+an :class:`~rvcad.validation.InputError` (a ``ValueError``) naming the offending field, its value
+and what is allowed; :class:`ResolvedErrors` turns the case into plain
 per-instance arrays in mm and rad that the geometry uses.
 """
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from rvcad.params import Design
+from rvcad.validation import CaseError, DesignError, InputError, as_int, as_mapping, as_real, as_text, read_json_file, reject
 
 
 @dataclass(frozen=True)
@@ -82,33 +84,28 @@ ERROR_TYPES: dict[str, ErrorType] = {e.key: e for e in [
 """The eleven error types of paper Table 4 (A = none is the empty case)."""
 
 #: Largest magnitude accepted for each unit (a sanity bound, not physics): 1 mm and 5 degrees.
-_MAX_ABS = {"um": 1000.0, "deg": 5.0}
+MAX_ABS = {"um": 1000.0, "deg": 5.0}
 
 CASE_KEYS = ("name", "design", "errors", "load_Nm", "direction", "model")
 
 
 @dataclass(frozen=True)
 class ModelOption:
-    """A physical effect the base model of the paper lacks, as an option of the case's ``model`` object."""
+    """A physical effect the base model of the paper lacks, as an option of the case's ``model`` object.
+
+    ``choices`` non-empty: a named option (a string out of ``choices``; ``low``/``high`` unused).
+    """
 
     key: str
     unit: str
     low: float
     high: float
-    default: float
+    default: Any
     meaning: str
+    choices: tuple[str, ...] = ()
 
 
-MODEL_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
-    ModelOption("torsional_compliance_arcsec_per_Nm", "arcsec/(N m)", 0.0, 100.0, 0.0,
-                "torsional compliance of the carrier and crank bearings: the output lags by this times the "
-                "resisting torque (load dependent)"),
-    ModelOption("friction_torque_Nm", "N m", 0.0, 1000.0, 0.0,
-                "friction torque at the output that always resists the motion (direction-dependent hysteresis)"),
-    ModelOption("cam_bearing_clearance_um", "um", 0.0, 200.0, 0.0,
-                "radial clearance of every cam (crank) bearing between crank and disc (lost motion)"),
-    ModelOption("cam_bearing_stiffness_N_per_um", "N/um", 1.0, 1.0e6, 1000.0,
-                "radial stiffness of a cam bearing once its clearance is taken up"),
+GEOMETRY_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
     ModelOption("temperature_C", "degC", -40.0, 150.0, 20.0,
                 "temperature of the reducer (20 degC = as built)"),
     ModelOption("pin_circle_diameter_um_per_K", "um/K", -20.0, 20.0, 0.0,
@@ -119,45 +116,53 @@ MODEL_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
     ModelOption("pin_circle_ovality_angle_deg", "deg", -360.0, 360.0, 0.0,
                 "direction of the major axis of the pin circle ovality"),
 ]}
-"""Physics options of ``case["model"]``: effects that the paper's model lacks (units in the keys)."""
+"""The ``model`` options that move parts (used by :class:`ResolvedErrors`). The solver's physics options
+(contact law, compliance, friction, bearing clearance) live in ``rvdyn.options``, which validates the
+whole ``model`` object (names, ranges) when a case is solved."""
 
 
-def parse_model(model: dict[str, Any] | None) -> dict[str, float]:
-    """Validate the ``model`` object of a case: known keys, finite numbers inside their range."""
-    model = dict(model or {})
-    out: dict[str, float] = {}
-    for k, v in model.items():
-        if k not in MODEL_OPTIONS:
-            raise ValueError(f"model key {k!r} is unknown; allowed: {sorted(MODEL_OPTIONS)}")
-        o = MODEL_OPTIONS[k]
-        x = _number(v, f"model.{k}")
-        if not o.low <= x <= o.high:
-            raise ValueError(f"model.{k} {x} {o.unit} is out of range; allowed [{o.low}, {o.high}]")
-        out[k] = x
+def check_option(o: ModelOption, v: Any) -> Any:
+    """Validated value of one model option (number in range or one of its choices)."""
+    if o.choices:
+        if not isinstance(v, str) or v not in o.choices:
+            raise ValueError(f"model.{o.key} {v!r} is not allowed; allowed: {list(o.choices)}")
+        return v
+    x = _number(v, f"model.{o.key}")
+    if not o.low <= x <= o.high:
+        raise ValueError(f"model.{o.key} {x} {o.unit} is out of range; allowed [{o.low}, {o.high}]")
+    return x
+
+
+def parse_model(model: dict[str, Any] | None) -> dict[str, Any]:
+    """Type-check the ``model`` object of a case: string keys, values finite numbers or names; the
+    geometric options (:data:`GEOMETRY_OPTIONS`) also in range. The other names are validated by
+    ``rvdyn.options.parse_model``, where the physics lives."""
+    out: dict[str, Any] = {}
+    for k, v in dict(model or {}).items():
+        if not isinstance(k, str):
+            raise ValueError(f"model key {k!r} must be a string")
+        if k in GEOMETRY_OPTIONS:
+            out[k] = check_option(GEOMETRY_OPTIONS[k], v)
+        elif isinstance(v, str):
+            out[k] = v
+        else:
+            out[k] = _number(v, f"model.{k}")
     return out
 
 
-def model_value(model: dict[str, float], key: str) -> float:
-    """Value of a model option, or its default."""
-    return float(model.get(key, MODEL_OPTIONS[key].default))
+def geometry_option(model: dict[str, Any], key: str) -> float:
+    """Value of a geometric model option, or its default."""
+    return float(model.get(key, GEOMETRY_OPTIONS[key].default))
 
 
 def _number(v: Any, where: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ValueError(f"{where} {v!r} must be a number")
-    v = float(v)
-    if not math.isfinite(v):
-        raise ValueError(f"{where} {v!r} must be finite (NaN and inf are not allowed)")
-    return v
+    """A finite number (not a bool), as float; :class:`CaseError` naming ``where`` otherwise."""
+    return as_real(v, where, cls=CaseError)
 
 
 def _index(v: Any, where: str, n: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or (isinstance(v, float) and not v.is_integer()):
-        raise ValueError(f"{where} {v!r} must be an integer in [0, {n - 1}]")
-    v = int(v)
-    if not 0 <= v < n:
-        raise ValueError(f"{where} {v} is out of range; allowed 0..{n - 1}")
-    return v
+    """An instance index in ``[0, n - 1]``; :class:`CaseError` naming ``where`` otherwise."""
+    return as_int(v, where, lo=0, hi=n - 1, cls=CaseError)
 
 
 @dataclass(frozen=True)
@@ -173,13 +178,20 @@ class ErrorInstance:
     angle_deg: float = 0.0
 
 
+#: Largest load magnitude of a case, N m: the dataset reader's bound (``rvcalib.dataset.MAX_LOAD_NM``);
+#: the largest RV reducers are rated below 10 kN m, so a larger number is a unit slip (N mm).
+MAX_LOAD_NM = 20000.0
+#: Largest |angle_deg| of an error's direction, degrees (one turn either way).
+MAX_ANGLE_DEG = 360.0
+
+
 def parse_errors(errors: dict[str, Any] | None, design: Design) -> list[ErrorInstance]:
     """Validate the ``errors`` object of a case and expand it into instances.
 
     Parameters
     ----------
     errors : dict or None
-        ``{key: number | object | list}`` as in the conventions.
+        ``{key: number | object | list}`` as in the conventions (``None``: no errors).
     design : Design
         Gives the index ranges (pins, cranks, discs).
 
@@ -189,33 +201,42 @@ def parse_errors(errors: dict[str, Any] | None, design: Design) -> list[ErrorIns
 
     Raises
     ------
-    ValueError
-        Naming the key for unknown keys, wrong types, out-of-range indices or values.
+    CaseError
+        Naming the key for unknown keys, wrong types, empty lists, out-of-range indices or values.
     """
     if errors is None:
         return []
-    if not isinstance(errors, dict):
-        raise ValueError(f"errors must be an object mapping error keys to values, got {type(errors).__name__}")
+    errors = as_mapping(errors, "errors", f"an object mapping error keys {sorted(ERROR_TYPES)} to values", CaseError)
     n = {"crank": design.n_cranks, "disc": design.n_discs, "hole": design.n_cranks, "pin": design.z_pins}
     out: list[ErrorInstance] = []
     for key, spec in errors.items():
         if key not in ERROR_TYPES:
-            raise ValueError(f"errors key {key!r} is unknown; allowed: {sorted(ERROR_TYPES)}")
+            reject("errors key", key, f"{sorted(ERROR_TYPES)}", "is unknown", CaseError)
         et = ERROR_TYPES[key]
-        lim = _MAX_ABS[et.unit]
-        if isinstance(spec, list) and et.pinwise and len(spec) > 0 and all(
-                not isinstance(x, dict) for x in spec):
-            if len(spec) != design.z_pins:
-                raise ValueError(
-                    f"errors.{key}: a pin-wise list must have {design.z_pins} numbers, got {len(spec)}")
-            for i, x in enumerate(spec):
-                v = _number(x, f"errors.{key}[{i}]")
-                if abs(v) > lim:
-                    raise ValueError(f"errors.{key}[{i}] {v} {et.unit} is out of range; |value| <= {lim}")
-                if v != 0.0:
-                    out.append(ErrorInstance(key, v, pin=i))
-            continue
-        items = spec if isinstance(spec, list) else [spec]
+        lim = MAX_ABS[et.unit]
+        forms = ("a number, an object {\"value\": v, ...} or a non-empty list of such objects"
+                 + (f", or a list of {design.z_pins} numbers (one per pin)" if et.pinwise else ""))
+        if isinstance(spec, list):
+            if not spec:
+                reject(f"errors.{key}", spec, forms, "is an empty list", CaseError)
+            if et.pinwise and all(not isinstance(x, dict) for x in spec):
+                if len(spec) != design.z_pins:
+                    reject(f"errors.{key}", spec, forms, f"is a pin-wise list of {len(spec)} numbers", CaseError)
+                for i, x in enumerate(spec):
+                    v = as_real(x, f"errors.{key}[{i}]", lo=-lim, hi=lim, unit=et.unit, cls=CaseError)
+                    if v != 0.0:
+                        out.append(ErrorInstance(key, v, pin=i))
+                continue
+            for j, item in enumerate(spec):
+                if not isinstance(item, dict):
+                    reject(f"errors.{key}[{j}]", item, f"objects {{\"value\": v, ...}} in a list ({forms})",
+                           "is not an object", CaseError)
+            items = spec
+        elif isinstance(spec, dict):
+            items = [spec]
+        else:
+            _number(spec, f"errors.{key}")  # names the type of anything else
+            items = [spec]
         for j, item in enumerate(items):
             where = f"errors.{key}" + (f"[{j}]" if isinstance(spec, list) else "")
             sel: dict[str, Any] = dict(et.defaults)
@@ -224,23 +245,22 @@ def parse_errors(errors: dict[str, Any] | None, design: Design) -> list[ErrorIns
                 allowed = {"value", *et.instance_keys} | ({"angle_deg"} if et.has_angle else set())
                 for k in item:
                     if k not in allowed:
-                        raise ValueError(f"{where}.{k} is not allowed; allowed keys: {sorted(allowed)}")
+                        reject(f"{where} key", k, f"{sorted(allowed)}", "is not allowed", CaseError)
                 if "value" not in item:
-                    raise ValueError(f"{where} needs a 'value' ({et.unit})")
-                v = _number(item["value"], f"{where}.value")
+                    reject(where, item, f"an object with a 'value' ({et.unit}) and keys from {sorted(allowed)}",
+                           "has no 'value'", CaseError)
+                v = as_real(item["value"], f"{where}.value", lo=-lim, hi=lim, unit=et.unit, cls=CaseError)
                 for k in et.instance_keys:
                     if k in item:
                         sel[k] = _index(item[k], f"{where}.{k}", n[k])
                 if "angle_deg" in item:
-                    angle = _number(item["angle_deg"], f"{where}.angle_deg")
+                    angle = as_real(item["angle_deg"], f"{where}.angle_deg", lo=-MAX_ANGLE_DEG, hi=MAX_ANGLE_DEG,
+                                    unit="deg", cls=CaseError)
             else:
-                v = _number(item, where)
-            if abs(v) > lim:
-                raise ValueError(f"{where} {v} {et.unit} is out of range; |value| <= {lim} {et.unit}")
+                v = as_real(item, where, lo=-lim, hi=lim, unit=et.unit, cls=CaseError)
             out.append(ErrorInstance(key, v, crank=sel.get("crank"), disc=sel.get("disc"),
                                      hole=sel.get("hole"), pin=sel.get("pin"), angle_deg=angle))
     return out
-
 
 @dataclass(frozen=True)
 class Case:
@@ -270,28 +290,40 @@ class Case:
     model: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any] | None) -> "Case":
-        """Validate a case object; raise ``ValueError`` naming the field on bad input."""
-        d = dict(d or {})
+    def from_dict(cls, d: Any) -> "Case":
+        """Validate a case object (``None``: the nominal case).
+
+        Raises
+        ------
+        InputError
+            :class:`~rvcad.validation.CaseError` or :class:`~rvcad.validation.DesignError` naming
+            the field, its value and what is allowed.
+        """
+        d = as_mapping({} if d is None else d, "case", f"a JSON object with keys from {list(CASE_KEYS)}", CaseError)
         for k in d:
             if k not in CASE_KEYS:
-                raise ValueError(f"case key {k!r} is unknown; allowed: {list(CASE_KEYS)}")
-        name = d.get("name", "case")
-        if not isinstance(name, str):
-            raise ValueError(f"name {name!r} must be a string")
+                reject("case key", k, f"{list(CASE_KEYS)}", "is unknown", CaseError)
+        name = as_text(d.get("name", "case"), "name", max_len=255, cls=CaseError)
+        if "design" in d:
+            as_mapping(d["design"], "design", "an object of Design fields (omit the key for the default design)",
+                       DesignError)
         design = Design.from_dict(d.get("design"))
-        raw = d.get("errors") or {}
+        raw = as_mapping(d.get("errors", {}), "errors",
+                         "an object mapping error keys to values (omit the key or give {} for none)", CaseError)
         errs = parse_errors(raw, design)
-        load = _number(d.get("load_Nm", 20.0), "load_Nm")
-        if load < 0:
-            raise ValueError(f"load_Nm {load} must be >= 0 (the load always resists the motion)")
+        load = as_real(d.get("load_Nm", 20.0), "load_Nm", lo=0.0, hi=MAX_LOAD_NM, unit="N m", cls=CaseError,
+                       why="a magnitude: the load always resists the motion")
         direction = d.get("direction", 1)
-        if direction not in (1, -1) or isinstance(direction, bool):
-            raise ValueError(f"direction {direction!r} must be +1 or -1")
-        model = d.get("model") or {}
-        if not isinstance(model, dict):
-            raise ValueError(f"model {model!r} must be an object of rvdyn physics options")
-        model = parse_model(model)
+        if isinstance(direction, bool) or not isinstance(direction, (int, float)) or direction not in (1, -1):
+            reject("direction", direction, "+1 or -1", "is not a drive direction", CaseError)
+        model = as_mapping(d.get("model", {}), "model",
+                           "an object of rvdyn physics options (omit the key or give {} for none)", CaseError)
+        try:
+            model = parse_model(model)
+        except InputError:
+            raise
+        except ValueError as exc:  # parse_model's own range messages name model.KEY already
+            raise CaseError(str(exc), field="model") from None
         case = cls(name=name, design=design, errors=tuple(errs), raw_errors=json.loads(json.dumps(raw)),
                    load_Nm=load, direction=int(direction), model=dict(model))
         ResolvedErrors(case)  # checks that the perturbed parts are valid
@@ -321,21 +353,21 @@ class Case:
 
 
 def load_case(path: str | Path | None) -> Case:
-    """Read a case JSON file (``None``: the nominal case with no errors)."""
+    """Read a case JSON file (``None``: the nominal case with no errors).
+
+    The JSON is read strictly: a key repeated in one object, ``NaN``/``Infinity`` and a top level
+    that is not an object are errors (:class:`~rvcad.validation.CaseError`), as is everything
+    :meth:`Case.from_dict` refuses.
+    """
     if path is None:
         return Case.from_dict({"name": "nominal"})
     p = Path(path)
-    try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ValueError(f"case file {str(p)!r} does not exist") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"case file {str(p)!r} is not valid JSON: {exc}") from None
+    d = read_json_file(p, "case file", CaseError)
     if not isinstance(d, dict):
-        raise ValueError(f"case file {str(p)!r} must hold a JSON object")
+        reject(f"case file {str(p)!r}: the top level", d,
+               f"a JSON object with keys from {list(CASE_KEYS)}", "is not an object", CaseError)
     d.setdefault("name", p.stem)
     return Case.from_dict(d)
-
 
 class ResolvedErrors:
     """Per-instance perturbations in mm and rad, ready for the geometry.
@@ -411,24 +443,24 @@ class ResolvedErrors:
                 self.pin_pitch[pins] += math.radians(v)
             else:  # pragma: no cover - parse_errors rejects unknown keys
                 raise ValueError(f"errors key {inst.key!r} is unknown")
-        # geometric effects of the case's model options (see MODEL_OPTIONS)
+        # geometric effects of the case's model options (see GEOMETRY_OPTIONS)
         m = case.model
-        dT = model_value(m, "temperature_C") - 20.0
-        self.pin_radial += model_value(m, "pin_circle_diameter_um_per_K") * dT * um / 2.0
-        ov = model_value(m, "pin_circle_ovality_um")
+        dT = geometry_option(m, "temperature_C") - 20.0
+        self.pin_radial += geometry_option(m, "pin_circle_diameter_um_per_K") * dT * um / 2.0
+        ov = geometry_option(m, "pin_circle_ovality_um")
         if ov:
             phi = 2 * np.pi * np.arange(zp) / zp
-            self.pin_radial += ov * um * np.cos(2.0 * (phi - math.radians(model_value(m, "pin_circle_ovality_angle_deg"))))
+            self.pin_radial += ov * um * np.cos(2.0 * (phi - math.radians(geometry_option(m, "pin_circle_ovality_angle_deg"))))
         self._check(case)
 
     def _check(self, case: Case) -> None:
         d = case.design
         if np.any(d.eccentricity_mm + self.cam_ecc <= 0):
-            raise ValueError("errors.cam_eccentricity makes a cam eccentricity <= 0 mm")
+            raise CaseError("errors.cam_eccentricity makes a cam eccentricity <= 0 mm")
         r = d.pin_radius_mm + self.pin_radius
         if np.any(r <= 0):
             i = int(np.argmin(r))
-            raise ValueError(f"errors.pin_radius makes pin {i} radius {r[i]:.6f} mm <= 0")
+            raise CaseError(f"errors.pin_radius makes pin {i} radius {r[i]:.6f} mm <= 0")
         ang = 2 * np.pi * np.arange(d.z_pins) / d.z_pins + self.pin_pitch
         rad = d.pin_circle_radius_mm + self.pin_radial
         xy = rad[:, None] * np.c_[np.cos(ang), np.sin(ang)] + self.pin_circle_offset
@@ -437,6 +469,6 @@ class ResolvedErrors:
         over = dist - (r + r[nxt])
         if np.any(over <= 0):
             i = int(np.argmin(over))
-            raise ValueError(
+            raise CaseError(
                 f"errors.pin_pitch / pin_radius / pin_circle_diameter make pins {i} and {int(nxt[i])} overlap "
                 f"(centre distance {dist[i]:.4f} mm < radii sum {r[i] + r[nxt[i]]:.4f} mm)")

@@ -34,12 +34,17 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-import numpy as np
-
 from rvcad.atomic import atomic_path
 from rvcad.errors import Case
-from rvcad.parts import Assembly, Part
-from rvcad.tessellate import stl_bytes
+from rvcad.assembly import Assembly
+from rvcad.atomic import remove_stale_temps
+from rvcad.check import check_case
+from rvcad.geometry import ReducerGeometry
+from rvcad.occ import check_solid
+from rvcad.overlap import overlap_summary, overlaps
+from rvcad.plan import Part
+from rvcad.step import count_faces, edge_samples, read_step, step_writer
+from rvcad.stl import stl_bytes
 
 #: Default tolerance of the export, um: chord sagitta of the STL and budget of the STEP B-splines.
 DEFAULT_TOLERANCE_UM = 0.1
@@ -57,9 +62,6 @@ EXPORT_VERSION = "1"
 
 #: Name of the cache manifest in the output folder.
 MANIFEST = "manifest.json"
-
-#: Fixed STEP header time stamp: identical input gives byte-identical STEP files.
-STEP_TIMESTAMP = "2000-01-01T00:00:00"
 
 
 @dataclass
@@ -112,6 +114,10 @@ class ExportReport:
     files: list[ExportedFile] = field(default_factory=list)
     seconds: float = 0.0
     design_check: dict[str, Any] = field(default_factory=dict)
+    pose: str = "ideal"
+    overlaps: dict[str, Any] = field(default_factory=dict)
+    cleaned: list[str] = field(default_factory=list)
+    removed_temps: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -129,7 +135,13 @@ class ExportReport:
         lines = [f"rvcad export: case {self.case_name!r} (key {self.case_key}) -> {self.out_dir}",
                  f"  {len(w)} file(s) written, {len(s)} up to date, {tot / 1e6:.1f} MB, {self.seconds:.1f} s; "
                  f"formats {','.join(self.formats)}, tolerance {self.tolerance_um:g} um, "
-                 f"input angle {self.theta_in_deg:g} deg"]
+                 f"input angle {self.theta_in_deg:g} deg, {self.pose} pose"]
+        if self.cleaned:
+            lines.append(f"  --force: removed {len(self.cleaned)} file(s) of another export from the folder")
+        if self.removed_temps:
+            lines.append(f"  removed {len(self.removed_temps)} temporary file(s) left by an interrupted export")
+        if self.overlaps:
+            lines.append(f"  {overlap_summary(self.overlaps)}")
         if dev:
             lines.append(f"  largest exact-curve deviation {max(dev):.4f} um (cycloid envelope, involute flanks)")
         dc = self.design_check
@@ -137,6 +149,9 @@ class ExportReport:
             lines.append(f"  design check: {'ok' if dc.get('ok') else 'PROBLEMS'}; undercut: "
                          f"{'yes' if dc.get('undercut') else 'no'}; min pin gap {dc['pins']['min_gap_mm']:.4f} mm; "
                          f"disc tip to housing bore {dc['disc_tip_to_housing_bore_mm']:.4f} mm")
+            if dc.get("geometry"):
+                lines.append(f"    contact overlap no solver pose avoids: "
+                             f"{max(dc['geometry']['pin_penetration_mm'], 0.0) * 1e3:.2f} um (refused above 100 um)")
             for m in dc.get("messages", []):
                 lines.append(f"    {m}")
         big = sorted(w, key=lambda f: -f.seconds)[:5]
@@ -164,136 +179,14 @@ def _write_bytes(data: bytes) -> Callable[[Path], None]:
     return w
 
 
-def _step_writer(items: Sequence[tuple[str, Any, tuple[float, float, float] | None]],
-                 name: str) -> Callable[[Path], None]:
-    """Writer of a STEP file (AP214, mm) through the OCP XCAF document, without build123d.
-
-    ``items`` are (label, TopoDS_Shape, placement or None). One item without placement is written
-    as a single named part; otherwise an assembly ``name`` whose components are the named parts
-    placed by (x mm, y mm, rotation deg about +z).
-    """
-    def w(p: Path) -> None:
-        from OCP.APIHeaderSection import APIHeaderSection_MakeHeader
-        from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Trsf, gp_Vec
-        from OCP.IFSelect import IFSelect_ReturnStatus
-        from OCP.Interface import Interface_Static
-        from OCP.Message import Message, Message_Gravity
-        from OCP.STEPCAFControl import STEPCAFControl_Controller, STEPCAFControl_Writer
-        from OCP.STEPControl import STEPControl_Controller, STEPControl_StepModelType
-        from OCP.TCollection import TCollection_ExtendedString, TCollection_HAsciiString
-        from OCP.TDataStd import TDataStd_Name
-        from OCP.TDocStd import TDocStd_Document
-        from OCP.TopLoc import TopLoc_Location
-        from OCP.XCAFApp import XCAFApp_Application
-        from OCP.XCAFDoc import XCAFDoc_DocumentTool
-        from OCP.XSControl import XSControl_WorkSession
-
-        doc = TDocStd_Document(TCollection_ExtendedString("XmlOcaf"))
-        app = XCAFApp_Application.GetApplication_s()
-        app.NewDocument(TCollection_ExtendedString("MDTV-XCAF"), doc)
-        app.InitDocument(doc)
-        XCAFDoc_DocumentTool.SetLengthUnit_s(doc, 0.001)
-        tool = XCAFDoc_DocumentTool.ShapeTool_s(doc.Main())
-        tool.SetAutoNaming_s(False)
-
-        def named(label: Any, text: str) -> Any:
-            TDataStd_Name.Set_s(label, TCollection_ExtendedString(text))
-            return label
-
-        if len(items) == 1 and items[0][2] is None:
-            named(tool.AddShape(items[0][1], False), items[0][0])
-        else:
-            asm = named(tool.NewShape(), name)
-            for label, shape, pl in items:
-                part = named(tool.AddShape(shape, False), label)
-                x, y, r = pl if pl is not None else (0.0, 0.0, 0.0)
-                tr = gp_Trsf()
-                tr.SetRotation(gp_Ax1(gp_Pnt(0.0, 0.0, 0.0), gp_Dir(0.0, 0.0, 1.0)), math.radians(r))
-                tt = gp_Trsf()
-                tt.SetTranslation(gp_Vec(float(x), float(y), 0.0))
-                comp = tool.AddComponent(asm, part, TopLoc_Location(tt.Multiplied(tr)))
-                named(comp, label)
-            tool.UpdateAssemblies()
-        for printer in Message.DefaultMessenger_s().Printers():
-            printer.SetTraceLevel(Message_Gravity.Message_Fail)
-        STEPCAFControl_Controller.Init_s()
-        STEPControl_Controller.Init_s()
-        writer = STEPCAFControl_Writer(XSControl_WorkSession(), False)
-        writer.SetNameMode(True)
-        header = APIHeaderSection_MakeHeader(writer.Writer().Model())
-        if not header.IsDone():
-            header = APIHeaderSection_MakeHeader(0)
-            header.Apply(writer.Writer().Model())
-        header.SetName(TCollection_HAsciiString(name))
-        header.SetTimeStamp(TCollection_HAsciiString(STEP_TIMESTAMP))
-        header.SetOriginatingSystem(TCollection_HAsciiString("rvcad"))
-        Interface_Static.SetIVal_s("write.surfacecurve.mode", 1)
-        Interface_Static.SetIVal_s("write.precision.mode", 0)
-        if not writer.Transfer(doc, STEPControl_StepModelType.STEPControl_AsIs):
-            raise RuntimeError(f"OpenCASCADE could not transfer {name} to STEP")
-        if writer.Write(str(p)) != IFSelect_ReturnStatus.IFSelect_RetDone:
-            raise RuntimeError(f"OpenCASCADE could not write {p}")
-    return w
-
-
-def read_step(path: str | Path) -> Any:
-    """Read a STEP file back as one OCP ``TopoDS_Shape`` (for checks); raises ``ValueError``."""
-    from OCP.IFSelect import IFSelect_ReturnStatus
-    from OCP.STEPControl import STEPControl_Reader
-
-    r = STEPControl_Reader()
-    if r.ReadFile(str(path)) != IFSelect_ReturnStatus.IFSelect_RetDone:
-        raise ValueError(f"{path} is not a readable STEP file")
-    r.TransferRoots()
-    return r.OneShape()
-
-
-def edge_samples(shape: Any, per_edge: int = 400, kinds: Sequence[str] | None = None) -> list[tuple[str, np.ndarray]]:
-    """Points sampled along every edge of an OCP shape: (curve type, (per_edge, 3) mm).
-
-    The curve type is the OpenCASCADE ``GeomAbs_CurveType`` name without prefix (``Line``,
-    ``Circle``, ``BSplineCurve``, ...). Parameters are spaced uniformly over each edge's range;
-    edge locations (assembly placements) are applied. ``kinds`` keeps only those curve types.
-    """
-    from OCP.BRepAdaptor import BRepAdaptor_Curve
-    from OCP.TopAbs import TopAbs_EDGE
-    from OCP.TopExp import TopExp_Explorer
-    from OCP.TopoDS import TopoDS
-
-    out: list[tuple[str, np.ndarray]] = []
-    ex = TopExp_Explorer(shape, TopAbs_EDGE)
-    while ex.More():
-        a = BRepAdaptor_Curve(TopoDS.Edge(ex.Current()))
-        kind = a.GetType().name.replace("GeomAbs_", "")
-        if kinds is not None and kind not in kinds:
-            ex.Next()
-            continue
-        u = np.linspace(a.FirstParameter(), a.LastParameter(), per_edge)
-        pts = np.empty((per_edge, 3))
-        for i, uu in enumerate(u):
-            p = a.Value(float(uu))
-            pts[i] = (p.X(), p.Y(), p.Z())
-        out.append((kind, pts))
-        ex.Next()
-    return out
-
-
-def count_faces(shape: Any) -> int:
-    """Number of faces of an OCP shape."""
-    from OCP.TopAbs import TopAbs_FACE
-    from OCP.TopExp import TopExp_Explorer
-
-    ex, n = TopExp_Explorer(shape, TopAbs_FACE), 0
-    while ex.More():
-        n += 1
-        ex.Next()
-    return n
-
-
-def content_key(case: Case, tolerance_um: float, fmt: str, file: str, theta_in_deg: float | None = None) -> str:
-    """Cache key of one file: sha256 of case key, tolerance, format, file, input angle, version."""
+def content_key(case: Case, tolerance_um: float, fmt: str, file: str, theta_in_deg: float | None = None,
+                state: tuple[float, Sequence[float]] | None = None) -> str:
+    """Cache key of one file: sha256 of case key, tolerance, format, file, input angle, explicit state
+    (output and crank angles, when the assembly is not placed by the ideal kinematics), version."""
     d = {"case": case.key(), "tolerance_um": float(tolerance_um), "format": fmt, "file": file,
          "theta_in_deg": theta_in_deg, "version": EXPORT_VERSION}
+    if state is not None:
+        d["state_rad"] = [float(state[0])] + [float(v) for v in state[1]]
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:24]
 
 
@@ -306,6 +199,40 @@ def _load_manifest(out: Path) -> dict[str, Any]:
     except (OSError, ValueError):
         pass
     return {"files": {}}
+
+
+class ExportFolderError(ValueError):
+    """The output folder holds the export of another case (or tolerance); refused without ``force``."""
+
+
+def output_names(assembly: Assembly) -> list[str]:
+    """Every file name an export of this assembly may write."""
+    names = [f"{n}.{x}" for n in list(assembly.parts) + ["assembly"] for x in FORMATS]
+    return names + ["case.json", MANIFEST]
+
+
+def _claim_folder(out: Path, case: Case, tol_um: float, force: bool) -> list[str]:
+    """Refuse (or with ``force`` clean) a folder whose manifest belongs to another case or tolerance.
+
+    Returns the names of the removed files (only those the old manifest lists, plus its case.json
+    and manifest).
+    """
+    if not (out / MANIFEST).is_file():
+        return []
+    m = _load_manifest(out)
+    old_key, old_tol = m.get("case_key"), m.get("tolerance_um")
+    if old_key is None or (old_key == case.key() and old_tol == tol_um):
+        return []
+    listed = [f for f in m["files"] if isinstance(f, str) and "/" not in f and not f.startswith(".")]
+    present = [f for f in dict.fromkeys(listed + ["case.json", MANIFEST]) if (out / f).is_file()]
+    if not force:
+        raise ExportFolderError(
+            f"--out {str(out)!r} holds the export of case {m.get('case_name')!r} (key {old_key}, tolerance "
+            f"{old_tol} um) in {len(present)} file(s); refusing to mix case {case.name!r} (key {case.key()}, "
+            f"tolerance {tol_um:g} um) into it: use another folder, or --force to remove those files first")
+    for f in present:
+        (out / f).unlink(missing_ok=True)
+    return present
 
 
 def select_parts(assembly: Assembly, patterns: Sequence[str] | None) -> list[str]:
@@ -338,7 +265,8 @@ def check_tolerance(tolerance_um: float) -> float:
 def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] = FORMATS,
                 tolerance_um: float = DEFAULT_TOLERANCE_UM, theta_in_deg: float = 0.0,
                 parts: Sequence[str] | None = None, force: bool = False,
-                progress: Callable[[ExportedFile], None] | None = None) -> ExportReport:
+                progress: Callable[[ExportedFile], None] | None = None,
+                state: tuple[float, Sequence[float]] | None = None, pose: str | None = None) -> ExportReport:
     """Write the STEP and STL files of every part and of the assembly.
 
     Parameters
@@ -357,9 +285,15 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
     parts : sequence of str or None
         Shell patterns of the parts to write (``disc*``, ``pin00``, ``assembly``); default all.
     force : bool
-        Rewrite files even when the manifest shows them up to date.
+        Rewrite files even when the manifest shows them up to date, and clean a folder that holds
+        the export of another case or tolerance (otherwise refused).
     progress : callable or None
         Called with each :class:`ExportedFile` when it is done.
+    state : (theta_out rad, (psi_0, psi_1) rad) or None
+        Place the assembly at this state (e.g. the pose solved by ``rvdyn``) instead of the ideal
+        kinematics at ``theta_in_deg``.
+    pose : str or None
+        Name of the pose for the report (default ``ideal``, or ``state`` when one is given).
 
     Returns
     -------
@@ -368,7 +302,10 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
     Raises
     ------
     ValueError
-        Bad format, tolerance, angle or part pattern (the message names it).
+        Bad format, tolerance, angle or part pattern (the message names it);
+        :class:`rvcad.check.DesignError` for a case that cannot give valid solids (the message
+        names the field; nothing is written); :class:`ExportFolderError` for a folder of another
+        export; :class:`rvcad.occ.InvalidSolidError` if a built solid fails BRepCheck.
     OSError
         The output folder cannot be created or written.
     """
@@ -385,17 +322,33 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
     if isinstance(theta_in_deg, bool) or not isinstance(theta_in_deg, (int, float)) or not math.isfinite(theta_in_deg):
         raise ValueError(f"theta_in_deg {theta_in_deg!r} must be a finite number of degrees")
     tol = tol_um * 1e-3
-    asm = Assembly(case, float(theta_in_deg))
+    geometry = ReducerGeometry(case)
+    margins = check_case(case, geometry)  # refuses a case that cannot give valid solids: nothing written yet
+    asm = Assembly(case, float(theta_in_deg), state=state, geometry=geometry)
     names = select_parts(asm, parts)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {str(out)!r} exists and is not a folder")
+    cleaned = _claim_folder(out, case, tol_um, force)
+    temps = [p.name for p in remove_stale_temps(out, output_names(asm))]
     out.mkdir(parents=True, exist_ok=True)
     manifest = _load_manifest(out)
     if manifest.get("version") != EXPORT_VERSION:
         manifest = {"files": {}}
     report = ExportReport(out_dir=str(out), case_name=case.name, case_key=case.key(), tolerance_um=tol_um,
-                          theta_in_deg=float(theta_in_deg), formats=fmts, design_check=asm.design_check())
+                          theta_in_deg=float(theta_in_deg), formats=fmts,
+                          design_check={**asm.design_check(), "geometry": margins},
+                          pose=pose or ("ideal" if state is None else "state"), overlaps=overlaps(asm, tol),
+                          cleaned=cleaned, removed_temps=temps)
+    report.overlaps["pose"] = report.pose
+
+    valid: set[str] = set()
+
+    def checked(shape: Any, name: str) -> Any:  # BRepCheck once per part and run
+        if name not in valid:
+            check_solid(shape, name)
+            valid.add(name)
+        return shape
 
     def save_manifest() -> None:
         manifest.update({"version": EXPORT_VERSION, "case_name": case.name, "case_key": case.key(),
@@ -433,8 +386,8 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
         part: Part = asm[name]
         if "step" in fmts:
             def build_step(part: Part = part) -> tuple[Callable[[Path], None], int | None, float | None]:
-                s = part.shape(tol)
-                return _step_writer([(part.name, s, None)], part.name), count_faces(s), part.spline_deviation(tol) * 1e3
+                s = checked(part.shape(tol), part.name)
+                return step_writer([(part.name, s, None)], part.name), count_faces(s), part.spline_deviation(tol) * 1e3
             emit(f"{name}.step", name, "step", content_key(case, tol_um, "step", f"{name}.step"), build_step)
         if "stl" in fmts:
             def build_stl(part: Part = part) -> tuple[Callable[[Path], None], int | None, float | None]:
@@ -448,21 +401,25 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
         if "step" in fmts:
             def build_asm_step() -> tuple[Callable[[Path], None], int | None, float | None]:
                 items = asm.shapes(tol)
-                return (_step_writer(items, f"rv-reducer {case.name}"), sum(count_faces(s) for _, s, _ in items),
+                for n, sh, _ in items:
+                    checked(sh, n)
+                return (step_writer(items, f"rv-reducer {case.name}"), sum(count_faces(s) for _, s, _ in items),
                         None)
-            emit("assembly.step", "assembly", "step", content_key(case, tol_um, "step", "assembly.step", th),
+            emit("assembly.step", "assembly", "step",
+                 content_key(case, tol_um, "step", "assembly.step", th, asm.state),
                  build_asm_step)
         if "stl" in fmts:
             def build_asm_stl() -> tuple[Callable[[Path], None], int | None, float | None]:
                 m = asm.mesh(tol)
                 return (_write_bytes(stl_bytes(m, f"rvcad {case.name} assembly theta_in {th:g} deg mm")),
                         len(m.faces), None)
-            emit("assembly.stl", "assembly", "stl", content_key(case, tol_um, "stl", "assembly.stl", th),
+            emit("assembly.stl", "assembly", "stl",
+                 content_key(case, tol_um, "stl", "assembly.stl", th, asm.state),
                  build_asm_stl)
 
     report.seconds = time.perf_counter() - t_start
     return report
 
 
-__all__ = ["DEFAULT_TOLERANCE_UM", "EXPORT_VERSION", "FORMATS", "ExportReport", "ExportedFile", "content_key",
-           "edge_samples", "export_case", "read_step", "select_parts"]
+__all__ = ["DEFAULT_TOLERANCE_UM", "EXPORT_VERSION", "FORMATS", "ExportFolderError", "ExportReport", "ExportedFile",
+           "content_key", "edge_samples", "export_case", "output_names", "read_step", "select_parts"]

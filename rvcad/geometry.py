@@ -21,13 +21,8 @@ import math
 import numpy as np
 
 from rvcad.errors import Case, ResolvedErrors
-from rvcad.params import Design
-from rvcad.profile import CycloidProfile, InvoluteGear
-
-#: Profile shift coefficients of the stage I gears (assumption; x1 = -x2 keeps the 30 mm centre
-#: distance, and x1 = +0.4 keeps the planet tip off the 12-tooth sun's base circle).
-SUN_SHIFT = 0.4
-PLANET_SHIFT = -0.4
+from rvcad.params import PLANET_SHIFT, SUN_SHIFT, Design  # noqa: F401  (shifts re-exported)
+from rvcad.profile import CycloidProfile, InvoluteGear, modified_profile_parameters
 
 
 def rot(a: np.ndarray) -> np.ndarray:
@@ -85,9 +80,10 @@ class ReducerGeometry:
         self.errors = er
         zp, nc, nd = d.z_pins, d.n_cranks, d.n_discs
         rp = d.pin_circle_radius_mm
-        self.profiles = [CycloidProfile(rp, d.eccentricity_mm, zp, d.pin_radius_mm, cam_phase=k * math.pi)
+        rp_gen, r_gen, rot_mod = modified_profile_parameters(d)   # profile modification (0 by default)
+        self.profiles = [CycloidProfile(rp_gen, d.eccentricity_mm, zp, r_gen, cam_phase=k * math.pi)
                          for k in range(nd)]
-        self.disc_profile_rotation = er.disc_phase.copy()
+        self.disc_profile_rotation = er.disc_phase.copy() + rot_mod
         alpha = math.radians(d.pressure_angle_deg)
         share = d.stage1_backlash_mm
         self.sun = InvoluteGear(d.z_sun, d.module_mm, alpha, SUN_SHIFT, 0.0)

@@ -7,7 +7,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
 from typing import Any
+
+from rvcad.profile import MAX_MODIFICATION
+from rvcad.validation import DesignError, as_int, as_mapping, as_real, read_json_file, reject
+
+#: Profile shift coefficients of the stage I gears (assumption; x1 = -x2 keeps the 30 mm centre
+#: distance, and x1 = +0.4 keeps the planet tip off the 12-tooth sun's base circle).
+SUN_SHIFT = 0.4
+PLANET_SHIFT = -0.4
 
 
 @dataclass(frozen=True)
@@ -50,6 +59,17 @@ class Design:
         Radius of the central clearance hole of each cycloid disc, mm.
     housing_outer_radius_mm : float
         Outer radius of the pin housing, mm.
+    cam_bearing_rollers, cam_bearing_roller_diameter_mm, cam_bearing_roller_length_mm : int, float, float
+        Needle rollers of each cam bearing: count, diameter and effective length, mm (assumption:
+        16 x 2.5 mm x 8 mm in the 9 mm cam hole).
+    journal_bearing_rollers, journal_bearing_roller_diameter_mm, journal_bearing_roller_length_mm : int, float, float
+        Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
+        (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
+    profile_equidistant_mm, profile_shift_mm, profile_rotation_deg : float
+        Profile modification of both discs: the disc is cut by a wheel of radius ``pin_radius_mm +
+        equidistant`` whose centre runs on the circle ``pin_circle_radius + shift``, and the profile is
+        turned by ``rotation`` (+z) relative to the crank holes. Positive equidistant and negative shift
+        remove material (backlash); 0 by default.
     """
 
     z_sun: int = 12
@@ -71,6 +91,23 @@ class Design:
     crank_journal_radius_mm: float = 7.0
     disc_center_hole_radius_mm: float = 14.0
     housing_outer_radius_mm: float = 80.0
+    # ---- bearings and supports of the physical contact law (rvdyn, issue 11) -------------------------
+    # Assumptions of this implementation (not in the paper; README "Assumptions"): the cam bearings are
+    # needle bearings between cam and disc hole, the crank journal bearings are modelled as cylindrical
+    # roller bearings (one in the flange plate, one in the carrier), all rolling elements steel (GCr15).
+    cam_bearing_rollers: int = 16
+    cam_bearing_roller_diameter_mm: float = 2.5
+    cam_bearing_roller_length_mm: float = 8.0
+    journal_bearing_rollers: int = 12
+    journal_bearing_roller_diameter_mm: float = 3.0
+    journal_bearing_roller_length_mm: float = 6.0
+    # Profile modification of the cycloid discs (rvcad.profile.modified_profile_parameters): the
+    # grinding wheel's radius rp + equidistant, its centre circle Rp + shift, the profile turned by
+    # rotation. Zero by default (the paper's unmodified, zero-backlash profile).
+    profile_equidistant_mm: float = 0.0
+    profile_shift_mm: float = 0.0
+    profile_rotation_deg: float = 0.0
+    # ---- end of the bearing block ---------------------------------------------------------------------
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -126,93 +163,209 @@ class Design:
         return d
 
     def validate(self) -> "Design":
-        """Raise ``ValueError`` naming the field if the design cannot be built.
+        """Raise :class:`~rvcad.validation.DesignError` naming the field if the design cannot be built.
+
+        Checks, in this order: the type of every field (integers, finite numbers, two crank
+        angles), the physical range of every field (:data:`FIELD_RANGES`), then the relations
+        between fields: Zc = Zp - 1, pins that do not overlap, the shortening coefficient
+        e Zp / Rp < 1, the two planets apart on the crank circle
+        (radius = the stage I centre distance), and the cam, journal, centre-hole and housing radii.
+        What the solids need beyond these relations (tip lands and root gaps of the teeth, crank
+        holes apart and inside the disc root and plate rim, pins against the discs with the errors
+        applied) is :func:`rvcad.check.check_case`, run before anything is exported. Undercut (pin radius above the smallest
+        convex radius of curvature of the pin-centre curve, :attr:`min_convex_radius_mm`) is
+        allowed: the CAD trims the loops and the design check reports it (conventions).
 
         Returns
         -------
         Design
             ``self``, for chaining.
         """
-        for name in ("z_sun", "z_planet", "z_pins", "z_disc"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < 3:
-                raise ValueError(f"design.{name} {v!r} must be an integer >= 3")
-        if self.z_disc != self.z_pins - 1:
-            raise ValueError(
-                f"design.z_disc {self.z_disc} must equal z_pins - 1 = {self.z_pins - 1} "
-                "(single-tooth-difference cycloid drive)")
+        self._check_types()
+        self._check_ranges()
+        self._check_relations()
+        return self
+
+    def _check_types(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name.endswith("_mm") or f.name.endswith("_deg"):
-                vals = v if isinstance(v, tuple) else (v,)
-                for x in vals:
-                    if not isinstance(x, (int, float)) or isinstance(x, bool) or not math.isfinite(x):
-                        raise ValueError(f"design.{f.name} {x!r} must be a finite number")
-        positive = ("pin_circle_diameter_mm", "eccentricity_mm", "pin_radius_mm", "module_mm",
-                    "gear_width_mm", "disc_width_mm", "plate_width_mm", "cam_radius_mm",
-                    "crank_journal_radius_mm", "disc_center_hole_radius_mm", "housing_outer_radius_mm")
-        for name in positive:
-            if getattr(self, name) <= 0:
-                raise ValueError(f"design.{name} {getattr(self, name)} must be > 0")
-        if not 10.0 <= self.pressure_angle_deg <= 30.0:
-            raise ValueError(f"design.pressure_angle_deg {self.pressure_angle_deg} must be in [10, 30]")
-        if self.stage1_backlash_mm < 0:
-            raise ValueError(f"design.stage1_backlash_mm {self.stage1_backlash_mm} must be >= 0")
-        if self.disc_gap_mm < 0:
-            raise ValueError(f"design.disc_gap_mm {self.disc_gap_mm} must be >= 0")
+            default = f.default
+            where = f"design.{f.name}"
+            if f.name == "crank_angles_deg":
+                if not isinstance(v, (tuple, list)):
+                    reject(where, v, "a list of 2 angles in degrees", f"is of type {type(v).__name__}", DesignError)
+                for i, x in enumerate(v):
+                    as_real(x, f"{where}[{i}]", unit="deg", cls=DesignError)
+            elif isinstance(default, bool):
+                if not isinstance(v, bool):
+                    reject(where, v, "true or false", f"is of type {type(v).__name__}", DesignError)
+            elif isinstance(default, int):
+                as_int(v, where, cls=DesignError)
+            elif isinstance(default, float):
+                as_real(v, where, cls=DesignError)
+
+    def _check_ranges(self) -> None:
+        for name, (lo, hi, lo_open, why) in FIELD_RANGES.items():
+            v = getattr(self, name)
+            if type(self.__dataclass_fields__[name].default) is int:
+                as_int(v, f"design.{name}", lo=int(lo), hi=int(hi), cls=DesignError, why=why)
+            elif name == "crank_angles_deg":
+                if len(v) != 2:
+                    reject(f"design.{name}", list(v), "exactly 2 crank angles (two crankshafts)",
+                           f"lists {len(v)}", DesignError)
+                for i, x in enumerate(v):
+                    as_real(x, f"design.{name}[{i}]", lo=lo, hi=hi, unit="deg", cls=DesignError, why=why)
+            else:
+                unit = "deg" if name.endswith("_deg") else "mm"
+                as_real(v, f"design.{name}", lo=lo, hi=hi, lo_open=lo_open, unit=unit, cls=DesignError, why=why)
+
+    def _check_relations(self) -> None:
+        def bad(name: str, value: Any, allowed: str, problem: str) -> None:
+            reject(f"design.{name}", value, allowed, problem, DesignError)
+
+        if self.z_disc != self.z_pins - 1:
+            bad("z_disc", self.z_disc, f"z_pins - 1 = {self.z_pins - 1}",
+                "does not match the pins (the cycloid drive has one lobe fewer than pins)")
         rp = self.pin_circle_radius_mm
         half_pitch = rp * math.sin(math.pi / self.z_pins)
         if self.pin_radius_mm >= half_pitch:
-            raise ValueError(
-                f"design.pin_radius_mm {self.pin_radius_mm} mm must be below half the pin chord pitch "
-                f"{half_pitch:.4f} mm: {self.z_pins} pins of that radius overlap on the "
-                f"{self.pin_circle_diameter_mm} mm circle")
+            bad("pin_radius_mm", self.pin_radius_mm, f"< half the pin chord pitch, {half_pitch:.4f} mm",
+                f"mm makes the {self.z_pins} pins overlap on the {self.pin_circle_diameter_mm:g} mm circle")
         k1 = self.eccentricity_mm * self.z_pins / rp
-        if not 0.0 < k1 < 1.0:
-            raise ValueError(
-                f"design.eccentricity_mm {self.eccentricity_mm} gives a shortening coefficient e*Zp/Rp = "
-                f"{k1:.4f}; it must be in (0, 1), i.e. eccentricity below {rp / self.z_pins:.4f} mm")
-        if len(self.crank_angles_deg) != 2:
-            raise ValueError(f"design.crank_angles_deg {self.crank_angles_deg} must list exactly 2 cranks")
+        if not k1 < 1.0:
+            bad("eccentricity_mm", self.eccentricity_mm, f"< Rp / Zp = {rp / self.z_pins:.4f} mm",
+                f"mm gives a shortening coefficient e*Zp/Rp = {k1:.4f} >= 1 (a looped, unusable profile)")
+        # the two planets on the crank circle: its radius is the stage I centre distance a, so two planets
+        # (tip radius m (Z2/2 + 1 + x2)) at crank angles beta_0, beta_1 stand 2 a sin(|beta_1 - beta_0| / 2)
+        # apart and must not overlap (the crank holes in the discs and plates are rvcad.check's)
         a = self.center_distance_mm
+        c0, c1 = self.crank_angles_deg
+        chord = 2.0 * a * abs(math.sin(math.radians(c1 - c0) / 2.0))
+        need = 2.0 * (self.planet_pitch_radius_mm + self.module_mm * (1.0 + PLANET_SHIFT))
+        if chord <= need:
+            min_deg = 2.0 * math.degrees(math.asin(min(1.0, need / (2.0 * a))))
+            bad("crank_angles_deg", [int(c) if float(c).is_integer() else c for c in (c0, c1)],
+                f"cranks at least {min_deg:.2f} deg apart (and at most {360 - min_deg:.2f} deg)",
+                f"puts the two planets {chord:.3f} mm apart on the {a:g} mm crank circle (the stage I centre "
+                f"distance): their tip circles ({need:.3f} mm across) overlap")
         if self.cam_radius_mm + self.eccentricity_mm >= a:
-            raise ValueError(
-                f"design.cam_radius_mm {self.cam_radius_mm} mm plus eccentricity must stay below the crank "
-                f"radius {a} mm")
+            bad("cam_radius_mm", self.cam_radius_mm, f"< crank radius - eccentricity = {a - self.eccentricity_mm:g} mm",
+                "mm plus the eccentricity reaches the disc centre")
         if self.crank_journal_radius_mm >= self.cam_radius_mm - self.eccentricity_mm:
-            raise ValueError(
-                f"design.crank_journal_radius_mm {self.crank_journal_radius_mm} mm must be below "
-                f"cam_radius_mm - eccentricity_mm = {self.cam_radius_mm - self.eccentricity_mm} mm "
-                "so the crank can be assembled through the cam")
+            bad("crank_journal_radius_mm", self.crank_journal_radius_mm,
+                f"< cam_radius_mm - eccentricity_mm = {self.cam_radius_mm - self.eccentricity_mm:g} mm",
+                "mm does not pass through the cam (the crank cannot be assembled)")
+        # the input shaft through the discs, taken as large as the unshifted sun tip circle m (Z1 + 2) / 2
         sun_tip = self.sun_pitch_radius_mm + self.module_mm
         if self.disc_center_hole_radius_mm <= sun_tip + self.eccentricity_mm:
-            raise ValueError(
-                f"design.disc_center_hole_radius_mm {self.disc_center_hole_radius_mm} mm must exceed the sun "
-                f"tip radius plus eccentricity ({sun_tip + self.eccentricity_mm} mm)")
+            bad("disc_center_hole_radius_mm", self.disc_center_hole_radius_mm,
+                f"> sun tip radius + eccentricity = {sun_tip + self.eccentricity_mm:g} mm", "mm touches the sun")
         if self.disc_center_hole_radius_mm >= a - self.cam_radius_mm - self.eccentricity_mm:
-            raise ValueError(
-                f"design.disc_center_hole_radius_mm {self.disc_center_hole_radius_mm} mm must leave a web "
-                f"to the crank holes (below {a - self.cam_radius_mm - self.eccentricity_mm} mm)")
+            bad("disc_center_hole_radius_mm", self.disc_center_hole_radius_mm,
+                f"< crank radius - cam radius - eccentricity = {a - self.cam_radius_mm - self.eccentricity_mm:g} mm",
+                "mm leaves no web to the crank holes")
         if self.housing_outer_radius_mm <= rp + self.pin_radius_mm:
-            raise ValueError(
-                f"design.housing_outer_radius_mm {self.housing_outer_radius_mm} mm must exceed Rp + pin radius "
-                f"= {rp + self.pin_radius_mm} mm")
-        return self
+            bad("housing_outer_radius_mm", self.housing_outer_radius_mm,
+                f"> Rp + pin radius = {rp + self.pin_radius_mm:g} mm", "mm does not hold the pins")
+
+    @property
+    def min_convex_radius_mm(self) -> float:
+        """Smallest convex radius of curvature of the pin-centre curve, mm (about 4.6 mm by default).
+
+        A pin radius above it undercuts the disc (the CAD trims the loops; the design check says so).
+        Evaluated on 4001 points of the rising half of lobe 0 of ``q(t) = Rp u(t) - e u(Zp t)``.
+        """
+        rp, e, zp = self.pin_circle_radius_mm, self.eccentricity_mm, self.z_pins
+        best = 0.0
+        n = 4001
+        for i in range(n):
+            t = math.pi / (zp - 1) * i / (n - 1)
+            dx = -rp * math.sin(t) + e * zp * math.sin(zp * t)
+            dy = rp * math.cos(t) - e * zp * math.cos(zp * t)
+            ddx = -rp * math.cos(t) + e * zp * zp * math.cos(zp * t)
+            ddy = -rp * math.sin(t) + e * zp * zp * math.sin(zp * t)
+            k = (dx * ddy - dy * ddx) / math.hypot(dx, dy) ** 3
+            best = max(best, k)
+        return 1.0 / best if best > 0 else math.inf
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any] | None) -> "Design":
+    def from_dict(cls, d: Any) -> "Design":
         """Build and validate from a dict (the ``design`` object of a case JSON).
 
-        Unknown keys raise ``ValueError`` naming the key.
+        ``None`` gives the default design. Unknown keys, wrong types (a crank angle list that is
+        not a list of 2 numbers, a tooth count that is not an integer) and values out of range raise
+        :class:`~rvcad.validation.DesignError` naming the field.
         """
-        d = dict(d or {})
-        names = {f.name for f in fields(cls)}
+        if d is None:
+            return cls().validate()
+        names = [f.name for f in fields(cls)]
+        d = as_mapping(d, "design", f"an object with keys from {names}", DesignError)
         for k in d:
             if k not in names:
-                raise ValueError(f"design key {k!r} is unknown; allowed: {sorted(names)}")
-        if "crank_angles_deg" in d:
-            d["crank_angles_deg"] = tuple(d["crank_angles_deg"])
-        for k, v in d.items():
-            if k.startswith("z_") and isinstance(v, float) and v.is_integer():
-                d[k] = int(v)
-        return cls(**d).validate()
+                reject("design key", k, f"{sorted(names)}", "is unknown", DesignError)
+        kw: dict[str, Any] = {}
+        for f in fields(cls):
+            if f.name not in d:
+                continue
+            v = d[f.name]
+            where = f"design.{f.name}"
+            if f.name == "crank_angles_deg":
+                if not isinstance(v, (list, tuple)):
+                    reject(where, v, "a list of 2 angles in degrees", f"is of type {type(v).__name__}, not a list",
+                           DesignError)
+                kw[f.name] = tuple(as_real(x, f"{where}[{i}]", unit="deg", cls=DesignError) for i, x in enumerate(v))
+            elif isinstance(f.default, bool):
+                kw[f.name] = v
+            elif isinstance(f.default, int):
+                kw[f.name] = as_int(v, where, cls=DesignError)
+            elif isinstance(f.default, float):
+                kw[f.name] = as_real(v, where, cls=DesignError)
+            else:
+                kw[f.name] = v
+        return cls(**kw).validate()
+
+
+#: Physical range of every Design field: (low, high, low bound open?, reason). Relations between
+#: fields are checked in :meth:`Design.validate` after these.
+FIELD_RANGES: dict[str, tuple[float, float, bool, str]] = {
+    "z_sun": (6, 300, False, "an involute pinion below 6 teeth has no tip land"),
+    "z_planet": (6, 300, False, "stage I gears of 6 to 300 teeth"),
+    "z_pins": (6, 200, False, "cycloid drives of 6 to 200 pins"),
+    "z_disc": (5, 199, False, "z_pins - 1"),
+    "pin_circle_diameter_mm": (0.0, 2000.0, True, "a reducer below 2 m"),
+    "eccentricity_mm": (0.0, 100.0, True, "below Rp / Zp as well"),
+    "pin_radius_mm": (0.0, 100.0, True, "below half the pin pitch as well"),
+    "module_mm": (0.05, 50.0, False, "the ISO 54 module range"),
+    "pressure_angle_deg": (10.0, 30.0, False, "standard pressure angles 14.5 to 25 deg with margin"),
+    "stage1_backlash_mm": (0.0, 50.0, False, "below the planet's tip thickness as well"),
+    "crank_angles_deg": (-360.0, 360.0, False, "one turn either way"),
+    "gear_width_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "disc_width_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "disc_gap_mm": (0.0, 1000.0, False, "axial widths below 1 m"),
+    "plate_width_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "cam_radius_mm": (0.0, 1000.0, True, "inside the disc as well"),
+    "crank_journal_radius_mm": (0.0, 1000.0, True, "inside the cam as well"),
+    "disc_center_hole_radius_mm": (0.0, 1000.0, True, "between the sun and the crank holes as well"),
+    "housing_outer_radius_mm": (0.0, 2000.0, True, "a reducer below 2 m"),
+    "cam_bearing_rollers": (3, 200, False, "rolling elements of one bearing"),
+    "cam_bearing_roller_diameter_mm": (0.0, 100.0, True, "needle rollers below 100 mm"),
+    "cam_bearing_roller_length_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "journal_bearing_rollers": (3, 200, False, "rolling elements of one bearing"),
+    "journal_bearing_roller_diameter_mm": (0.0, 100.0, True, "rollers below 100 mm"),
+    "journal_bearing_roller_length_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    **{k: (-lim, lim, False, "rvcad.profile.MAX_MODIFICATION") for k, lim in MAX_MODIFICATION.items()},
+}
+
+
+def load_design(path: str | Path) -> Design:
+    """Read a design JSON file (the ``design`` object of a case: ``Design`` fields).
+
+    Raises
+    ------
+    DesignError
+        Naming the file or the field (a repeated key, a bad value, an unknown key).
+    """
+    d = read_json_file(path, "design file", DesignError)
+    if not isinstance(d, dict):
+        reject(f"design file {str(path)!r}", d, "a JSON object of Design fields", "is not an object", DesignError)
+    return Design.from_dict(d)

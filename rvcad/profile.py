@@ -378,6 +378,27 @@ class CycloidProfile:
         return sd + self.pin_radius, t, n
 
 
+#: Largest profile modification accepted (mm for equidistant and shift, degrees for rotation).
+MAX_MODIFICATION = {"profile_equidistant_mm": 0.2, "profile_shift_mm": 0.2, "profile_rotation_deg": 0.5}
+
+
+def modified_profile_parameters(design) -> tuple[float, float, float]:
+    """Generating parameters of the modified disc profile: ``(Rp + shift, rp + equidistant, rotation rad)``.
+
+    Equidistant modification: the disc is cut for a pin (wheel) radius ``rp + d_rp``; shift (offset)
+    modification: the wheel centre runs on ``Rp + d_Rp``; rotation modification: the profile is turned by
+    ``delta`` relative to the crank holes. The pin-centre curve becomes ``(Rp + d_Rp) u(t) - e u(Zp t)``
+    and the boundary its inner equidistant at ``rp + d_rp``. Raises ``ValueError`` naming the field when
+    a modification is out of its range (:data:`MAX_MODIFICATION`).
+    """
+    for name, lim in MAX_MODIFICATION.items():
+        v = getattr(design, name, 0.0)
+        if not abs(v) <= lim:
+            raise ValueError(f"design.{name} {v!r} is out of range; |value| <= {lim}")
+    return (design.pin_circle_radius_mm + design.profile_shift_mm, design.pin_radius_mm + design.profile_equidistant_mm,
+            math.radians(design.profile_rotation_deg))
+
+
 def inv(a: np.ndarray | float) -> np.ndarray | float:
     """Involute function tan(a) - a."""
     return np.tan(a) - a

@@ -19,8 +19,6 @@ Modules
     :mod:`rvcalib.results` (typed candidate records, the result); :mod:`rvcalib.lsq` the numerics.
 :mod:`rvcalib.simulate`
     ``simulate_dataset(...)``: measured-like datasets with hidden effects (answer file kept apart).
-:mod:`rvcalib.rsm_loop`
-    ``rsm_closed_loop(...)``: lack of fit of a response surface -> supported higher-order/physical term.
 :mod:`rvcalib.report`, :mod:`rvcalib.cli`
     Markdown/PNG/JSON report; ``rv-calibrate DATASET --out DIR [--json] [--steps N]``.
 

@@ -12,17 +12,17 @@ on stderr, exit status 2.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
+from rvcad import validation as v
 from rvcalib.dataset import read_dataset
-from rvcalib.orders import STEPS_MAX
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser."""
-    p = argparse.ArgumentParser(
+    p = v.ArgumentParser(
         prog="rv-calibrate",
         description="Close the loop on measured TE data: residual -> missing effect -> model update -> "
                     "error before and after.")
@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="requested screening grid, points per output revolution; used when it resolves the "
                         "reducer's orders that matter without aliasing (a multiple of the pin count, above twice "
                         "the highest input order) and is at most 720, else the smallest grid that does is used and "
-                        f"the report says so (default: that grid; at most {STEPS_MAX})")
+                        f"the report says so (default: that grid; at most {v.MAX_GRID_STEPS})")
     p.add_argument("--alpha", type=float, default=0.01, help="family-wise significance level (default 0.01)")
     p.add_argument("--max-terms", type=int, default=6, help="largest number of effects + empirical terms (default 6)")
     p.add_argument("--screen-points", type=int, default=None,
@@ -46,6 +46,47 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stop adding terms after this many seconds (the result says so; default: no budget)")
     p.add_argument("--verbose", action="store_true", help="progress messages on stderr")
     return p
+
+
+def _reducer_for_options(args: argparse.Namespace):
+    """The reducer the options are checked against: ``--reducer``, else DATASET/design.json, else the
+    default design (a bad design file is reported when the dataset is read)."""
+    from rvcad.params import Design
+
+    from rvcalib.dataset import load_design
+
+    try:
+        return load_design(args.reducer, Path(args.dataset))[0]
+    except ValueError:
+        return Design()
+
+
+def check_options(args: argparse.Namespace) -> None:
+    """Ranges of the options, before the dataset is read (OptionError naming the option and its bound).
+
+    ``--steps`` and ``--screen-points`` are bounded by :data:`rvcad.validation.MAX_GRID_STEPS` (the
+    time budget of the grid solves), ``--max-terms`` by :data:`rvcad.validation.MAX_TERMS`; both grids
+    are multiples of the reducer's pin count Zp (``--steps``; pin-wise signatures shift by whole pin
+    pitches) and ``--screen-points`` above 2 Zp (sampling theorem). Whether a grid resolves every
+    order that matters (the input orders too) is checked once the dataset is read (:func:`rvcalib.orders.screen_grid`: ``--steps``
+    that would alias is replaced by the smallest grid that does not, with a note; ``--screen-points``
+    that would alias is refused).
+    """
+    zp = _reducer_for_options(args).z_pins
+    if args.steps is not None:
+        v.option_int(args.steps, "--steps", zp, v.MAX_GRID_STEPS, why="the time budget of the grid solves")
+        if args.steps % zp:
+            raise v.OptionError(f"--steps {args.steps} is not a multiple of {zp} (the pin count of the reducer); "
+                                f"allowed: a multiple of {zp} in [{zp}, {v.MAX_GRID_STEPS}]", field="--steps",
+                                value=args.steps)
+    v.option_real(args.alpha, "--alpha", 0.0, 1.0, lo_open=True, hi_open=True)
+    v.option_int(args.max_terms, "--max-terms", 1, v.MAX_TERMS, why="effects plus empirical terms the loop may add")
+    if args.screen_points is not None:
+        v.option_int(args.screen_points, "--screen-points", 2 * zp + 1, v.MAX_GRID_STEPS,
+                     why=f"more than 2 points per period of the pin order {zp}")
+    if args.time_budget is not None:
+        v.option_real(args.time_budget, "--time-budget", 0.0, 86400.0, lo_open=True)
+    v.output_dir(args.out)
 
 
 def summary(res, paths: dict) -> str:
@@ -95,15 +136,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rvcalib.report import result_json, write_report
 
     try:
-        for opt, v in (("--steps", args.steps), ("--screen-points", args.screen_points)):
-            if v is not None and not 1 <= v <= STEPS_MAX:
-                raise ValueError(f"{opt} {v} must lie in [1, {STEPS_MAX}] points per output revolution")
-        if not (0 < args.alpha < 1 and math.isfinite(args.alpha)):
-            raise ValueError(f"--alpha {args.alpha} must lie in (0, 1)")
-        if args.time_budget is not None and not (math.isfinite(args.time_budget) and 0 < args.time_budget <= 86400):
-            raise ValueError(f"--time-budget {args.time_budget} must lie in (0, 86400] seconds")
-        if not 1 <= args.max_terms <= 50:
-            raise ValueError(f"--max-terms {args.max_terms} must lie in [1, 50]")
+        check_options(args)
         ds = read_dataset(args.dataset, design=args.reducer)
         steps = args.steps
         log = (lambda s: print(f"rv-calibrate: {s}", file=sys.stderr, flush=True)) if args.verbose else None
@@ -111,7 +144,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         screen_points=args.screen_points, time_budget_s=args.time_budget)
         paths = write_report(res, args.out)
     except ValueError as exc:
-        print(f"rv-calibrate: error: {exc}", file=sys.stderr)
+        print(f"rv-calibrate: error: {v.one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"rv-calibrate: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
         return 2
     if args.json:
         print(result_json(res, paths["figures"], paths["report"]))

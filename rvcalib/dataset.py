@@ -3,8 +3,8 @@
 A dataset is a folder with ``runs.csv`` (one row per run: ``run, load_Nm, direction``, optional
 declared Table 4 error columns, ``temperature_C``, ``speed_rpm``) and ``samples.csv`` (``run,
 input_deg, output_deg``, optional ``time_s``). :func:`read_dataset` returns a
-:class:`MeasuredDataset` or raises ``ValueError`` with a message that names the file, the column
-and the run.
+:class:`MeasuredDataset` or raises ``DatasetError`` (a ``ValueError``, :mod:`rvcad.validation`)
+with a message that names the file, the column and the run.
 
 What is checked (an error) and what is tolerated (repaired and reported in ``notes``):
 
@@ -41,6 +41,7 @@ import pandas as pd
 
 from rvcad.errors import ERROR_TYPES, Case
 from rvcad.params import Design
+from rvcad.validation import DatasetError
 
 from rvcalib.orders import check_periodic, period_deg
 
@@ -232,41 +233,41 @@ def load_design(source: "str | Path | dict | Design | None", folder: Path | None
     if path is None or (source is None and not path.is_file()):
         return Design(), "default"
     if not path.is_file():
-        raise ValueError(f"reducer design file '{path}' does not exist")
+        raise DatasetError(f"reducer design file '{path}' does not exist")
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"reducer design file '{path}' is not valid JSON: {exc}") from None
+        raise DatasetError(f"reducer design file '{path}' is not valid JSON: {exc}") from None
     if isinstance(raw, dict) and isinstance(raw.get("design"), dict):
         raw = raw["design"]
     if not isinstance(raw, dict):
-        raise ValueError(f"reducer design file '{path}' must hold a JSON object of design fields "
+        raise DatasetError(f"reducer design file '{path}' must hold a JSON object of design fields "
                          f"(e.g. {{\"z_sun\": 18, \"z_planet\": 36}}), got {type(raw).__name__}")
     try:
         d = Design.from_dict(raw)
         check_periodic(d)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{path.name}: {exc}") from None
+        raise DatasetError(f"{path.name}: {exc}") from None
     return d, str(path) if source is not None else "design.json in the dataset folder"
 
 
 def _read_csv(path: Path, what: str) -> pd.DataFrame:
     if not path.is_file():
-        raise ValueError(f"{what} file '{path}' does not exist (a dataset folder holds runs.csv and samples.csv)")
+        raise DatasetError(f"{what} file '{path}' does not exist (a dataset folder holds runs.csv and samples.csv)")
     try:
         df = pd.read_csv(path, dtype={"run": str}, skipinitialspace=True)
     except pd.errors.EmptyDataError:
-        raise ValueError(f"{what} file '{path}' is empty") from None
+        raise DatasetError(f"{what} file '{path}' is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{what} file '{path}' is not a readable CSV: {exc}") from None
+        raise DatasetError(f"{what} file '{path}' is not a readable CSV: {exc}") from None
     df.columns = [str(c).strip() for c in df.columns]
     if len(df) == 0:
-        raise ValueError(f"{what} file '{path}' has a header but no rows")
+        raise DatasetError(f"{what} file '{path}' has a header but no rows")
     dup = [c for c in df.columns if list(df.columns).count(c) > 1]
     if dup:
-        raise ValueError(f"{path.name}: column '{dup[0]}' appears more than once")
+        raise DatasetError(f"{path.name}: column '{dup[0]}' appears more than once")
     if "run" in df.columns:
-        df["run"] = df["run"].astype(str).str.strip()
+        df["run"] = df["run"].fillna("").astype(str).str.strip()  # pandas 3 keeps NaN through astype(str)
     return df
 
 
@@ -279,7 +280,7 @@ def _numeric(df: pd.DataFrame, col: str, fname: str, runs: pd.Series | None = No
         where = f" (run {runs.iloc[i]})" if runs is not None else ""
         cell = raw.iloc[i]
         what = "is missing" if pd.isna(cell) else f"is not a finite number: {str(cell)!r}"
-        raise ValueError(f"{fname}: column '{col}' row {i + 2}{where} {what}")
+        raise DatasetError(f"{fname}: column '{col}' row {i + 2}{where} {what}")
     return vals.to_numpy(dtype=float)
 
 
@@ -290,18 +291,18 @@ def _check_error_column(key: str, values: np.ndarray, runs: pd.Series) -> None:
         return
     if et.unit == "um":
         if np.all(nz < UM_LOOKS_LIKE_MM):
-            raise ValueError(
+            raise DatasetError(
                 f"runs.csv: column '{key}' holds values up to {nz.max():g}, which look like mm; the "
                 f"column is in um (e.g. 14 for 14 um, not 0.014): multiply it by 1000")
         if np.any(nz > 1000.0):
             i = int(np.argmax(np.abs(values)))
-            raise ValueError(
+            raise DatasetError(
                 f"runs.csv: column '{key}' run {runs.iloc[i]} value {values[i]:g} um exceeds 1 mm; "
                 "the column is in um (values in nm? divide by 1000)")
     else:
         if np.any(nz > 5.0):
             i = int(np.argmax(np.abs(values)))
-            raise ValueError(
+            raise DatasetError(
                 f"runs.csv: column '{key}' run {runs.iloc[i]} value {values[i]:g} is too large for "
                 "degrees (|value| <= 5); it looks like arcsec, arcmin or um: give the error in degrees")
 
@@ -310,32 +311,32 @@ def _read_runs(path: Path) -> tuple[pd.DataFrame, list[str]]:
     df = _read_csv(path, "runs")
     for c in RUN_REQUIRED:
         if c not in df.columns:
-            raise ValueError(f"runs.csv: required column '{c}' is missing; columns are {list(df.columns)}")
+            raise DatasetError(f"runs.csv: required column '{c}' is missing; columns are {list(df.columns)}")
     allowed = set(RUN_REQUIRED) | set(RUN_OPTIONAL) | set(ERROR_TYPES)
     for c in df.columns:
         if c not in allowed:
-            raise ValueError(
+            raise DatasetError(
                 f"runs.csv: column '{c}' is unknown; allowed: {list(RUN_REQUIRED)}, optional "
                 f"{list(RUN_OPTIONAL)} and the error keys {sorted(ERROR_TYPES)}")
     runs = df["run"]
     if (runs == "").any() or (runs.str.lower() == "nan").any():
         i = int(np.flatnonzero(((runs == "") | (runs.str.lower() == "nan")).to_numpy())[0])
-        raise ValueError(f"runs.csv: column 'run' row {i + 2} is empty")
+        raise DatasetError(f"runs.csv: column 'run' row {i + 2} is empty")
     dup = runs[runs.duplicated()]
     if len(dup):
-        raise ValueError(f"runs.csv: run '{dup.iloc[0]}' appears more than once in column 'run'")
+        raise DatasetError(f"runs.csv: run '{dup.iloc[0]}' appears more than once in column 'run'")
     load = _numeric(df, "load_Nm", "runs.csv", runs)
     for i, v in enumerate(load):
         if v < 0:
-            raise ValueError(f"runs.csv: column 'load_Nm' run {runs.iloc[i]} is {v:g}; the load magnitude must be >= 0 "
+            raise DatasetError(f"runs.csv: column 'load_Nm' run {runs.iloc[i]} is {v:g}; the load magnitude must be >= 0 "
                              "(it always resists the motion)")
         if v > MAX_LOAD_NM:
-            raise ValueError(f"runs.csv: column 'load_Nm' run {runs.iloc[i]} is {v:g}, which looks like N mm; "
+            raise DatasetError(f"runs.csv: column 'load_Nm' run {runs.iloc[i]} is {v:g}, which looks like N mm; "
                              "give the load in N m")
     direc = _numeric(df, "direction", "runs.csv", runs)
     for i, v in enumerate(direc):
         if v not in (1.0, -1.0):
-            raise ValueError(f"runs.csv: column 'direction' run {runs.iloc[i]} is {v:g}; it must be +1 or -1")
+            raise DatasetError(f"runs.csv: column 'direction' run {runs.iloc[i]} is {v:g}; it must be +1 or -1")
     out = pd.DataFrame({"run": runs, "load_Nm": load, "direction": direc.astype(int)})
     keys = [c for c in df.columns if c in ERROR_TYPES]
     for k in keys:
@@ -346,16 +347,16 @@ def _read_runs(path: Path) -> tuple[pd.DataFrame, list[str]]:
         t = _numeric(df, "temperature_C", "runs.csv", runs)
         for i, v in enumerate(t):
             if v > MAX_TEMPERATURE_C:
-                raise ValueError(f"runs.csv: column 'temperature_C' run {runs.iloc[i]} is {v:g}, which looks like "
+                raise DatasetError(f"runs.csv: column 'temperature_C' run {runs.iloc[i]} is {v:g}, which looks like "
                                  "kelvin or fahrenheit; give degrees Celsius")
             if v < -40.0:
-                raise ValueError(f"runs.csv: column 'temperature_C' run {runs.iloc[i]} is {v:g} degC, below -40")
+                raise DatasetError(f"runs.csv: column 'temperature_C' run {runs.iloc[i]} is {v:g} degC, below -40")
         out["temperature_C"] = t
     if "speed_rpm" in df.columns:
         s = _numeric(df, "speed_rpm", "runs.csv", runs)
         if np.any(s < 0):
             i = int(np.argmin(s))
-            raise ValueError(f"runs.csv: column 'speed_rpm' run {runs.iloc[i]} is {s[i]:g}; the speed must be >= 0")
+            raise DatasetError(f"runs.csv: column 'speed_rpm' run {runs.iloc[i]} is {s[i]:g}; the speed must be >= 0")
         out["speed_rpm"] = s
     return out, keys
 
@@ -381,20 +382,20 @@ def _check_angle_units(run: str, inp: np.ndarray, out: np.ndarray, ratio: float,
     if s_out > 0 and s_in > 0:
         r = (s_in / s_out) / ratio
         if abs(r / rad - 1.0) < 0.05:
-            raise ValueError(
+            raise DatasetError(
                 f"samples.csv: run {run}: column 'output_deg' looks like radians (input span / output span = "
                 f"{s_in / s_out:.4g}, expected {ratio:g}, off by the factor 180/pi); give degrees")
         if abs(r * rad - 1.0) < 0.05:
-            raise ValueError(
+            raise DatasetError(
                 f"samples.csv: run {run}: column 'input_deg' looks like radians (input span / output span = "
                 f"{s_in / s_out:.4g}, expected {ratio:g}, off by the factor pi/180); give degrees")
         if abs(r - 1.0) < 0.05 and s_in < 0.5 * (ratio * 360.0) and s_in > 0.5 * 2 * math.pi * ratio:
-            raise ValueError(
+            raise DatasetError(
                 f"samples.csv: run {run}: columns 'input_deg' and 'output_deg' look like radians (input span "
                 f"{s_in:.4g} ~ {s_in / (2 * math.pi * ratio):.3g} output revolutions in radians, but only "
                 f"{s_in / (ratio * 360.0):.3g} in degrees); give degrees")
         if abs(r - 1.0) > 0.05:
-            raise ValueError(
+            raise DatasetError(
                 f"samples.csv: run {run}: input span / output span is {s_in / s_out:.5g}, not the ratio "
                 f"{ratio:g}{' of the default reducer' if default else ''}: "
                 + ("the ratio does not match the default (paper) design; describe the reducer measured with "
@@ -481,7 +482,7 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
     """
     root = Path(path)
     if not root.is_dir():
-        raise ValueError(f"dataset folder '{root}' does not exist or is not a folder")
+        raise DatasetError(f"dataset folder '{root}' does not exist or is not a folder")
     des, des_src = load_design(design, root)
     ratio = float(des.ratio)
     period = period_deg(des)
@@ -489,19 +490,21 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
     sdf = _read_csv(root / "samples.csv", "samples")
     for c in SAMPLE_REQUIRED:
         if c not in sdf.columns:
-            raise ValueError(f"samples.csv: required column '{c}' is missing; columns are {list(sdf.columns)}")
+            raise DatasetError(f"samples.csv: required column '{c}' is missing; columns are {list(sdf.columns)}")
     for c in sdf.columns:
         if c not in SAMPLE_REQUIRED + SAMPLE_OPTIONAL:
-            raise ValueError(f"samples.csv: column '{c}' is unknown; allowed: {list(SAMPLE_REQUIRED)} and "
+            raise DatasetError(f"samples.csv: column '{c}' is unknown; allowed: {list(SAMPLE_REQUIRED)} and "
                              f"optional {list(SAMPLE_OPTIONAL)}")
     srun = sdf["run"]
+    if (srun == "").any():
+        raise DatasetError(f"samples.csv: column 'run' row {int(np.flatnonzero((srun == '').to_numpy())[0]) + 2} is empty")
     inp_all = _numeric(sdf, "input_deg", "samples.csv", srun)
     out_all = _numeric(sdf, "output_deg", "samples.csv", srun)
     t_all = _numeric(sdf, "time_s", "samples.csv", srun) if "time_s" in sdf.columns else None
     known = set(runs_df["run"])
     extra = sorted(set(srun) - known)
     if extra:
-        raise ValueError(f"samples.csv: run '{extra[0]}' in column 'run' is not in runs.csv")
+        raise DatasetError(f"samples.csv: run '{extra[0]}' in column 'run' is not in runs.csv")
     notes: list[str] = []
     records: list[RunRecord] = []
     groups = {k: np.flatnonzero((srun == k).to_numpy()) for k in runs_df["run"]}
@@ -509,7 +512,7 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
         rid = row["run"]
         idx = groups[rid]
         if idx.size == 0:
-            raise ValueError(f"samples.csv: run {rid} of runs.csv has no samples")
+            raise DatasetError(f"samples.csv: run {rid} of runs.csv has no samples")
         inp, out = inp_all[idx], out_all[idx]
         tt = t_all[idx] if t_all is not None else None
         rnotes: list[str] = []
@@ -532,30 +535,30 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
             inp, out = inp[keep], out[keep]
             tt = tt[keep] if tt is not None else None
         if inp.size < 8:
-            raise ValueError(f"samples.csv: run {rid} has only {inp.size} distinct samples; at least one output "
+            raise DatasetError(f"samples.csv: run {rid} has only {inp.size} distinct samples; at least one output "
                              "revolution of samples is needed")
         if tt is not None and np.any(np.diff(tt) <= 0):
             i = int(np.flatnonzero(np.diff(tt) <= 0)[0])
-            raise ValueError(f"samples.csv: run {rid}: column 'time_s' is not increasing at sample {i + 2} of the run "
+            raise DatasetError(f"samples.csv: run {rid}: column 'time_s' is not increasing at sample {i + 2} of the run "
                              f"({tt[i]:g} then {tt[i + 1]:g} s)")
         dx = np.diff(inp) * direction
         if np.all(dx < 0):
-            raise ValueError(f"samples.csv: run {rid}: column 'input_deg' runs {'down' if direction == 1 else 'up'} "
+            raise DatasetError(f"samples.csv: run {rid}: column 'input_deg' runs {'down' if direction == 1 else 'up'} "
                              f"but runs.csv gives direction {direction:+d}")
         if np.any(dx <= 0):
             i = int(np.flatnonzero(dx <= 0)[0])
-            raise ValueError(f"samples.csv: run {rid}: column 'input_deg' is not monotonic: sample {i + 2} of the run "
+            raise DatasetError(f"samples.csv: run {rid}: column 'input_deg' is not monotonic: sample {i + 2} of the run "
                              f"goes from {inp[i]:.6g} to {inp[i + 1]:.6g} deg against direction {direction:+d}")
         _check_angle_units(rid, inp, out, ratio, des_src == "default")
         revs = record_revolutions(inp, period)
         step = float(np.median(np.abs(np.diff(inp))))
         if revs < 1.0 - 0.5 * step / period:  # half a sample step of slack for reading errors
-            raise ValueError(f"samples.csv: run {rid} covers {revs:.4g} output revolutions (input span "
+            raise DatasetError(f"samples.csv: run {rid} covers {revs:.4g} output revolutions (input span "
                              f"{abs(inp[-1] - inp[0]):.6g} deg); at least one output revolution ({period:g} deg "
                              "of input) is needed")
         te = (out - inp / ratio) * ARCSEC_PER_DEG
         if abs(float(np.median(te))) > 3600.0:
-            raise ValueError(f"samples.csv: run {rid}: the TE output_deg - input_deg/{ratio:g} is "
+            raise DatasetError(f"samples.csv: run {rid}: the TE output_deg - input_deg/{ratio:g} is "
                              f"{np.median(te) / 3600:.4g} deg; the encoders do not share their zero or the columns "
                              "are not the input and output angles")
         sigma = noise_estimate(te)
@@ -574,7 +577,7 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
         try:
             Case.from_dict(rec.case_dict())
         except ValueError as exc:
-            raise ValueError(f"runs.csv: run {rid}: {exc}") from None
+            raise DatasetError(f"runs.csv: run {rid}: {exc}") from None
         records.append(rec)
         notes.extend(rnotes)
     return MeasuredDataset(path=root, runs=records, notes=notes, declared_keys=keys, design=des, design_source=des_src)

@@ -8,7 +8,7 @@ Three families:
   disc and hole of the cam and hole errors, the pin of the pin-wise errors (a single pin's pitch,
   radial position and radius) as well as all pins at once, and the direction of the eccentricity
   and offset errors (two parameters: the components along 0 and 90 deg of its frame).
-* ``model``: the physical effects that the paper's model lacks (``rvcad.errors.MODEL_OPTIONS``),
+* ``model``: the physical effects that the paper's model lacks (``rvdyn.options.MODEL_OPTIONS``),
   passed to rvdyn through the case's ``model`` object: torsional compliance (load dependent),
   output friction torque (direction dependent), cam-bearing clearance (direction dependent lost
   motion), thermal growth of the pin circle (only where the runs differ in temperature; at one
@@ -36,7 +36,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rvcad.errors import ERROR_TYPES, MODEL_OPTIONS
+from rvcad.errors import ERROR_TYPES
+from rvdyn.options import MODEL_OPTIONS
 from rvcad.params import Design
 
 from rvcalib.dataset import MeasuredDataset

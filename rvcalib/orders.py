@@ -18,12 +18,14 @@ from __future__ import annotations
 import math
 
 from rvcad.params import Design
+from rvcad.validation import MAX_GRID_STEPS
 
 #: Largest screening grid chosen from a ``--steps`` request (points per output revolution); larger
 #: requests (1000, 1e6) screen on the smallest grid that resolves the orders instead.
 SCREEN_MAX = 720
-#: Largest ``--steps`` / ``--screen-points`` accepted (memory of the signatures).
-STEPS_MAX = 1_000_000
+#: Largest ``--steps`` / ``--screen-points`` accepted (the time budget of the grid solves, as every
+#: command's grid option; :data:`rvcad.validation.MAX_GRID_STEPS`).
+STEPS_MAX = MAX_GRID_STEPS
 
 
 def ratio(design: Design) -> float:

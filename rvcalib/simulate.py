@@ -30,7 +30,8 @@ import numpy as np
 import pandas as pd
 
 from rvcad.atomic import atomic_path
-from rvcad.errors import ERROR_TYPES, MODEL_OPTIONS, Case
+from rvcad.errors import ERROR_TYPES, Case
+from rvdyn.options import MODEL_OPTIONS
 
 from rvcad.params import Design
 

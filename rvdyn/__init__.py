@@ -1,11 +1,22 @@
-"""rvdyn: quasi-static meshing analysis of the RV reducer: transmission error, statistics, lost motion.
+"""rvdyn: quasi-static meshing analysis of the RV reducer: transmission error, statistics, backlash,
+and the hysteresis curve with the datasheet figures (rvdyn.stiffness).
 
 Two contact providers behind one solver: ``analytic`` (exact envelope and involute distances)
 and ``fcl`` (python-fcl distance queries on the exported meshes).
-"""
-from rvdyn.contacts import AnalyticContacts, ContactLaw
-from rvdyn.solver import ARCSEC_PER_RAD, InterferenceError, QuasiStaticSolver, Solution
-from rvdyn.te import TEResult, lost_motion, run_te, te_stats, write_table_atomic
 
-__all__ = ["ARCSEC_PER_RAD", "AnalyticContacts", "ContactLaw", "InterferenceError", "QuasiStaticSolver", "Solution",
-           "TEResult", "lost_motion", "run_te", "te_stats", "write_table_atomic"]
+* :func:`solve` -- one case (an :class:`rvcad.Case`, a dict or a JSON path) -> ``.table``,
+  ``.stats``, ``.plot()`` (:mod:`rvdyn.api`).
+* :func:`run_cases` / :class:`Runner` -- many cases through a content-keyed disk cache, in this
+  process, a local process pool or a Dask cluster (:mod:`rvdyn.runner`, :mod:`rvdyn.cache`).
+* :func:`run_te`, :func:`te_stats`, :func:`backlash` -- the building blocks (:mod:`rvdyn.te`).
+"""
+from rvdyn.api import Result, solve
+from rvdyn.cache import CaseCache, Job
+from rvdyn.contacts import AnalyticContacts, ContactLaw
+from rvdyn.runner import Runner, run_cases
+from rvdyn.solver import ARCSEC_PER_RAD, InterferenceError, QuasiStaticSolver, Solution
+from rvdyn.te import TEResult, backlash, run_te, te_stats, write_table_atomic
+
+__all__ = ["ARCSEC_PER_RAD", "AnalyticContacts", "CaseCache", "ContactLaw", "InterferenceError", "Job",
+           "QuasiStaticSolver", "Result", "Runner", "Solution", "TEResult", "backlash", "run_cases", "run_te",
+           "solve", "te_stats", "write_table_atomic"]

@@ -20,35 +20,58 @@ from dataclasses import dataclass
 import numpy as np
 
 from rvcad.geometry import ReducerGeometry
+from rvdyn.materials import LineContact
 
 
 @dataclass(frozen=True)
 class ContactLaw:
-    """ADAMS-style impact force without damping, ``F = K * delta**n`` (paper Eq. 1).
+    """Contact law of the solver, by kind.
+
+    ``kind = "impact"``: the paper's ADAMS-style impact force without damping, ``F = K * delta**n``
+    (paper Eq. 1) at every contact. ``kind = "physical"``: Hertzian line contact at the pins and the
+    ISO 6336-1 mesh stiffness at the sun-planet meshes (:class:`PhysicalLaw`, built by the solver
+    from the geometry at each linearisation); ``K`` and ``n`` are then unused.
 
     Parameters
     ----------
     K : float
-        Stiffness, N/mm**n (default 2.0e5 N/mm^1.5, conventions).
+        Stiffness, N/mm**n (default 2.0e5 N/mm^1.5, the paper's value).
     n : float
         Force exponent (default 1.5).
     rigid : bool
         Rigid single-flank limit (K -> infinity): solved as a linear penalty with stiffness
         ``RIGID_K`` under a vanishing load, so elastic deflections stay below 1e-9 mm.
+    kind : {"impact", "physical"}
     """
 
     K: float = 2.0e5
     n: float = 1.5
     rigid: bool = False
+    kind: str = "impact"
 
     RIGID_K = 1.0e9  # N/mm, linear penalty of the rigid limit
     RIGID_LOAD_NMM = 1.0  # N mm, vanishing load that only sets the flank in the rigid limit
+    KINDS = ("impact", "physical")
 
     def __post_init__(self) -> None:
+        if self.kind not in self.KINDS:
+            raise ValueError(f"contact law {self.kind!r} is unknown; allowed: {list(self.KINDS)}")
         if not (math.isfinite(self.K) and self.K > 0):
             raise ValueError(f"contact stiffness K {self.K} must be a finite number > 0 (N/mm^n)")
         if not (math.isfinite(self.n) and 1.0 <= self.n <= 3.0):
             raise ValueError(f"contact exponent n {self.n} must be in [1, 3]")
+
+    @property
+    def physical(self) -> bool:
+        return self.kind == "physical" and not self.rigid
+
+    def describe(self) -> str:
+        """Words for messages: which law this is."""
+        if self.rigid:
+            return "the rigid limit"
+        if self.kind == "physical":
+            return "the physical contact law (Hertz line contact, ISO 6336 mesh stiffness)"
+        return f"the impact law K = {self.K:g} N/mm^{self.n:g}"
 
     @property
     def k_eff(self) -> float:
@@ -58,7 +81,11 @@ class ContactLaw:
     def n_eff(self) -> float:
         return 1.0 if self.rigid else self.n
 
-    def force(self, delta: np.ndarray) -> np.ndarray:
+    def floor_stiffness(self) -> float:
+        """Typical working stiffness (N/mm) for the damping floor of the solver."""
+        return float(self.k_eff if self.rigid else self.stiffness(np.array(1e-3)))
+
+    def force(self, delta: np.ndarray, rows=None) -> np.ndarray:
         """Contact force (N) for penetration delta (mm); zero where delta <= 0."""
         d = np.maximum(delta, 0.0)
         n = self.n_eff
@@ -66,7 +93,7 @@ class ContactLaw:
             return self.k_eff * d * np.sqrt(d)
         return self.k_eff * d ** n
 
-    def stiffness(self, delta: np.ndarray) -> np.ndarray:
+    def stiffness(self, delta: np.ndarray, rows=None) -> np.ndarray:
         """dF/d(delta), N/mm."""
         d = np.maximum(delta, 0.0)
         n = self.n_eff
@@ -76,7 +103,10 @@ class ContactLaw:
             return 1.5 * self.k_eff * np.sqrt(d)
         return n * self.k_eff * d ** (n - 1.0)
 
-    def energy(self, delta: np.ndarray) -> np.ndarray:
+    def force_stiffness(self, delta: np.ndarray, rows=None) -> tuple[np.ndarray, np.ndarray]:
+        return self.force(delta), self.stiffness(delta)
+
+    def energy(self, delta: np.ndarray, rows=None) -> np.ndarray:
         """Stored energy K delta^(n+1)/(n+1), N mm."""
         d = np.maximum(delta, 0.0)
         n = self.n_eff
@@ -85,6 +115,58 @@ class ContactLaw:
         if n == 1.0:
             return 0.5 * self.k_eff * d * d
         return self.k_eff * d ** (n + 1.0) / (n + 1.0)
+
+
+class PhysicalLaw:
+    """The physical law at one linearisation: Hertz line contact on the first ``n_pin`` columns (one
+    Johnson constant ``C`` per step and pin, from the local curvature), a linear mesh spring ``k_mesh``
+    (N/mm along the line of action) on the others. ``rows`` selects steps of the chunk."""
+
+    rigid = False
+    kind = "physical"
+
+    def __init__(self, line: LineContact, n_pin: int, k_mesh: float) -> None:
+        self.line = line
+        self.n_pin = n_pin
+        self.k_mesh = float(k_mesh)
+
+    def describe(self) -> str:
+        return "the physical contact law (Hertz line contact, ISO 6336 mesh stiffness)"
+
+    def _C(self, rows):
+        return self.line.C if rows is None else self.line.C[rows]
+
+    def floor_stiffness(self) -> float:
+        C = np.median(self.line.C)
+        return float(self.line.stiffness(np.array(1e-4), np.array(C)))
+
+    def force_stiffness(self, delta: np.ndarray, rows=None) -> tuple[np.ndarray, np.ndarray]:
+        p = self.n_pin
+        C = self._C(rows)
+        dp = delta[:, :p]
+        u = self.line._u(dp, C)
+        pos = dp > 0
+        F = np.empty_like(delta)
+        K = np.empty_like(delta)
+        F[:, :p] = np.where(pos, self.line.L * np.exp(C - u), 0.0)
+        K[:, :p] = np.where(pos, self.line.L / (self.line.A * (u - 1.0)), 0.0)
+        dm = delta[:, p:]
+        F[:, p:] = self.k_mesh * np.maximum(dm, 0.0)
+        K[:, p:] = np.where(dm > 0, self.k_mesh, 0.0)
+        return F, K
+
+    def force(self, delta: np.ndarray, rows=None) -> np.ndarray:
+        return self.force_stiffness(delta, rows)[0]
+
+    def stiffness(self, delta: np.ndarray, rows=None) -> np.ndarray:
+        return self.force_stiffness(delta, rows)[1]
+
+    def energy(self, delta: np.ndarray, rows=None) -> np.ndarray:
+        p = self.n_pin
+        E = np.empty_like(delta)
+        E[:, :p] = self.line.energy(delta[:, :p], self._C(rows))
+        E[:, p:] = 0.5 * self.k_mesh * np.maximum(delta[:, p:], 0.0) ** 2
+        return E
 
 
 class AnalyticContacts:
@@ -111,6 +193,10 @@ class AnalyticContacts:
         d, t, n = prof.boundary_distance(p, start)
         self._last_t[k] = t
         return d, n
+
+    def foot_parameters(self, k: int) -> np.ndarray | None:
+        """Foot parameters (rad) of disc k's last ``disc_distance`` call, or None."""
+        return self._last_t.get(k)
 
     def stage1_gaps(self, theta_in: np.ndarray, theta_out: np.ndarray, psi: np.ndarray,
                     direction: int) -> np.ndarray:

@@ -3,7 +3,7 @@
 The analytic provider (:class:`rvdyn.contacts.AnalyticContacts`) is the exact reference; this
 one answers the same two questions on triangle meshes built from the very samples that the
 exported STL uses, so it checks the exported geometry end to end. Every call into FCL goes
-through :mod:`rvcad.collision` (the only module that imports ``fcl``).
+through :mod:`rvdyn.collision` (the only module that imports ``fcl``).
 
 Disc boundary (``disc_distance``)
 ---------------------------------
@@ -57,9 +57,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rvcad import collision
 from rvcad.geometry import ReducerGeometry
 from rvcad.profile import CycloidProfile, InvoluteGear
+from rvdyn import collision
 
 #: Height of the fin strips above the profile plane, mm (any positive value gives the same
 #: distances; the point queries sit at z = 0).

@@ -29,10 +29,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rvcad.errors import model_value
 from rvcad.geometry import ReducerGeometry
 from rvcad.tolerances import TOL, Tolerances
-from rvdyn.contacts import ContactLaw
+from rvdyn.bearings import Supports
+from rvdyn.contacts import ContactLaw, PhysicalLaw
+from rvdyn.materials import (MATERIALS, LineContact, e_star, hertz_line_pressure, iso_mesh_stiffness,
+                             iso_single_tooth_stiffness, transverse_contact_ratio)
+from rvdyn.options import model_choice, model_value, parse_model
 
 ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
 
@@ -51,6 +54,13 @@ class InterferenceError(ValueError):
     """The case's interference cannot be resolved at the given stiffness."""
 
 
+def law_from_model(model: dict, rigid: bool = False) -> ContactLaw:
+    """The contact law a case's ``model`` object asks for (default: ``rvdyn.options.DEFAULT_CONTACT``)."""
+    m = parse_model(model)
+    return ContactLaw(K=model_value(m, "contact_K_N_per_mm_n"), n=model_value(m, "contact_n"), rigid=rigid,
+                      kind=model_choice(m, "contact"))
+
+
 @dataclass
 class Solution:
     """Equilibrium states for a set of input angles.
@@ -65,6 +75,16 @@ class Solution:
     max_penetration_mm : (N,) mm
     stage1_force_N : (N, n_cranks) N (NaN in the rigid limit)
     iterations : int, outer iterations used (largest over the chunks)
+    parts_rad : dict of (N,) rad
+        Output wind-up of each part kind at the step (unit-load method, section 8 of docs/physics.md):
+        ``pins`` and ``gears`` (contact deflections), and with the physical law and elastic supports
+        ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (series
+        compliance); empty in the rigid limit and with floating discs (cam-bearing clearance).
+    peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
+    warnings : list of str
+    pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
+    cam_force_N : (N, n_discs, n_cranks, 2) N or None, forces of the cams on the discs (fixed frame)
+    n_pin_contacts : (N,) int, pin-disc contacts (both discs) that touch (penetration > 0)
     """
 
     theta_in: np.ndarray
@@ -77,6 +97,12 @@ class Solution:
     stage1_force_N: np.ndarray
     iterations: int = 0
     x: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    parts_rad: dict = field(default_factory=dict)
+    peak_pressure_MPa: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    warnings: list = field(default_factory=list)
+    pin_force_N: np.ndarray | None = field(default=None, repr=False)
+    cam_force_N: np.ndarray | None = field(default=None, repr=False)
+    n_pin_contacts: np.ndarray | None = field(default=None, repr=False)
 
 
 class QuasiStaticSolver:
@@ -94,10 +120,11 @@ class QuasiStaticSolver:
                  tol: Tolerances = TOL) -> None:
         self.geom = geom
         self.contacts = contacts
-        self.law = law if law is not None else ContactLaw()
+        m = parse_model(geom.case.model)
+        self.model = m
+        self.law = law if law is not None else law_from_model(m)
         self.tol = tol
         d = geom.design
-        m = geom.case.model
         self.clearance = model_value(m, "cam_bearing_clearance_um") * 1e-3
         self.bearing_k = model_value(m, "cam_bearing_stiffness_N_per_um") * 1e3
         self.float_discs = self.clearance > 0.0
@@ -108,6 +135,56 @@ class QuasiStaticSolver:
         self.a = d.center_distance_mm
         self.friction_Nmm = model_value(m, "friction_torque_Nm") * 1e3
         self.compliance_rad_per_Nmm = model_value(m, "torsional_compliance_arcsec_per_Nm") / ARCSEC_PER_RAD * 1e-3
+        self.pressure_limit = model_value(m, "contact_pressure_limit_MPa")
+        self._setup_physical(d, m)
+
+    def _setup_physical(self, d, m) -> None:
+        """Constants of the physical law: pin-disc materials, ISO 6336-1 mesh stiffness, supports."""
+        pin, disc = MATERIALS["pin"], MATERIALS["cycloid_disc"]
+        self.pin_mats = (pin, disc)
+        self.pin_estar = e_star(pin, disc)
+        self.face_width = d.disc_width_mm
+        g = self.geom
+        sun, pl = g.sun, g.planet
+        aw = d.center_distance_mm
+        alpha_w = math.acos((sun.base_radius + pl.base_radius) / aw)
+        self.eps_alpha = transverse_contact_ratio(sun.tip_radius, sun.base_radius, pl.tip_radius, pl.base_radius,
+                                                  aw, alpha_w, sun.base_pitch)
+        self.c_single = iso_single_tooth_stiffness(d.z_sun, d.z_planet, sun.shift, pl.shift,
+                                                   MATERIALS["sun_gear"].E, MATERIALS["planet_gear"].E,
+                                                   pressure_angle_deg=d.pressure_angle_deg)
+        self.c_gamma = iso_mesh_stiffness(self.c_single, self.eps_alpha)      # N/(mm um)
+        self.k_mesh = self.c_gamma * 1e3 * d.gear_width_mm                     # N/mm along the line of action
+        self.supports = None
+        self.k_stage1 = self.k_mesh
+        self.torsion_share = 0.0
+        if self.law.kind == "physical" and model_choice(m, "supports") == "elastic" and not self.float_discs:
+            self.supports = Supports.from_design(d)
+            # crank torsion between planet and cams in series with the mesh, seen along the line of action
+            k_t = self.supports.GJ / (self.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
+            self.k_stage1 = 1.0 / (1.0 / self.k_mesh + 1.0 / k_t)
+            self.torsion_share = self.k_stage1 / k_t                           # share of the stage I deflection
+        self._C_last: np.ndarray | None = None
+        self._R_last: np.ndarray | None = None
+        self._R_all: np.ndarray | None = None
+        self._nrm_last: np.ndarray | None = None
+
+    def _line_C(self, k: int, pts: np.ndarray, t0: np.ndarray, r_pin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Johnson constant C and relative radius R (mm) of the pin contacts of disc k from the local
+        radius of curvature of the disc boundary at the foot points (signed: negative where concave)."""
+        prof = self.geom.profiles[k]
+        t = getattr(self.contacts, "foot_parameters", lambda _k: None)(k)
+        if t is None or t.shape != t0.shape:
+            t = prof.foot_point(pts, t0)
+        kap = prof.curvature(t)
+        with np.errstate(divide="ignore"):
+            rho = 1.0 / kap - prof.pin_radius                                   # boundary radius, signed
+        rho = np.where(np.abs(rho) > self.Rp, np.sign(rho + 1e-300) * self.Rp, rho)   # depth datum <= Rp
+        # a concave boundary must be wider than the pin (conformal limit: relative radius <= 1e4 mm)
+        rho = np.where((rho < 0) & (-rho < r_pin * (1.0 + 1e-4)), -r_pin * (1.0 + 1e-4), rho)
+        R = 1.0 / (1.0 / r_pin + 1.0 / rho)
+        return LineContact.of(r_pin, rho, *self.pin_mats, self.face_width).C, R
+
 
     # ------------------------------------------------------------------ state maps
     def _unpack(self, th_in: np.ndarray, x: np.ndarray):
@@ -166,14 +243,23 @@ class QuasiStaticSolver:
         gaps = np.empty((N, self.nd, self.zp))
         nx = np.empty_like(gaps)
         ny = np.empty_like(gaps)
+        Cs = np.empty((N, self.nd, self.zp))
+        Rs = np.empty((N, self.nd, self.zp))
         for k in range(self.nd):
             pts = np.stack([px[:, k].ravel(), py[:, k].ravel()], axis=1)
             dist, nrm = self.contacts.disc_distance(k, pts, t0[:, k].ravel())
             gaps[:, k] = dist.reshape(N, self.zp) - self.geom.pin_radii[None]
             nx[:, k] = nrm[:, 0].reshape(N, self.zp)
             ny[:, k] = nrm[:, 1].reshape(N, self.zp)
+            r_pin = np.broadcast_to(self.geom.pin_radii[None], (N, self.zp)).ravel()
+            Ck, Rk = self._line_C(k, pts, t0[:, k].ravel(), r_pin)
+            Cs[:, k] = Ck.reshape(N, self.zp)
+            Rs[:, k] = Rk.reshape(N, self.zp)
         mx = nx * c - ny * s
         my = nx * s + ny * c
+        self._C_last = Cs.reshape(N, -1)
+        self._R_last = Rs.reshape(N, -1)
+        self._nrm_last = np.stack([mx, my], axis=-1)                            # fixed frame, (N, nd, Zp, 2)
         lever = nx * py - ny * px
         jac = (-(mx[..., None] * dcen[:, :, None, 0, :] + my[..., None] * dcen[:, :, None, 1, :])
                + lever[..., None] * dang[:, :, None, :])
@@ -267,8 +353,15 @@ class QuasiStaticSolver:
 
     def _law(self, load_Nm: float) -> ContactLaw:
         if load_Nm == 0.0 and not self.law.rigid:
-            return ContactLaw(self.law.K, self.law.n, rigid=True)
+            return ContactLaw(self.law.K, self.law.n, rigid=True, kind=self.law.kind)
         return self.law
+
+    def _step_law(self, law: ContactLaw, C: np.ndarray | None):
+        """The law of one linearisation: the physical law with the Johnson constants of its pin contacts."""
+        if not law.physical:
+            return law
+        n1 = self.nd * self.zp
+        return PhysicalLaw(LineContact(1.0 / (math.pi * self.pin_estar), C, self.face_width), n1, self.k_stage1)
 
     def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200) -> np.ndarray:
         """Minimise the linearised potential around x0; returns the step (N, ndof).
@@ -279,8 +372,7 @@ class QuasiStaticSolver:
         N, M, D = J.shape
         step = np.zeros((N, D))
         # damping floor: about a quarter of the contacts at 1 um of penetration (typical working stiffness)
-        floor_k = law.stiffness(np.array(1e-3)) if not law.rigid else law.k_eff
-        floor = float(floor_k) * max(1.0, M / 4.0) * np.ones(D)
+        floor = law.floor_stiffness() * max(1.0, M / 4.0) * np.ones(D)
         eye = np.eye(D)
 
         arms = self._hole_arms(th_in, x0)
@@ -299,8 +391,7 @@ class QuasiStaticSolver:
                 break
             s = step[idx]
             delta = -(G[idx] + _jdot(J[idx], s))
-            f = law.force(delta)
-            k = law.stiffness(delta)
+            f, k = law.force_stiffness(delta, idx)
             Ji = J[idx]
             grad = -np.matmul(f[:, None, :], Ji)[:, 0] + b[None]
             H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
@@ -322,7 +413,7 @@ class QuasiStaticSolver:
                     break
                 cand = s[w] + alpha * dstep[w]
                 Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], b, law, cand,
-                                None if arms is None else arms[idx[w]])
+                                None if arms is None else arms[idx[w]], rows=idx[w])
                 upd = Ec < best_E[w]
                 best_E[w[upd]] = Ec[upd]
                 best_s[w[upd]] = cand[upd]
@@ -374,6 +465,10 @@ class QuasiStaticSolver:
         chunk = N if chunk is None else max(1, int(chunk))
         tol_mm = self.tol.solver_angle_rad * self.Rp
         G_all = np.empty((N, self.nd * self.zp + 2 * self.nc))
+        C_all = np.empty((N, self.nd * self.zp))
+        R_all = np.empty((N, self.nd * self.zp))
+        nrm_all = np.empty((N, self.nd, self.zp, 2))
+        J_all = np.empty((N, self.nd * self.zp + 2 * self.nc, self.ndof))
         trust = np.full(N, OUTER_TRUST_MM)
         last_dx = np.zeros((N, self.ndof))
         mu_all = np.ones(N)
@@ -386,8 +481,9 @@ class QuasiStaticSolver:
                 xs[:] = prev
             for it in range(self.tol.solver_max_iter):
                 G, J = self._linearise(th[sl], xs, direction)
+                step_law = self._step_law(law, self._C_last)
                 mu = mu_all[sl]
-                dx = self._inner(th[sl], xs, G, J, b, law, mu)
+                dx = self._inner(th[sl], xs, G, J, b, step_law, mu)
                 mu_all[sl] = np.minimum(mu, 1e-2)
                 # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
                 # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
@@ -406,49 +502,133 @@ class QuasiStaticSolver:
                     # the step is below the tolerance: the linearised gaps at the new state are exact
                     # to O(dx^2 / rho), far below 1e-12 mm
                     G_all[sl] = G + _jdot(J, dx)
+                    nrm_all[sl] = self._nrm_last
+                    J_all[sl] = J
+                    C_all[sl] = self._C_last
+                    R_all[sl] = self._R_last
                     break
             else:
-                self._check_penetration(th[sl], xs, direction, law)  # an overlap is the usual cause
+                self._check_penetration(th[sl], xs, direction, law, load_Nm=load_Nm)  # an overlap is the usual cause
                 raise RuntimeError(
                     f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
                     f"(last change {np.abs(dx).max():.3e} mm)")
             x[sl] = xs
             prev = xs[-1].copy()
-        return self._finish(th, x, direction, load_Nm, law, iters, G_all)
+        self._R_all = R_all
+        self._J_all = J_all
+        return self._finish(th, x, direction, load_Nm, self._step_law(law, C_all), iters, G_all, nrm_all)
 
-    def _check_penetration(self, th, x, direction, law, G: np.ndarray | None = None) -> np.ndarray:
-        """Gaps at the states x; raise InterferenceError if an overlap exceeds what the law allows."""
+    def _check_penetration(self, th, x, direction, law, G: np.ndarray | None = None,
+                           load_Nm: float = 0.0) -> np.ndarray:
+        """Gaps at the states x; raise InterferenceError if an overlap exceeds what the law allows.
+
+        The message names the likely cause: in the rigid limit the errors (the elastic law can take a
+        preload); with an elastic law and no errors the load; otherwise the errors or the load."""
         if G is None:
             G, _ = self._linearise(th, x, direction)
         pen = np.maximum(-G, 0.0).max(axis=1)
         limit = self.tol.interference_mm if law.rigid else MAX_ELASTIC_PENETRATION_MM
         if np.any(pen > limit):
             i = int(np.argmax(pen))
-            mode = "the rigid limit" if law.rigid else f"K = {law.K:g} N/mm^{law.n:g}"
-            raise InterferenceError(
-                f"interference of {pen[i] * 1e3:.3f} um at input angle {math.degrees(th[i]):.3f} deg cannot be "
-                f"resolved at {mode} (allowed {limit * 1e3:g} um): the parts overlap; reduce the errors that "
-                "close the clearance or use the elastic contact law")
+            head = (f"interference of {pen[i] * 1e3:.3f} um at input angle {math.degrees(th[i]):.3f} deg cannot be "
+                    f"resolved at {law.describe()} (allowed {limit * 1e3:g} um): ")
+            if law.rigid:
+                advice = ("the parts overlap; reduce the errors that close the clearance, or solve with an elastic "
+                          "contact law under load (load_Nm > 0, no --rigid) to take it as a preload")
+            elif not self.geom.case.errors:
+                advice = (f"the load {load_Nm:g} N m presses the contacts deeper than an elastic contact law "
+                          "holds; reduce load_Nm")
+            else:
+                advice = (f"the parts overlap by more than an elastic contact law holds at load {load_Nm:g} N m; "
+                          "reduce the errors that close the clearance (or the load)")
+            raise InterferenceError(head + advice)
         return G
 
-    def _finish(self, th, x, direction, load_Nm, law, iters, G: np.ndarray) -> Solution:
-        G = self._check_penetration(th, x, direction, law, G)
+    def _finish(self, th, x, direction, load_Nm, law, iters, G: np.ndarray, nrm: np.ndarray) -> Solution:
+        G = self._check_penetration(th, x, direction, law, G, load_Nm=load_Nm)
         delta = -G
         pen = np.maximum(delta, 0.0).max(axis=1)
         to, ps, _, _ = self._unpack(th, x)
         F = law.force(delta)
         te = to - th / self.geom.ratio
-        if not law.rigid:
-            te = te - direction * (load_Nm * 1e3 + self.friction_Nmm) * self.compliance_rad_per_Nmm
-        nan = law.rigid
+        T = load_Nm * 1e3 + self.friction_Nmm
         n1 = self.nd * self.zp
+        parts: dict[str, np.ndarray] = {}
+        warnings: list[str] = []
+        cam_F = None
+        if not law.rigid and not self.float_discs:
+            cam_F = self.disc_cam_forces(th, x, F, nrm)
+        if not law.rigid:
+            te = te - direction * T * self.compliance_rad_per_Nmm
+            if not self.float_discs:
+                f = self._unit_load_forces(law, delta, direction)               # dF/dT, N per N mm
+                work = f * np.maximum(delta, 0.0)
+                parts = {"pins": work[:, :n1].sum(axis=1), "gears": work[:, n1:].sum(axis=1)}
+                if self.supports is not None and law.kind == "physical":
+                    parts["crank_torsion"] = self.torsion_share * parts["gears"]
+                    parts["gears"] = parts["gears"] - parts["crank_torsion"]
+                    sup = self._support_windup(th, x, F, f, nrm, cam_F)
+                    parts.update(sup)
+                    te = te - direction * sum(sup.values())
+        nan = law.rigid
+        pressure = np.full(th.size, np.nan)
+        if not nan:
+            pressure = self._pin_pressure(F[:, :n1], law).max(axis=1)
+            worst = float(np.nanmax(pressure)) if pressure.size else 0.0
+            if worst > self.pressure_limit:
+                warnings.append(
+                    f"peak pin-disc contact pressure {worst:.0f} MPa exceeds the stated limit "
+                    f"{self.pressure_limit:g} MPa (model.contact_pressure_limit_MPa): the materials would yield; "
+                    "the elastic result is an extrapolation")
         return Solution(
             theta_in=th, theta_out=to + (te - (to - th / self.geom.ratio)), psi=ps, te_rad=te,
             n_contacts=(delta > (1e-12 if not law.rigid else 0.0)).sum(axis=1),
             peak_force_N=np.full(th.size, np.nan) if nan else F.max(axis=1),
             max_penetration_mm=pen,
             stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:n1 + self.nc],
-            iterations=iters, x=x)
+            iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings,
+            pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F,
+            n_pin_contacts=(delta[:, :n1] > (1e-12 if not law.rigid else 0.0)).sum(axis=1))
+
+    def _pin_pressure(self, F: np.ndarray, law) -> np.ndarray:
+        """Peak Hertzian pressure p0 = sqrt(P E*/(pi R)) of every pin contact (N, 2 Zp), MPa, with the
+        relative radius R at the converged foot points (for either law: the force meets the real geometry)."""
+        return hertz_line_pressure(F, self._R_all, self.pin_estar, self.face_width)
+
+    def _unit_load_forces(self, law, delta: np.ndarray, direction: int) -> np.ndarray:
+        """Contact forces per unit output torque, dF/dT (N, M) in N/(N mm), at the solution.
+
+        Equilibrium ``J^T F = b`` with ``F = F(-(G + J x))`` and ``db/dT = direction e0 / Rp`` gives
+        ``(J^T K J) dx/dT = -db/dT`` and ``dF/dT = -K J dx/dT`` (K: contact stiffnesses). With the loads
+        proportional to T this is F/T; with a preload (errors) it is the incremental load path the unit-load
+        method needs (docs/physics.md, section 8)."""
+        J = self._J_all
+        _, k = law.force_stiffness(delta)
+        H = np.einsum("nmi,nm,nmj->nij", J, k, J) + 1e-12 * np.eye(self.ndof)[None]
+        db = np.zeros(self.ndof)
+        db[0] = direction / self.Rp
+        dx = -np.linalg.solve(H, np.broadcast_to(db, (J.shape[0], self.ndof))[..., None])[..., 0]
+        return -k * np.einsum("nmi,ni->nm", J, dx)
+
+    def disc_cam_forces(self, th, x, F, nrm) -> np.ndarray:
+        """Cam-bearing forces on the discs (N, nd, nc, 2) that balance the contact forces F (N, M)."""
+        n1 = self.nd * self.zp
+        to, ps, _, _ = self._unpack(th, x)
+        cen, _ = self._poses(th, x)                                             # (N, nd, 2)
+        Fp = F[:, :n1].reshape(-1, self.nd, self.zp)
+        fvec = -Fp[..., None] * nrm                                             # force of pin i on disc k
+        F_disc = fvec.sum(axis=2)
+        r = self.geom.pin_centers[None, None] - cen[:, :, None]
+        M_disc = (r[..., 0] * fvec[..., 1] - r[..., 1] * fvec[..., 0]).sum(axis=2)
+        cams = np.swapaxes(self.geom.cam_centers(to, ps), 1, 2)                # (N, nd, nc, 2)
+        return Supports.cam_forces(F_disc, M_disc, cams - cen[:, :, None])
+
+    def _support_windup(self, th, x, F, f, nrm, B) -> dict[str, np.ndarray]:
+        """Series wind-up of the supports (rad per step): the deflections under the actual loads F
+        (cam forces B), weighted by the unit-load forces f (bearings.Supports.wind_up)."""
+        n1 = self.nd * self.zp
+        b = self.disc_cam_forces(th, x, f, nrm)
+        return self.supports.wind_up(B, b)
 
 
 def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -457,7 +637,8 @@ def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def energy_sub(solver: QuasiStaticSolver, x0, G, J, b, law: ContactLaw, s: np.ndarray,
-               arms: np.ndarray | None = None) -> np.ndarray:
-    """Linearised potential of the states x0 + s (N,), N mm (``arms``: hole arms at x0, floating discs)."""
+               arms: np.ndarray | None = None, rows=None) -> np.ndarray:
+    """Linearised potential of the states x0 + s (N,), N mm (``arms``: hole arms at x0, floating discs;
+    ``rows``: the steps of the law's per-step constants)."""
     delta = -(G + _jdot(J, s))
-    return law.energy(delta).sum(axis=1) + s @ b + solver._bearing(x0 + s, arms, derivs=False)[0]
+    return law.energy(delta, rows).sum(axis=1) + s @ b + solver._bearing(x0 + s, arms, derivs=False)[0]

@@ -1,7 +1,11 @@
-"""The fcl solver against the exact analytic solver on the same cases (issue 3 acceptance).
+"""The fcl solver against the exact analytic solver on the same cases (issue 3 acceptance, issue 11).
 
-TE curves must agree within 0.5 arcsec RMS and 1 arcsec at any step, for the nominal case and for
-each single Table 4 error at its paper value (default load 20 N m, elastic law).
+Impact law (the paper's, named explicitly): TE curves agree within 0.5 arcsec RMS and 1 arcsec at any
+step, for the nominal case and each single Table 4 error at its paper value (default load 20 N m).
+Physical law (Hertz pins, ISO mesh, supports): the same bound holds for the nominal case and the errors
+whose preload the contacts carry without the supports' help; three that need the supports inside the
+equilibrium disagree (strict xfail, docs/physics.md section 8) and the paper's 0.1 deg disc phase is
+refused by both providers alike.
 """
 from __future__ import annotations
 
@@ -10,23 +14,48 @@ import pytest
 
 from rvcad.errors import ERROR_TYPES, Case
 from rvcad.geometry import ReducerGeometry
+from rvdyn.contacts import ContactLaw
+from rvdyn.solver import InterferenceError
 from rvdyn.te import run_te
 
 STEPS = 96
 CASES = {"nominal": {}} | {k: {k: et.paper_value} for k, et in ERROR_TYPES.items()}
+PHYSICAL_DISAGREE = ("cam_eccentricity", "disc_hole_eccentricity", "pin_circle_offset")
+PHYSICAL_REFUSED = ("disc_phase",)
+
+
+def _compare(name: str, law: ContactLaw) -> None:
+    case = Case.from_dict({"name": name, "errors": CASES[name]})
+    g = ReducerGeometry(case)
+    a = run_te(case, "analytic", STEPS, geom=g, law=law)
+    f = run_te(case, "fcl", STEPS, geom=g, law=law)
+    d = f.table["te_arcsec"].to_numpy() - a.table["te_arcsec"].to_numpy()
+    assert np.sqrt(np.mean(d ** 2)) < 0.5
+    assert np.abs(d).max() < 1.0
+    assert f.stats["ratio"] == pytest.approx(a.stats["ratio"], rel=1e-6)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(CASES))
 def test_fcl_matches_analytic(name: str) -> None:
-    case = Case.from_dict({"name": name, "errors": CASES[name]})
+    _compare(name, ContactLaw(kind="impact"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n if n not in PHYSICAL_DISAGREE else pytest.param(n, marks=pytest.mark.xfail(
+    strict=True, reason="preload shared as with rigid supports: stiff contacts amplify fcl's gap error"))
+    for n in CASES if n not in PHYSICAL_REFUSED])
+def test_fcl_matches_analytic_physical(name: str) -> None:
+    _compare(name, ContactLaw(kind="physical"))
+
+
+@pytest.mark.slow
+def test_physical_refuses_the_paper_disc_phase_in_both_providers() -> None:
+    case = Case.from_dict({"errors": {"disc_phase": 0.1}})
     g = ReducerGeometry(case)
-    a = run_te(case, "analytic", STEPS, geom=g)
-    f = run_te(case, "fcl", STEPS, geom=g)
-    d = f.table["te_arcsec"].to_numpy() - a.table["te_arcsec"].to_numpy()
-    assert np.sqrt(np.mean(d ** 2)) < 0.5
-    assert np.abs(d).max() < 1.0
-    assert f.stats["ratio"] == pytest.approx(a.stats["ratio"], rel=1e-6)
+    for solver in ("analytic", "fcl"):
+        with pytest.raises(InterferenceError, match="reduce the errors that close the clearance"):
+            run_te(case, solver, 12, geom=g, law=ContactLaw(kind="physical"))
 
 
 def test_fcl_ideal_rigid_zero_te() -> None:

@@ -73,6 +73,13 @@ def test_bad_terms_and_levels(table6):
     # a 4-factor BBD never has three factors away from 0 at once
     with pytest.raises(ValueError, match="term 'EA:EB:EC' cannot be estimated"):
         rsm.fit(table6, FACTORS, "te_arcmin", terms="quadratic + EA:EB:EC")
+    # the typed error carries every inestimable term; dropping them leaves a full-rank model
+    with pytest.raises(rsm.NotEstimableError, match=r"term 'EA\^3' cannot be estimated.*also not estimable: "
+                       r"EA:EB:EC, EB\^3") as info:
+        rsm.fit(table6, FACTORS, "te_arcmin", terms="quadratic + EA^3 + EA:EB:EC + EB^3 + EA^2:EB")
+    assert info.value.terms == ["EA^3", "EA:EB:EC", "EB^3"]
+    kept = [t for t in rsm.parse_terms("quadratic + EA^2:EB", FACTORS)]
+    assert len(rsm.fit(table6, FACTORS, "te_arcmin", terms="quadratic + EA^2:EB").params) == len(kept)
     lv = pd.read_csv(DATA / "paper_table5_levels.csv")
     with pytest.raises(ValueError, match="levels table has no row for factor 'ED'"):
         rsm.fit(table6, FACTORS, "te_arcmin", levels=lv[lv.factor != "ED"])

@@ -50,6 +50,9 @@ def _compare(ours: rsm.RSMResults, data: pd.DataFrame, response: str) -> None:
     assert ours.anova.loc["Model", "p"] == pytest.approx(ref.f_pvalue, rel=1e-6, abs=1e-300)
     assert ours.r2 == pytest.approx(ref.rsquared, rel=1e-10)
     assert ours.r2_adj == pytest.approx(ref.rsquared_adj, rel=1e-10)
+    assert ours.llf == pytest.approx(ref.llf, rel=1e-10)
+    assert ours.aic == pytest.approx(ref.aic, rel=1e-10)
+    assert ours.bic == pytest.approx(ref.bic, rel=1e-10)
     ci = ref.conf_int(0.05)
     mine_ci = ours.conf_int(0.05)
     for t in ours.term_names:

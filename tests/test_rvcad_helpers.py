@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rvcad.tessellate import read_stl
+from rvcad.stl import read_stl
 
 
 def stl_vertices(path: Path) -> np.ndarray:

@@ -6,10 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from rvcad import collision
+from rvdyn import collision
 from rvcad.errors import Case
 from rvcad.parts import (AXIAL_CLEARANCE_MM, Assembly, CycloidDisc, PinHousing, PlanetGear, SunGear, _Gear)
-from rvcad.tessellate import Loop, arc_steps, involute_deviation, stacked_circles, triangulate
+from rvcad.curves import involute_deviation
+from rvcad.mesh import stacked_circles, triangulate
+from rvcad.outline import Loop
+from rvcad.plane import arc_steps
 
 S = 1e-4  # 0.1 um sagitta / tolerance
 
@@ -200,7 +203,7 @@ def test_triangulate_rejects_self_intersection() -> None:
     with pytest.raises(ValueError, match="sagitta"):
         arc_steps(1.0, 1.0, 0.0)
     with pytest.raises(ValueError, match="do not join"):
-        from rvcad.tessellate import LineSeg
+        from rvcad.outline import LineSeg
 
         Loop((LineSeg((0, 0), (1, 0)), LineSeg((1, 0), (0, 1)), LineSeg((0, 1), (0, 0.5))))
     with pytest.raises(ValueError, match="overlap"):

@@ -1,4 +1,4 @@
-"""Single-factor screen and factor sweeps (rvdyn.screen, ``rvdyn screen``)."""
+"""Single-factor screen and factor sweeps (rvstudy.screen, ``rv-stackup --stages screen``)."""
 from __future__ import annotations
 
 import json
@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 
 from rvcad.errors import ERROR_TYPES
-from rvdyn import cli
-from rvdyn.screen import (
+from rvstudy import cli
+from rvstudy.screen import (
     RSM_FACTORS,
     STAGE,
     TABLE5_HALF_RANGE,
@@ -20,7 +20,9 @@ from rvdyn.screen import (
     sweep_cases,
 )
 
-STEPS = 24
+from conftest import STUDY_STEPS
+
+STEPS = STUDY_STEPS
 
 
 def test_screen_cases_are_table4_at_paper_values():
@@ -93,44 +95,68 @@ def test_rank_needs_case_a():
         rank_errors(df)
 
 
-def test_real_screen_small_steps():
+@pytest.fixture(scope="module")
+def screen_run(small_study):
+    """The screen stage of the shared small ``rv-stackup`` run (analytic, few steps, 3 sweep points):
+    (output folder, its summary.json)."""
+    out, _ = small_study
+    return out, json.loads((out / "summary.json").read_text())
+
+
+@pytest.mark.slow
+def test_real_screen_small_steps(screen_run):
     """The analytic solver at a few steps: stage I errors change the TE ripple far less than cam and hole errors."""
-    r = run_screen("analytic", STEPS, 3, 20.0, progress=False)
-    s = r.screen.set_index("letter")
+    out, summary = screen_run
+    s = pd.read_csv(out / "tables" / "screen.csv")
     assert np.isfinite(s["pp_arcsec"]).all()
+    s = s[s["sign"].isin([0, 1])].set_index("letter")
     assert s.loc["A", "pp_arcsec"] < 1e-3  # error-free: a constant elastic wind-up only
     assert s.loc["A", "mean_abs_arcsec"] > 1.0  # ... of several arcsec at 20 N m
     for stage1 in ("B", "C"):
         for big in ("D", "E", "G"):
             assert s.loc[stage1, "d_pp_arcsec"] < s.loc[big, "d_pp_arcsec"]
-    assert len(r.sweeps) == 12 and set(r.sweeps["factor"]) == set(RSM_FACTORS)
-    assert set(r.stage_check) == {"pp", "mean_abs"}
+    sw = pd.read_csv(out / "tables" / "sweeps.csv")
+    assert len(sw) == 12 and set(sw["factor"]) == set(RSM_FACTORS)
+    assert set(summary["stage_check"]) == {"pp", "mean_abs"}
 
 
-def test_screen_command_writes_tables_plots_and_json(tmp_path, capsys):
-    rc = cli.main(["screen", "--out", str(tmp_path), "--solver", "analytic", "--steps", str(STEPS),
-                   "--sweep-points", "2", "--json"])
-    assert rc == 0
-    out = json.loads(capsys.readouterr().out)
-    assert {"screen", "sweeps", "stage_check", "files"} <= set(out)
-    for name in ("screen.csv", "sweeps.csv", "screen.png", "sweeps.png", "te_curves.png"):
-        assert (tmp_path / name).stat().st_size > 0
-    assert not list(tmp_path.glob(".*"))  # no temporary files left
-    tab = pd.read_csv(tmp_path / "screen.csv")
-    assert len(tab) == 12 and tab["rank_pp"].notna().sum() == 11
-    assert [r["letter"] for r in out["screen"]][0] == "A"
+@pytest.mark.slow
+def test_default_serial_runner_gives_the_study_numbers(screen_run):
+    """run_screen on its own (serial, no cache) solves the + rows to the same numbers as rv-stackup."""
+    out, _ = screen_run
+    study = pd.read_csv(out / "tables" / "screen.csv")
+    study = study[study["sign"].isin([0, 1])].set_index("letter")
+    alone = run_screen("analytic", STEPS, load_Nm=20.0, progress=False, sweeps=False).screen.set_index("letter")
+    assert list(alone.index) == list(study.index)
+    for col in ("pp_arcsec", "mean_abs_arcsec", "rank_pp"):
+        np.testing.assert_allclose(alone[col], study[col], rtol=1e-9, atol=1e-12)
 
 
-def test_screen_command_human_summary(tmp_path, capsys, monkeypatch):
-    import rvdyn.screen as screen
+@pytest.mark.slow
+def test_screen_stage_writes_tables_plots_and_json(screen_run):
+    out, summary = screen_run
+    assert summary["cases"]["failed"] == 0 and summary["cases"]["computed"] > 0
+    assert summary["config"]["sweep_points"] == 3
+    for name in ("tables/screen.csv", "tables/sweeps.csv", "figures/screen.png", "figures/sweeps.png",
+                 "figures/te_curves.png", "report.md"):
+        assert (out / name).stat().st_size > 0, name
+    assert not [p for p in out.rglob(".*") if p.is_file()]  # no temporary files left
+    tab = pd.read_csv(out / "tables" / "screen.csv")
+    assert len(tab) == 23 and tab["rank_pp"].notna().sum() == 11  # A, +-11 errors; ranks of the + rows
+    assert tab["letter"].iloc[0] == "A"
+    report = (out / "report.md").read_text()
+    assert "Single-factor screen" in report and "pin_pitch" in report and "reproduced" in report
 
-    vals = {k: (float(i + 1), 9.0 + i) for i, k in enumerate(ERROR_TYPES)}
-    monkeypatch.setattr(screen, "serial_runner", lambda *a, **k: _fake_runner(vals))
-    monkeypatch.setattr(screen, "write_screen_outputs", lambda result, out: {"screen_csv": str(out)})
-    assert cli.main(["screen", "--out", str(tmp_path), "--solver", "analytic", "--steps", str(STEPS),
-                     "--sweep-points", "2"]) == 0
+
+@pytest.mark.slow
+def test_screen_stage_human_summary_reuses_cache(screen_run, tmp_path, capsys):
+    out, _ = screen_run
+    assert cli.main(["--out", str(tmp_path), "--cache", str(out / "cache"), "--stages", "screen", "--solver",
+                     "analytic", "--steps", str(STEPS), "--sweep-points", "3", "--workers", "1", "--no-progress",
+                     "--no-figures"]) == 0
     text = capsys.readouterr().out
-    assert "stage I" in text and "pin_pitch" in text and "reproduced" in text
+    assert "0 solved" in text  # every case of the same screen comes from the cache
+    assert "stage I errors B/C rank" in text and "below every stage II error" in text
 
 
 @pytest.mark.parametrize("argv, needle", [
@@ -139,6 +165,6 @@ def test_screen_command_human_summary(tmp_path, capsys, monkeypatch):
     (["--load-Nm", "-3"], "--load-Nm"),
 ])
 def test_screen_bad_options_exit_2(tmp_path, capsys, argv, needle):
-    rc = cli.main(["screen", "--out", str(tmp_path), "--solver", "analytic", *argv])
+    rc = cli.main(["--out", str(tmp_path), "--stages", "screen", "--solver", "analytic", *argv])
     assert rc == 2
     assert needle in capsys.readouterr().err

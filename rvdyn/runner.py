@@ -1,14 +1,40 @@
-"""Where the cases are solved: in this process, a local process pool, or a Dask cluster.
+"""One forward runner: many TE solves, cached on disk, in this process, a local pool or a Dask cluster.
 
-Every executor runs the same worker function, :func:`solve_job`, on JSON-ready job payloads
-(:meth:`rvstudy.cache.Job.to_payload`) and yields ``(index, result)`` pairs as they finish. The
-results come back to this process, which alone writes the cache (:class:`CachedRunner`); Dask
-workers therefore need the package installed but no shared disk.
+Use
+---
+>>> from rvdyn.runner import run_cases
+>>> res = run_cases(cases, solver="analytic", steps=360, cache="cache-dir", executor=2)  # doctest: +SKIP
+>>> res[0]["stats"]["pp"], res[0]["te_arcsec"]  # doctest: +SKIP
 
-* :class:`SerialExecutor` -- one case after another in this process (``--workers 1``; tests).
+or keep one :class:`Runner` (its cache, executor and counters) for several batches::
+
+    with Runner(executor=2, cache="cache-dir", solver="fcl", steps=360) as run:
+        first = run(cases_a, "screen")
+        second = run(cases_b, "design", steps=[720] * len(cases_b))        # per-case steps
+        third = run(cases_c, "readings", theta_in_deg=[angles_c0, angles_c1])  # at given input angles
+
+Every call returns one result dict per case, in the order of the cases:
+
+* ``key`` -- the cache key (:meth:`rvdyn.cache.Job.key`); equal jobs are solved once per call;
+* ``status`` -- ``ok`` or ``failed`` (an interference the contact law cannot resolve or a solver that
+  did not converge: a property of the case, cached as such; missing software raises instead);
+* ``stats`` -- ``pp, mean, mean_abs, rms`` of the TE (arcsec, :func:`rvdyn.te.te_stats`), ``ratio``
+  and ``seconds`` (solver wall time, s); NaN when failed;
+* ``te_arcsec`` -- the TE curve (ndarray, arcsec, one value per step or per given input angle, in the
+  order of motion) or None when failed;
+* ``error`` -- the message of a failed solve (else empty); ``cached`` -- taken from the cache.
+
+Executors run the same worker function, :func:`solve_job`, on JSON-ready job payloads
+(:meth:`rvdyn.cache.Job.to_payload`) and yield ``(index, result)`` pairs as they finish. The results
+come back to this process, which alone writes the cache; Dask workers therefore need the package
+installed but no shared disk.
+
+* :class:`SerialExecutor` -- one case after another in this process.
 * :class:`LocalPoolExecutor` -- :class:`concurrent.futures.ProcessPoolExecutor` with the ``spawn``
-  start method (``--workers N``, default 2).
-* :class:`DaskExecutor` -- ``dask.distributed.Client(address)`` (``--scheduler ADDRESS``).
+  start method; its workers end themselves when the process that started them dies.
+* :class:`DaskExecutor` -- ``dask.distributed.Client(address)``.
+
+Nothing here holds a design constant: everything about the reducer comes from each case.
 """
 from __future__ import annotations
 
@@ -17,14 +43,15 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from rvcad.errors import Case
 from rvdyn.contacts import ContactLaw
+from rvdyn.cache import CaseCache, Job
 from rvdyn.te import SOLVERS, run_te
-from rvstudy.cache import CaseCache, Job
 
 SolveFn = Callable[[dict[str, Any]], dict[str, Any]]
 
@@ -37,7 +64,8 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     Parameters
     ----------
     payload : dict
-        ``case`` (case dict), ``solver``, ``steps``, ``revolutions``, ``law`` ({K, n, rigid}), ``key``.
+        ``case`` (case dict), ``solver``, ``steps``, ``revolutions``, ``law`` ({K, n, rigid}), ``key``
+        and optionally ``theta_in_deg`` (list of input angles, deg, replacing steps and revolutions).
 
     Returns
     -------
@@ -51,8 +79,10 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     case = Case.from_dict(payload["case"])
     law = ContactLaw(**payload["law"])
     t0 = time.perf_counter()
+    th = payload.get("theta_in_deg")
     try:
-        r = run_te(case, payload["solver"], int(payload["steps"]), float(payload["revolutions"]), law=law)
+        r = run_te(case, payload["solver"], int(payload["steps"]), float(payload["revolutions"]), law=law,
+                   theta_in_deg=None if th is None else np.asarray(th, dtype=float))
     except (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as exc:
         if isinstance(exc, ImportError):  # pragma: no cover - ImportError is not a ValueError; kept explicit
             raise
@@ -129,7 +159,7 @@ class LocalPoolExecutor:
 
     def __init__(self, workers: int = 2) -> None:
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-            raise ValueError(f"--workers {workers!r} must be an integer >= 1")
+            raise ValueError(f"workers {workers!r} must be an integer >= 1")
         self.workers = workers
         self._pool: ProcessPoolExecutor | None = None
 
@@ -169,6 +199,15 @@ class LocalPoolExecutor:
         return f"local process pool, {self.workers} workers"
 
 
+class SchedulerError(ValueError):
+    """A Dask scheduler address that is empty or cannot be reached (``address``, and ``reason``)."""
+
+    def __init__(self, address: Any, reason: str) -> None:
+        super().__init__(f"scheduler address {address!r}: {reason}")
+        self.address = address
+        self.reason = reason
+
+
 class DaskExecutor:
     """Send the cases to a Dask distributed scheduler.
 
@@ -181,8 +220,8 @@ class DaskExecutor:
 
     Raises
     ------
-    ValueError
-        Naming ``--scheduler`` when the scheduler cannot be reached.
+    SchedulerError
+        A ValueError naming the scheduler address when it is empty or cannot be reached.
     """
 
     name = "dask"
@@ -191,14 +230,14 @@ class DaskExecutor:
         try:
             from dask.distributed import Client
         except ImportError as exc:  # pragma: no cover - a declared dependency
-            raise ValueError(f"--scheduler needs dask[distributed] installed ({exc})") from None
+            raise ValueError(f"a Dask scheduler needs dask[distributed] installed ({exc})") from None
         if not isinstance(address, str) or not address.strip():
-            raise ValueError("--scheduler ADDRESS must be a non-empty scheduler address like tcp://host:8786")
+            raise SchedulerError(address, "must be a non-empty address like tcp://host:8786")
         self.address = address
         try:
             self.client = Client(address, timeout=f"{timeout_s}s", set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
-            raise ValueError(f"--scheduler {address!r}: cannot connect to the Dask scheduler ({exc})") from None
+            raise SchedulerError(address, f"cannot connect to the Dask scheduler ({exc})") from None
         info = self.client.scheduler_info()
         self.workers = max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
 
@@ -207,7 +246,7 @@ class DaskExecutor:
             return
         from dask.distributed import as_completed
 
-        futs = [self.client.submit(fn, p, pure=False, key=f"rvstudy-{p['key']}-{i}-{time.time_ns()}")
+        futs = [self.client.submit(fn, p, pure=False, key=f"rvdyn-{p['key']}-{i}-{time.time_ns()}")
                 for i, p in enumerate(payloads)]
         index = {f.key: i for i, f in enumerate(futs)}
         try:
@@ -225,33 +264,44 @@ class DaskExecutor:
         return f"Dask scheduler {self.address} ({self.workers} worker threads)"
 
 
-def make_executor(workers: int = 2, scheduler: str | None = None, timeout_s: float = 20.0) -> Executor:
-    """Executor from the CLI options: Dask if ``scheduler`` is given, else serial (1) or a pool (N)."""
+def make_executor(workers: int = 1, scheduler: str | None = None, timeout_s: float = 20.0) -> Executor:
+    """Executor from options: Dask if ``scheduler`` (an address) is given, else serial (1) or a local pool (N)."""
     if scheduler:
         return DaskExecutor(scheduler, timeout_s)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"--workers {workers!r} must be an integer >= 1")
+        raise ValueError(f"workers {workers!r} must be an integer >= 1")
     return SerialExecutor() if workers == 1 else LocalPoolExecutor(workers)
 
 
-class CachedRunner:
-    """Solve cases through an executor, reusing and filling a :class:`CaseCache`.
+def _check_steps(steps: Any, what: str = "steps") -> int:
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 2:
+        raise ValueError(f"{what} {steps!r} must be an integer >= 2")
+    return int(steps)
 
-    A runner is what :func:`rvdyn.screen.run_screen` and the study call: ``runner(cases, desc)``
-    returns one result dict per case, in order: ``stats`` (arcsec), ``te_arcsec`` (ndarray or None),
-    ``key``, ``cached`` (bool), ``status`` and ``error``. Equal cases (equal keys) are solved once.
-    Every finished solve is written to the cache at once, so an interrupted run loses only the
-    solves in flight.
+
+class Runner:
+    """Solve cases through an executor, reusing and filling a :class:`rvdyn.cache.CaseCache`.
+
+    ``runner(cases, desc)`` returns one result dict per case, in order (see the module docstring).
+    Equal jobs (equal keys) are solved once per call. Every finished solve is written to the cache at
+    once, so an interrupted run loses only the solves in flight.
 
     Parameters
     ----------
-    executor : Executor
-    cache : CaseCache
+    executor : Executor, int, str or None
+        An executor; or a number of local worker processes (1 = this process); or a Dask scheduler
+        address. Default: this process. An executor made here is closed by :meth:`close` (or at the
+        end of a ``with`` block); one passed in is the caller's to close.
+    cache : CaseCache, str, Path or None
+        The cache or its folder; None: no cache (every case is solved, nothing written).
     solver : {"analytic", "fcl"}
+        Contact provider.
     steps : int
-        Steps per output revolution (>= 2).
+        Default steps per ``revolutions`` output turns (>= 2).
     law : ContactLaw or None
+        Contact law (default K = 2e5 N/mm^1.5, n = 1.5).
     revolutions : float
+        Output revolutions of a solve.
     progress : bool
         tqdm bars on stderr.
     solve_fn : callable
@@ -263,32 +313,85 @@ class CachedRunner:
         Unique solves done now, taken from the cache, and failed (computed or cached), cumulative.
     solve_seconds : list of float
         Solver wall time of every computed case, s.
+    wall_seconds : float
+        Wall time spent in calls, s.
     """
 
-    def __init__(self, executor: Executor, cache: CaseCache, solver: str, steps: int,
-                 law: ContactLaw | None = None, revolutions: float = 1.0, progress: bool = True,
-                 solve_fn: SolveFn = solve_job) -> None:
+    def __init__(self, executor: Executor | int | str | None = None, cache: CaseCache | str | Path | None = None,
+                 solver: str = "analytic", steps: int = 720, law: ContactLaw | None = None,
+                 revolutions: float = 1.0, progress: bool = False, solve_fn: SolveFn = solve_job) -> None:
         if solver not in SOLVERS:
-            raise ValueError(f"--solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
-        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
-            raise ValueError(f"--steps {steps!r} must be an integer >= 2")
-        self.executor = executor
-        self.cache = cache
+            raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
+        self.steps = _check_steps(steps)
+        if not (isinstance(revolutions, (int, float)) and math.isfinite(revolutions) and revolutions > 0):
+            raise ValueError(f"revolutions {revolutions!r} must be a finite number > 0")
+        self._own = not hasattr(executor, "run")
+        if executor is None:
+            executor = SerialExecutor()
+        elif isinstance(executor, str):
+            executor = DaskExecutor(executor)
+        elif not hasattr(executor, "run"):
+            executor = make_executor(workers=executor)
+        self.executor: Executor = executor
+        self.cache = cache if isinstance(cache, CaseCache) else CaseCache(cache)
         self.solver = solver
-        self.steps = steps
         self.law = law if law is not None else ContactLaw()
-        self.revolutions = revolutions
+        self.revolutions = float(revolutions)
         self.progress = progress
         self.solve_fn = solve_fn
         self.computed = self.reused = self.failed = 0
         self.solve_seconds: list[float] = []
         self.wall_seconds = 0.0
 
-    def __call__(self, cases: Sequence[Case], desc: str = "cases") -> list[dict[str, Any]]:
+    def jobs(self, cases: Sequence[Case], steps: int | Sequence[int] | None = None,
+             theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None) -> list[Job]:
+        """The jobs of a batch (see :meth:`__call__` for the arguments)."""
+        cases = list(cases)
+        n = len(cases)
+        if steps is None or isinstance(steps, (int, np.integer)):
+            st = [_check_steps(self.steps if steps is None else steps)] * n
+        else:
+            st = [_check_steps(x, f"steps[{i}]") for i, x in enumerate(steps)]
+            if len(st) != n:
+                raise ValueError(f"steps has {len(st)} entries for {n} cases")
+        th: list[tuple[float, ...] | None] = [None] * n
+        if theta_in_deg is not None:
+            if len(theta_in_deg) != n:
+                raise ValueError(f"theta_in_deg has {len(theta_in_deg)} entries for {n} cases")
+            for i, a in enumerate(theta_in_deg):
+                if a is None:
+                    continue
+                arr = np.asarray(a, dtype=np.float64)
+                if arr.ndim != 1 or arr.size < 2 or not np.all(np.isfinite(arr)):
+                    raise ValueError(f"theta_in_deg[{i}] must be a 1-D array of at least 2 finite angles (deg); "
+                                     f"got shape {arr.shape}")
+                th[i] = tuple(float(x) for x in arr)
+        return [Job(c, self.solver, s, self.revolutions, self.law, t) for c, s, t in zip(cases, st, th)]
+
+    def __call__(self, cases: Sequence[Case], desc: str = "cases", *, steps: int | Sequence[int] | None = None,
+                 theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None) -> list[dict[str, Any]]:
+        """Solve a batch of cases.
+
+        Parameters
+        ----------
+        cases : sequence of Case
+        desc : str
+            Label of the progress bar.
+        steps : int, sequence of int or None
+            Steps for every case, or one per case; default the runner's.
+        theta_in_deg : sequence of (array or None), or None
+            Per case, explicit input angles (deg, order of motion) that replace steps and revolutions,
+            or None for that case.
+
+        Returns
+        -------
+        list of dict
+            One result per case (module docstring).
+        """
         from tqdm.auto import tqdm
 
         t0 = time.perf_counter()
-        jobs = [Job(c, self.solver, self.steps, self.revolutions, self.law) for c in cases]
+        jobs = self.jobs(cases, steps, theta_in_deg)
         keys = [j.key() for j in jobs]
         unique: dict[str, Job] = {}
         for k, j in zip(keys, jobs):
@@ -335,3 +438,36 @@ class CachedRunner:
                 "solve_seconds_median": float(np.nanmedian(s)) if s.size else float("nan"),
                 "solve_seconds_total": float(np.nansum(s)) if s.size else 0.0,
                 "wall_seconds": self.wall_seconds}
+
+    def describe(self) -> str:
+        """Where the cases are solved (the executor's description)."""
+        return getattr(self.executor, "describe", lambda: self.executor.name)()
+
+    def close(self) -> None:
+        """Close the executor if this runner made it."""
+        if self._own:
+            self.executor.close()
+
+    def __enter__(self) -> Runner:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def run_cases(cases: Sequence[Case], *, solver: str = "analytic", steps: int | Sequence[int] = 720,
+              revolutions: float = 1.0, law: ContactLaw | None = None,
+              theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None,
+              cache: CaseCache | str | Path | None = None, executor: Executor | int | str | None = None,
+              progress: bool = False) -> list[dict[str, Any]]:
+    """Solve many cases once: a :class:`Runner` for one batch (arguments as there and in ``__call__``).
+
+    Returns
+    -------
+    list of dict
+        One result per case, in order (module docstring).
+    """
+    with Runner(executor, cache, solver, steps if isinstance(steps, (int, np.integer)) else 720, law,
+                revolutions, progress) as run:
+        return run(cases, "cases", steps=None if isinstance(steps, (int, np.integer)) else steps,
+                   theta_in_deg=theta_in_deg)

@@ -6,11 +6,12 @@
 * :func:`sweep_cases` -- each RSM factor (EA = pin_pitch in deg, EB = pin_circle_diameter in um,
   EC = pin_radius in um, ED = disc_hole_eccentricity in um) alone over the Table 5 range
   (-0.06..0.06 deg, -14..14, -7..7, -14..14 um).
-* :func:`run_screen` -- runs both through a *runner* (default: :func:`serial_runner`, one
-  :func:`rvdyn.te.run_te` after another; ``rv-stackup`` passes its cached, parallel runner) and
+* :func:`run_screen` -- runs both through a *runner* (default: :func:`serial_runner`, an
+  :class:`rvdyn.runner.Runner` in this process without cache; ``rv-stackup`` passes its cached,
+  parallel one) and
   returns the tables, the error ranking and the check of the paper's stage I / stage II claim.
-* :func:`screen_command` -- ``rvdyn screen``: writes ``screen.csv``, ``sweeps.csv`` and the PNG
-  plots atomically and prints a summary (or one JSON object with ``--json``).
+* :func:`plot_screen`, :func:`plot_te_curves`, :func:`plot_sweeps` -- the figures of the report
+  (``rv-stackup --stages screen`` writes the tables, figures and report of this stage).
 
 Responses, per case and over one output revolution: ``pp`` (max - min of TE), ``mean``, ``mean_abs``
 (mean of |TE|, our reading of the paper's "mean value of transmission error") and ``rms``, all in
@@ -22,29 +23,27 @@ wind-up cancels in it); ``rank_mean_abs`` ranks by ``|mean_abs - mean_abs(A)|`` 
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
-import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rvcad.atomic import atomic_path
 import numpy as np
 import pandas as pd
 
+from rvcad.atomic import atomic_path
 from rvcad.errors import ERROR_TYPES, Case
 from rvdyn.contacts import ContactLaw
-from rvdyn.te import SOLVERS, run_te, write_table_atomic
+from rvdyn.runner import Runner as ForwardRunner
 
 from rvpaper import PAPER_DESCRIPTION, RSM_FACTORS, STAGE, TABLE5_HALF_RANGE  # noqa: E402  (re-exported)
 
 ARCSEC_PER_ARCMIN = 60.0
 
 #: A runner maps a list of cases to one result dict per case (same order): ``{"stats": {pp, mean,
-#: mean_abs, rms, seconds, ...} (arcsec, s), "te_arcsec": array or None, "key": str, "cached": bool}``.
+#: mean_abs, rms, seconds, ...} (arcsec, s), "te_arcsec": array or None, "key": str, "cached": bool}``
+#: (an :class:`rvdyn.runner.Runner` is one).
 Runner = Callable[[Sequence[Case], str], list[dict[str, Any]]]
 
 
@@ -149,7 +148,7 @@ def sweep_cases(points: int = 7, load_Nm: float = 20.0, half_range: dict[str, fl
 
 def serial_runner(solver: str = "analytic", steps: int = 720, law: ContactLaw | None = None,
                   progress: bool = True) -> Runner:
-    """A runner that solves the cases one after another in this process (no cache).
+    """A runner that solves the cases one after another in this process, with no cache.
 
     Parameters
     ----------
@@ -160,20 +159,7 @@ def serial_runner(solver: str = "analytic", steps: int = 720, law: ContactLaw | 
     progress : bool
         Show a tqdm bar on stderr.
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
-
-    def run(cases: Sequence[Case], desc: str = "cases") -> list[dict[str, Any]]:
-        from tqdm.auto import tqdm
-
-        out = []
-        for c in tqdm(list(cases), desc=desc, unit="case", disable=not progress, file=sys.stderr):
-            r = run_te(c, solver, steps, 1.0, law=law)
-            out.append({"stats": dict(r.stats), "te_arcsec": r.table["te_arcsec"].to_numpy(),
-                        "key": c.key(), "cached": False})
-        return out
-
-    return run
+    return ForwardRunner(None, None, solver, steps, law, progress=progress)
 
 
 def _stat_columns(results: list[dict[str, Any]]) -> pd.DataFrame:
@@ -400,91 +386,3 @@ def plot_sweeps(sweeps: pd.DataFrame, path: str | Path) -> Path:
         ax.set_title(f"{f} swept alone")
     fig.tight_layout()
     return save_figure_atomic(fig, path)
-
-
-def write_screen_outputs(result: ScreenResult, out: str | Path) -> dict[str, str]:
-    """Write ``screen.csv``, ``sweeps.csv``, ``screen.png``, ``te_curves.png``, ``sweeps.png`` atomically.
-
-    Returns
-    -------
-    dict
-        ``{artifact: path}``.
-    """
-    out = Path(out)
-    files = {"screen_csv": write_table_atomic(result.screen, out / "screen.csv"),
-             "screen_png": plot_screen(result.screen, out / "screen.png")}
-    if result.curves:
-        files["te_curves_png"] = plot_te_curves(result.curves, out / "te_curves.png")
-    if len(result.sweeps):
-        files["sweeps_csv"] = write_table_atomic(result.sweeps, out / "sweeps.csv")
-        files["sweeps_png"] = plot_sweeps(result.sweeps, out / "sweeps.png")
-    return {k: str(v) for k, v in files.items()}
-
-
-def summary_dict(result: ScreenResult) -> dict[str, Any]:
-    """JSON-ready summary: ranking (+paper-value rows), sweeps and the stage check."""
-    plus = result.screen[result.screen["sign"].isin([0, 1])]
-    cols = ["letter", "error", "stage", "value", "unit", "pp_arcsec", "mean_abs_arcsec", "d_pp_arcsec",
-            "d_mean_abs_arcsec", "rank_pp", "rank_mean_abs"]
-    rows = json.loads(plus[cols].to_json(orient="records"))
-    sw = json.loads(result.sweeps[[c for c in ("factor", "error", "value", "unit", "pp_arcsec",
-                                               "mean_abs_arcsec", "te_mean_abs_arcmin")
-                                   if c in result.sweeps]].to_json(orient="records"))
-    return {"screen": rows, "sweeps": sw, "stage_check": result.stage_check}
-
-
-def format_summary(result: ScreenResult) -> str:
-    """Human summary of the screen: the ranking and whether stage I ranks below stage II."""
-    plus = result.screen[result.screen["sign"].isin([0, 1])].sort_values("rank_pp", na_position="first")
-    lines = [f"{'':2}{'error':<28}{'stage':>6}{'value':>9}{'pp [as]':>11}{'mean|TE| [as]':>15}"
-             f"{'rank pp':>9}{'rank |mean|':>12}"]
-    for r in plus.itertuples():
-        rp = "-" if not np.isfinite(r.rank_pp) else f"{int(r.rank_pp)}"
-        rm = "-" if not np.isfinite(r.rank_mean_abs) else f"{int(r.rank_mean_abs)}"
-        lines.append(f"{r.letter:<2}{r.error:<28}{r.stage:>6}{r.value:>7g}{r.unit:>2}{r.pp_arcsec:>11.4f}"
-                     f"{r.mean_abs_arcsec:>15.4f}{rp:>9}{rm:>12}")
-    for m, c in result.stage_check.items():
-        verdict = "reproduced" if c["reproduced"] else "NOT reproduced"
-        lines.append(f"stage I (B rank {c['rank_B']}, C rank {c['rank_C']}) below every stage II error by "
-                     f"{m}: {verdict}" + ("" if c["reproduced"] else
-                                          f" (stage II errors ranked below: {', '.join(c['stage2_below_stage1'])})"))
-    if len(result.sweeps):
-        lines.append("sweeps (mean |TE| arcmin at -h / 0 / +h):")
-        for f, d in result.sweeps.groupby("factor", sort=False):
-            d = d.sort_values("value")
-            mid = d.iloc[len(d) // 2]
-            lines.append(f"  {f} ({d['error'].iloc[0]}): {d['te_mean_abs_arcmin'].iloc[0]:.4f} / "
-                         f"{mid['te_mean_abs_arcmin']:.4f} / {d['te_mean_abs_arcmin'].iloc[-1]:.4f}")
-    return "\n".join(lines)
-
-
-def screen_command(args: argparse.Namespace) -> int:
-    """``rvdyn screen``: run the screen and sweeps serially and write tables and plots to ``args.out``.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        ``out, solver, steps, sweep_points, load_Nm, json``.
-
-    Returns
-    -------
-    int
-        Exit status (0). Bad options raise ``ValueError`` naming the option (the CLI exits 2).
-    """
-    if isinstance(args.steps, bool) or args.steps < 2:
-        raise ValueError(f"--steps {args.steps} must be an integer >= 2")
-    if args.sweep_points < 2:
-        raise ValueError(f"--sweep-points {args.sweep_points} must be an integer >= 2")
-    if not (math.isfinite(args.load_Nm) and args.load_Nm >= 0):
-        raise ValueError(f"--load-Nm {args.load_Nm} must be a finite number >= 0 (N m)")
-    result = run_screen(args.solver, args.steps, args.sweep_points, args.load_Nm,
-                        progress=not args.json and sys.stderr.isatty())
-    files = write_screen_outputs(result, args.out)
-    if args.json:
-        print(json.dumps({**summary_dict(result), "files": files, "solver": args.solver, "steps": args.steps,
-                          "load_Nm": args.load_Nm}))
-    else:
-        print(f"single-factor screen: solver {args.solver}, {args.steps} steps, load {args.load_Nm:g} N m")
-        print(format_summary(result))
-        print(f"wrote {', '.join(files.values())}")
-    return 0

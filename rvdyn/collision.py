@@ -1,6 +1,7 @@
 """The one module that talks to python-fcl (habit of trimesh ``collision.py``).
 
-Everything else in the project calls these functions, never ``fcl`` directly. Transforms are
+Everything else in the project (the ``fcl`` contact provider :mod:`rvdyn.fcl_contacts`, the CAD
+tests) calls these functions, never ``fcl`` directly. Transforms are
 passed in float64 (a float32 transform loses about 10 nm at 100 mm).
 
 Note (FCL behaviour): mesh-mesh *distance* returns 0 (or a meaningless value) once two bodies

@@ -2,8 +2,9 @@
 
 A *job* is one quasi-static TE solve: a case (:class:`rvcad.errors.Case`), the contact provider
 (``solver``), the number of ``steps`` per output revolution, the ``revolutions`` and the contact
-``law`` (K, n, rigid). Its key is the sha256 of ``Case.key()`` (design, errors, load, direction,
-model options), those settings and a fingerprint of the physics source files
+``law`` (K, n, rigid), or instead of steps and revolutions explicit input angles (``theta_in_deg``,
+e.g. the readings of a test rig). Its key is the sha256 of ``Case.key()`` (design, errors, load,
+direction, model options), those settings and a fingerprint of the physics source files
 (:func:`code_fingerprint`), so a changed solver never serves stale numbers.
 
 Each entry is one JSON file ``<dir>/<key[:2]>/<key>.json`` holding the statistics, the TE curve
@@ -23,6 +24,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rvcad.atomic import atomic_path
 from rvcad.errors import Case
 from rvdyn.contacts import ContactLaw
@@ -30,29 +33,41 @@ from rvdyn.contacts import ContactLaw
 #: Bump when the entry layout changes.
 CACHE_VERSION = 1
 
-#: Modules whose source decides the numbers of a solve (their bytes enter every key).
-PHYSICS_MODULES = ("rvcad.params", "rvcad.errors", "rvcad.profile", "rvcad.geometry", "rvcad.tolerances",
-                   "rvdyn.contacts", "rvdyn.solver", "rvdyn.te")
-#: Added to the fingerprint of fcl jobs.
-FCL_MODULES = ("rvcad.collision", "rvdyn.fcl_contacts")
+#: Packages whose source decides the numbers of a solve: every module of them enters the key
+#: (a new physics module is covered without being listed), except those below.
+PHYSICS_PACKAGES = ("rvcad", "rvdyn")
+#: Modules of those packages that do not decide the numbers (the runner, this cache, the API and CLIs).
+NOT_PHYSICS = frozenset({"rvcad.__main__", "rvcad.cli", "rvdyn.__main__", "rvdyn.cli", "rvdyn.api",
+                         "rvdyn.cache", "rvdyn.runner"})
+#: Modules used by the fcl provider only (in the fingerprint of fcl jobs only).
+FCL_MODULES = frozenset({"rvdyn.collision", "rvdyn.fcl_contacts"})
+
+
+def physics_modules(solver: str = "analytic") -> list[str]:
+    """Names of the modules whose source enters the key of a ``solver`` job, sorted."""
+    import importlib.util
+
+    out = []
+    for pkg in PHYSICS_PACKAGES:
+        spec = importlib.util.find_spec(pkg)
+        for folder in (spec.submodule_search_locations or []) if spec else []:
+            for f in Path(folder).glob("*.py"):
+                name = pkg if f.stem == "__init__" else f"{pkg}.{f.stem}"
+                if name in NOT_PHYSICS or (name in FCL_MODULES and solver != "fcl"):
+                    continue
+                out.append(name)
+    return sorted(set(out))
 
 
 @lru_cache(maxsize=4)
 def code_fingerprint(solver: str = "analytic") -> str:
-    """sha256 (16 hex) of the source of :data:`PHYSICS_MODULES` (and :data:`FCL_MODULES` for fcl).
-
-    A module that cannot be found contributes its name only.
-    """
+    """sha256 (16 hex) of the source of :func:`physics_modules` (names and bytes)."""
     import importlib.util
 
     h = hashlib.sha256()
-    mods = PHYSICS_MODULES + (FCL_MODULES if solver == "fcl" else ())
-    for m in mods:
+    for m in physics_modules(solver):
         h.update(m.encode())
-        try:
-            spec = importlib.util.find_spec(m)
-        except (ImportError, ValueError):
-            spec = None
+        spec = importlib.util.find_spec(m)
         if spec is not None and spec.origin and os.path.exists(spec.origin):
             h.update(Path(spec.origin).read_bytes())
     return h.hexdigest()[:16]
@@ -73,6 +88,9 @@ class Job:
         Output revolutions (default 1).
     law : ContactLaw
         Contact law (K in N/mm^n, exponent n, rigid flag).
+    theta_in_deg : tuple of float or None
+        Explicit input angles, deg, in the order of motion (they replace ``steps`` and
+        ``revolutions``; see :func:`rvdyn.te.run_te`). Their float64 bytes enter the key.
     """
 
     case: Case
@@ -80,11 +98,20 @@ class Job:
     steps: int
     revolutions: float = 1.0
     law: ContactLaw = field(default_factory=ContactLaw)
+    theta_in_deg: tuple[float, ...] | None = None
 
     def settings(self) -> dict[str, Any]:
         """Solver settings that enter the key (besides the case)."""
-        return {"solver": self.solver, "steps": int(self.steps), "revolutions": float(self.revolutions),
-                "law": {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}}
+        law = {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}
+        if self.law.kind != "impact":  # the law's kind reaches the worker and the key (impact keys unchanged)
+            law["kind"] = self.law.kind
+        d: dict[str, Any] = {"solver": self.solver, "steps": int(self.steps), "revolutions": float(self.revolutions),
+                             "law": law}
+        if self.theta_in_deg is not None:
+            th = np.asarray(self.theta_in_deg, dtype=np.float64)
+            d["steps"] = int(th.size)
+            d["theta_in_deg_sha256"] = hashlib.sha256(th.tobytes()).hexdigest()
+        return d
 
     def key(self) -> str:
         """Cache key: sha256 (32 hex) of the case key, the settings, the code fingerprint and the version."""
@@ -93,8 +120,11 @@ class Job:
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:32]
 
     def to_payload(self) -> dict[str, Any]:
-        """Picklable, JSON-ready description for a worker (see :func:`rvstudy.executor.solve_job`)."""
-        return {"case": self.case.to_dict(), **self.settings(), "key": self.key()}
+        """Picklable, JSON-ready description for a worker (see :func:`rvdyn.runner.solve_job`)."""
+        d = {"case": self.case.to_dict(), **self.settings(), "key": self.key()}
+        if self.theta_in_deg is not None:
+            d["theta_in_deg"] = [float(x) for x in self.theta_in_deg]
+        return d
 
 
 def _checksum(payload: dict[str, Any]) -> str:

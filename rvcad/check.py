@@ -1,0 +1,299 @@
+"""Geometric check of a case: refuse parts that cannot be built or assembled, naming the field.
+
+:meth:`rvcad.params.Design.validate` already refuses a *design* that cannot be built (pointed teeth
+from ``design.stage1_backlash_mm``, cranks too close in ``design.crank_angles_deg``, holes through
+the disc root, ...). :func:`check_case` runs before anything is exported (and in
+:func:`rvcad.reducer`) and adds what needs the error-perturbed geometry of the case, raising
+:class:`rvcad.validation.DesignError` (a ``ValueError``) whose message names the field, its value
+and what is allowed:
+
+* stage I teeth: a positive root gap (neighbouring teeth do not overlap at the root circle);
+* crank holes: the perturbed holes of the two cranks in each disc (radius ``cam_radius_mm``, moved
+  by ``errors.disc_hole_eccentricity``) do not overlap and stay inside the disc root circle; the
+  journal holes of the plates (moved by ``errors.carrier_hole_eccentricity``) stay inside the rim;
+* contacts (:func:`pin_interference`): the smallest largest penetration of the pins into the
+  discs and of the loaded stage I flanks over the poses the solver can take (its coordinates:
+  output and crank angles), at states over one crank revolution. The solver keeps these gaps and
+  more, so its equilibrium penetrates at least as much. Above :data:`MAX_PENETRATION_MM` (the
+  elastic limit of ``rvdyn``, 100 um) it would refuse the case too: ``errors.pin_radius`` +1000 um
+  (1000.0 um), ``errors.pin_circle_diameter`` -1000 um (500.0 um), a pin 150 um too large (149 um;
+  rvdyn: 155 um). The message names the error types whose removal brings it below the limit.
+
+Lengths in mm at the API, angles in rad inside.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy.optimize import linprog
+
+from rvcad.errors import Case
+from rvcad.geometry import ReducerGeometry
+from rvcad.plan import PLATE_RIM_CLEARANCE_MM
+from rvcad.validation import DesignError, quote, reject
+
+#: Largest pin-disc penetration a pose may keep, mm: the elastic contact limit of the solver
+#: (``rvdyn.solver.MAX_ELASTIC_PENETRATION_MM``, 0.1 mm); a case above it everywhere is refused.
+MAX_PENETRATION_MM = 0.1
+
+#: States sampled over one crank revolution for the pin-disc check (each pin meets a whole lobe).
+INTERFERENCE_STATES = 12
+
+#: Smallest root gap between two stage I teeth that still gives a valid solid, mm.
+MIN_TOOTH_LAND_MM = 1e-3
+
+
+# DesignError: the case cannot give valid, assemblable solids; the message names the field. It is the
+# validation layer's class (rvcad.validation), so Design.validate and this check raise one family.
+
+
+# ----------------------------------------------------------------------------- stage I teeth
+def _tooth_lands(gear) -> tuple[float, float]:
+    """(tip land, root gap) of an involute gear, mm: chord widths at the tip and root circles."""
+    half_tip = gear.tip_half_angle()
+    r0 = max(gear.base_radius, gear.root_radius)
+    half_root = float(gear.flank_polar_angle(r0))
+    gap = math.pi / gear.z - half_root
+    return 2.0 * gear.tip_radius * half_tip, 2.0 * gear.root_radius * gap
+
+
+def _check_gears(g: ReducerGeometry) -> None:
+    d = g.design
+    tip, root = _tooth_lands(g.planet)
+    if tip < MIN_TOOTH_LAND_MM:
+        b_max = d.stage1_backlash_mm + 2.0 * g.planet.pitch_radius * (g.planet.tip_half_angle()
+                                                                        - MIN_TOOTH_LAND_MM / (2 * g.planet.tip_radius))
+        raise DesignError(
+            f"design.stage1_backlash_mm {d.stage1_backlash_mm:g} mm thins the planet teeth to a point (tip land "
+            f"{tip * 1e3:.1f} um): the planet is not a valid solid; allowed: below {max(b_max, 0.0):.4f} mm")
+    stip, sroot = _tooth_lands(g.sun)
+    if stip < MIN_TOOTH_LAND_MM:
+        raise DesignError(
+            f"design.z_sun {d.z_sun} with module_mm {d.module_mm:g} and pressure_angle_deg "
+            f"{d.pressure_angle_deg:g} gives pointed sun teeth (tip land {stip * 1e3:.1f} um); allowed: more "
+            "teeth or a smaller pressure angle")
+    for name, gap in (("z_sun", sroot), ("z_planet", root)):
+        if gap < MIN_TOOTH_LAND_MM:
+            raise DesignError(f"design.{name} {getattr(d, name)}: neighbouring teeth overlap at the root circle "
+                              f"(gap {gap * 1e3:.1f} um); allowed: a tooth count with a positive root gap")
+
+
+# ----------------------------------------------------------------------------- crank holes
+def _check_holes(g: ReducerGeometry) -> None:
+    """The perturbed crank holes of each disc and plate: apart from each other, inside root and rim."""
+    d = g.design
+    r_hole, r_journal = d.cam_radius_mm, d.crank_journal_radius_mm
+    root = min(p.root_radius for p in g.profiles)
+    rim = d.pin_circle_radius_mm - d.eccentricity_mm - d.pin_radius_mm - PLATE_RIM_CLEARANCE_MM
+    checks = [(f"disc{k}", g.disc_holes[k], r_hole, root, "errors.disc_hole_eccentricity") for k in range(d.n_discs)]
+    checks.append(("flange and carrier", g.carrier_holes, r_journal, rim, "errors.carrier_hole_eccentricity"))
+    for part, holes, r, limit, field in checks:
+        sep = float(np.linalg.norm(holes[1] - holes[0]))
+        if sep <= 2.0 * r:
+            reject("design.crank_angles_deg", list(d.crank_angles_deg), f"holes more than {2 * r:g} mm apart",
+                   f"with the errors puts the crank holes of {part} {sep:.4f} mm apart (they overlap)", DesignError)
+        reach = float(np.max(np.linalg.norm(holes, axis=-1))) + r
+        if reach >= limit:
+            where = "root circle" if part.startswith("disc") else "rim"
+            reject(field, g.case.raw_errors.get(field.split(".", 1)[1]), f"holes inside the {where} ({limit:.4f} mm)",
+                   f"moves a crank hole of {part} out to {reach:.4f} mm", DesignError)
+
+
+# ----------------------------------------------------------------------------- pins against discs
+def crank_period_input(g: ReducerGeometry) -> float:
+    """Input angle of one crank revolution under the ideal kinematics, rad."""
+    _, ps = g.ideal_state(np.array([0.0, 1.0]))
+    return 2.0 * math.pi / abs(float(ps[1, 0] - ps[0, 0]))
+
+
+def pin_interference(g: ReducerGeometry, states: int = INTERFERENCE_STATES, rounds: int = 8) -> np.ndarray:
+    """Smallest largest contact penetration (pins in the discs, loaded stage I flanks) over the poses
+    the solver can take, mm.
+
+    At each of ``states`` ideal states over one crank revolution the solver's coordinates, the
+    output angle and the crank angles (``x = (Rp dtheta_out, e dpsi_0, e dpsi_1)``, mm, as in
+    ``rvdyn.solver``), may change; the gaps the solver keeps, the pins of both discs and the loaded
+    stage I flanks (the case's direction), linearised by finite differences (``g + J x``), give a
+    linear programme ``min t, -(g + J x) <= t`` (scipy ``linprog``) inside a trust region,
+    re-linearised ``rounds`` times; a move is kept only if the exact penetration drops, else the
+    trust region halves. The solver keeps
+    the same gaps and more (supports, bearings), so every pose it reaches penetrates at least this
+    much (a lower bound). Where the case's
+    model lets the discs float in a cam-bearing clearance, each disc may instead move freely in its
+    plane (a weaker bound).
+
+    Returns
+    -------
+    (states,) float64
+        Penetration, mm (<= 0: a pose without pin-disc overlap exists).
+    """
+    try:
+        floating = float(g.case.model.get("cam_bearing_clearance_um", 0.0) or 0.0) > 0.0
+    except (TypeError, ValueError):
+        floating = True
+    if floating:
+        return _free_disc_interference(g, states, rounds)
+    th = np.linspace(0.0, crank_period_input(g), states, endpoint=False)
+    to0, ps0 = g.ideal_state(th)
+    d = g.design
+    rp, e, nc = d.pin_circle_radius_mm, d.eccentricity_mm, d.n_cranks
+
+    def gaps(x: np.ndarray) -> np.ndarray:
+        to, ps = to0 + x[:, 0] / rp, ps0 + x[:, 1:] / e
+        pins = g.pin_gaps(to, ps)[0].reshape(states, -1)
+        return np.concatenate([pins, g.stage1_gaps(th, to, ps, g.case.direction)], axis=1)
+
+    x = np.zeros((states, 1 + nc))
+    G = gaps(x)
+    best = (-G).max(axis=1)
+    radius = np.maximum(np.abs(best), 1e-3)
+    done = np.zeros(states, dtype=bool)
+    h = 1e-6  # mm: the gaps are exact to ~1e-10 mm (foot-point tolerance), the slopes to ~1e-4
+    for _ in range(rounds):
+        J = np.stack([(gaps(x + h * np.eye(1 + nc)[i]) - G) / h for i in range(1 + nc)], axis=-1)
+        step = np.zeros_like(x)
+        for s in np.nonzero(~done)[0]:
+            A = np.c_[-J[s], -np.ones(len(G[s]))]
+            res = linprog(np.r_[np.zeros(1 + nc), 1.0], A_ub=A, b_ub=G[s], method="highs",
+                          bounds=[(-radius[s], radius[s])] * (1 + nc) + [(None, None)])
+            if res.status != 0 or res.x[-1] > best[s] - 1e-9:  # no improvement predicted
+                done[s] = True
+                continue
+            step[s] = res.x[:-1]
+        if done.all():
+            break
+        Gn = gaps(x + step)
+        pen = (-Gn).max(axis=1)
+        better = (pen < best) & ~done
+        x[better], G[better], best[better] = x[better] + step[better], Gn[better], pen[better]
+        radius[~better] *= 0.5
+    return best
+
+
+def _free_disc_interference(g: ReducerGeometry, states: int, rounds: int) -> np.ndarray:
+    """Per state, the largest over the discs of the smallest largest pin penetration when each disc
+    may move freely in its plane (x, y, rotation): the relaxation for discs that float in a cam-bearing
+    clearance. Linear programmes in a trust region as in :func:`pin_interference`; (states,) mm."""
+    th = np.linspace(0.0, crank_period_input(g), states, endpoint=False)
+    to, ps = g.ideal_state(th)
+    nd = g.design.n_discs
+    rp = g.design.pin_circle_radius_mm
+    out = np.zeros((states, nd))
+    for s in range(states):
+        for k, prof in enumerate(g.profiles):
+            shift, turn = np.zeros((1, nd, 2)), np.zeros((1, nd))
+
+            def gaps(shift: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                p, t0 = g.pins_in_profile_frames(to[s:s + 1], ps[s:s + 1], shift, turn)
+                bd, _, n = prof.boundary_distance(p[0, k], t0[0, k])
+                return bd - g.pin_radii, p[0, k] - bd[:, None] * n, n
+
+            gap, f, n = gaps(shift, turn)
+            best = float(-gap.min())
+            radius = max(abs(best), 1e-3)
+            for _ in range(rounds):
+                lever = -n[:, 0] * f[:, 1] + n[:, 1] * f[:, 0]
+                A = np.c_[n, lever, -np.ones(len(gap))]
+                res = linprog([0, 0, 0, 1], A_ub=A, b_ub=gap, method="highs",
+                              bounds=[(-radius, radius), (-radius, radius), (-radius / rp, radius / rp), (None, None)])
+                if res.status != 0 or res.x[3] > best - 1e-9:  # no improvement predicted
+                    break
+                dx, dy, dth, _ = res.x
+                ang = float(g.disc_poses(to[s:s + 1], ps[s:s + 1])[1][0, k]) + float(turn[0, k]) \
+                    + float(g.disc_profile_rotation[k])
+                c, si = math.cos(ang), math.sin(ang)
+                sh2, tu2 = shift.copy(), turn.copy()
+                sh2[0, k] += (c * dx - si * dy, si * dx + c * dy)  # profile frame -> fixed frame
+                tu2[0, k] += dth
+                gap2, f2, n2 = gaps(sh2, tu2)
+                pen = float(-gap2.min())
+                if pen < best:
+                    best, shift, turn, gap, f, n = pen, sh2, tu2, gap2, f2, n2
+                else:
+                    radius *= 0.5
+            out[s, k] = best
+    return out.max(axis=1)
+
+
+def _blame(case: Case, limit: float) -> list[str]:
+    """Error types (``errors.<name>``) whose removal alone brings the pin interference below ``limit``."""
+    names = list(case.raw_errors)
+    hit = []
+    for name in names:
+        rest = {k: v for k, v in case.raw_errors.items() if k != name}
+        try:
+            g = ReducerGeometry(case.with_errors(rest))
+        except ValueError:
+            continue
+        if float(pin_interference(g, states=8, rounds=4).max()) <= limit:
+            hit.append(f"errors.{name}")
+    return hit or [f"errors.{n}" for n in names] or ["design.pin_radius_mm"]
+
+
+# ----------------------------------------------------------------------------- entry point
+def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool = True) -> dict[str, Any]:
+    """Refuse a case that cannot give valid, assemblable solids; return the measured margins.
+
+    Parameters
+    ----------
+    case : Case
+    geometry : ReducerGeometry or None
+        Pre-built geometry of the case.
+    cache : bool
+        Reuse the outcome of an earlier check of a case with the same key in this process.
+
+    Returns
+    -------
+    dict
+        ``planet_tip_land_mm``, ``sun_tip_land_mm``, ``crank_hole_separation_mm``,
+        ``pin_penetration_mm`` (largest over the states of the smallest reachable contact penetration).
+
+    Raises
+    ------
+    DesignError
+        With the field, its value and what is allowed.
+    """
+    key = case.key()
+    if cache and key in _MEMO:
+        if isinstance(_MEMO[key], DesignError):
+            raise DesignError(str(_MEMO[key]))
+        return dict(_MEMO[key])
+    try:
+        out = _check(case, geometry)
+    except DesignError as exc:
+        _MEMO[key] = exc
+        raise
+    if len(_MEMO) > 64:
+        _MEMO.clear()
+    _MEMO[key] = out
+    return dict(out)
+
+
+def _check(case: Case, geometry: ReducerGeometry | None) -> dict[str, Any]:
+    g = geometry if geometry is not None else ReducerGeometry(case)
+    _check_gears(g)
+    _check_holes(g)
+    pen = float(pin_interference(g).max())
+    if pen > MAX_PENETRATION_MM:
+        fields = _blame(case, MAX_PENETRATION_MM)
+        values = [case.raw_errors.get(f.split(".", 1)[1]) for f in fields]
+        given = quote(values[0]) if len(fields) == 1 else "(" + ", ".join(map(quote, values)) + ")"
+        raise DesignError(
+            f"{' + '.join(fields)} {given} makes the parts overlap (pins in the discs, loaded stage I flanks) by at "
+            f"least {pen * 1e3:.1f} um in every pose the solver can take; allowed: an overlap of at most "
+            f"{MAX_PENETRATION_MM * 1e3:g} um (the solver's elastic contact limit)", field=fields[0], value=values[0],
+            allowed=f"an overlap of at most {MAX_PENETRATION_MM * 1e3:g} um")
+    d = g.design
+    sep = 2.0 * d.center_distance_mm * abs(math.sin(0.5 * math.radians(d.crank_angles_deg[1] - d.crank_angles_deg[0])))
+    return {"planet_tip_land_mm": _tooth_lands(g.planet)[0], "sun_tip_land_mm": _tooth_lands(g.sun)[0],
+            "crank_hole_separation_mm": sep, "pin_penetration_mm": pen}
+
+
+#: Outcome (margins or the refusal) of the cases checked, by case key: a case is checked once per process.
+_MEMO: dict[str, Any] = {}
+
+
+__all__ = ["INTERFERENCE_STATES", "MAX_PENETRATION_MM", "MIN_TOOTH_LAND_MM", "DesignError", "check_case",
+           "crank_period_input", "pin_interference"]
