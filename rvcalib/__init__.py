@@ -2,8 +2,10 @@
 
 Modules
 -------
+:mod:`rvcalib.orders`
+    Ratio, period, orders that matter and the screening grid, from the reducer's design.
 :mod:`rvcalib.dataset`
-    ``read_dataset(folder)``: runs.csv + samples.csv, validated (clear errors naming file/column/run),
+    ``read_dataset(folder, design=None)`` (the reducer: ``design`` / the folder's design.json / default): runs.csv + samples.csv, validated (clear errors naming file/column/run),
     duplicates and start-up transients dropped and reported.
 :mod:`rvcalib.forward`
     rvdyn TE on a uniform grid per run condition, periodic interpolation to the readings, cached.
@@ -20,12 +22,12 @@ Modules
 :mod:`rvcalib.simulate`
     ``simulate_dataset(...)``: measured-like datasets with hidden effects (answer file kept apart).
 :mod:`rvcalib.report`, :mod:`rvcalib.cli`
-    Markdown/PNG/JSON report; ``rv-calibrate DATASET --out DIR [--json] [--steps N]``.
+    Markdown/PNG/JSON report; ``rv-calibrate DATASET --out DIR [--reducer DESIGN.json] [--json] [--steps N]``.
 
 Example
 -------
 >>> from rvcalib import read_dataset, calibrate            # doctest: +SKIP
->>> res = calibrate(read_dataset("measured/"), steps=360)   # doctest: +SKIP
+>>> res = calibrate(read_dataset("measured/"), )   # doctest: +SKIP
 >>> res.rms_before, res.rms_after, [e.name for e in res.effects]   # doctest: +SKIP
 """
 from rvcalib.dataset import MeasuredDataset, RunRecord, read_dataset
