@@ -140,3 +140,11 @@ def test_modification_is_in_the_shared_profile_and_checked() -> None:
     assert g.profiles[0].pin_radius == pytest.approx(3.02) and g.profiles[1].pin_circle_radius == pytest.approx(63.99)
     with pytest.raises(ValueError, match=r"design.profile_shift_mm 0.5 is out of range; \|value\| <= 0.2"):
         ReducerGeometry(Case.from_dict({"design": {"profile_shift_mm": 0.5}}))
+
+
+def test_cli_stiffness_plot_png(tmp_path, capsys) -> None:
+    png = tmp_path / "curve.png"
+    assert rvdyn_main(["stiffness", "--contact", "impact", "--points", "5", "--plot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "torsional rigidity" in out and "lost motion" in out and "compliance budget" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
