@@ -27,18 +27,13 @@ import pandas as pd
 
 from rvcad.atomic import atomic_path
 from rvcad.errors import ERROR_TYPES
-from rvstudy.screen import (
-    STAGE,
-    plot_screen,
-    plot_sweeps,
-    plot_te_curves,
-    save_figure_atomic,
-)
+from rvstudy.screen import plot_screen, plot_sweeps
 from rvdyn.te import write_table_atomic
 import rvpaper as paper
 from rvdyn.cache import write_text_atomic
 from rvstudy.augment_section import augment_section
 from rvstudy.paper_readings import readings_section
+from rvstudy import report_mc
 from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyResult
 
 PRIMARY = "mean_abs_arcmin"
@@ -302,12 +297,13 @@ def conclusions(res: StudyResult) -> pd.DataFrame:
         best = max(ss, key=ss.get)
         add("ea_main_effect", "main + quadratic sum of squares: " + ", ".join(f"{f}={v:.3g}" for f, v in ss.items()),
             "yes" if best == "EA" else "no", f"{best} has the largest own effect" + ("" if best == "EA" else "." + ea_note))
-        kept = set(b.comparison.paper.terms) - {"Intercept"}
+        kept = set(b.comparison.paper.terms) - {"Intercept"} if b.comparison is not None else set()
         p9 = set(paper.EQ9_TERMS) - {"Intercept"}
-        add("eq9_terms", "significant (p < 0.05): " + (", ".join(sorted(kept)) or "none"),
-            "yes" if kept == p9 else ("partly" if kept & p9 else "no"),
-            "same term set" if kept == p9 else
-            f"paper-only: {', '.join(sorted(p9 - kept)) or 'none'}; ours only: {', '.join(sorted(kept - p9)) or 'none'}")
+        if b.comparison is not None:
+            add("eq9_terms", "significant (p < 0.05): " + (", ".join(sorted(kept)) or "none"),
+                "yes" if kept == p9 else ("partly" if kept & p9 else "no"),
+                "same term set" if kept == p9 else
+                f"paper-only: {', '.join(sorted(p9 - kept)) or 'none'}; ours only: {', '.join(sorted(kept - p9)) or 'none'}")
         if b.validation:
             v = b.validation["full"]
             rng = float(res.design.loc[res.design["status"] == "ok", PRIMARY].agg(lambda s: s.max() - s.min()))
@@ -321,55 +317,6 @@ def conclusions(res: StudyResult) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------------------------------------- figures
-def _mc_figures(res: StudyResult, figs: Path) -> dict[str, str]:
-    from matplotlib.figure import Figure
-
-    mc = res.mc
-    out: dict[str, str] = {}
-    smp = mc.get("surface_samples")
-    chk = mc.get("check")
-    if smp is not None and any(f"{r}_surface" in smp for r in RESPONSES):
-        fig = Figure(figsize=(11, 4.2))
-        for i, r in enumerate(RESPONSES):
-            ax = fig.add_subplot(1, 2, i + 1)
-            if f"{r}_surface" in smp:
-                ax.hist(smp[f"{r}_surface"], bins=60, density=True, alpha=0.6, color="C0",
-                        label=f"surface, RSM factors (n={len(smp)})")
-            if chk is not None and len(chk):
-                ok = chk[chk["status"] == "ok"]
-                ax.plot(ok[r], np.zeros(len(ok)), "|", color="C3", ms=30, mew=2,
-                        label=f"full solver, all 11 errors (n={len(ok)})")
-            if r == "pp_arcmin":
-                ax.axvline(res.config.spec_arcmin, color="k", ls="--", lw=1,
-                           label=f"spec {res.config.spec_arcmin:g} arcmin")
-            ax.set_xlabel(RESPONSE_LABEL[r])
-            ax.set_ylabel("density")
-            ax.legend(fontsize=7)
-        fig.suptitle("Monte Carlo tolerance stack-up")
-        fig.tight_layout()
-        out["mc_distribution_png"] = str(save_figure_atomic(fig, figs / "mc_distribution.png"))
-    sob, oat = mc.get("sobol"), mc.get("oat")
-    if (sob is not None and len(sob)) or (oat is not None and len(oat)):
-        fig = Figure(figsize=(11, 4.2))
-        for i, r in enumerate(RESPONSES):
-            ax = fig.add_subplot(1, 2, i + 1)
-            if oat is not None and len(oat):
-                o = oat[oat["response"] == r]
-                ax.bar(o["letter"], o["share"], color=["C1" if STAGE[L] == "I" else "C0" for L in o["letter"]],
-                       label="one-at-a-time share, 11 errors (solver)")
-            if sob is not None and len(sob):
-                s = sob[sob["response"] == r]
-                ax.plot([ERROR_TYPES[k].letter for k in s["error"]], s["S1"], "kD", label="first-order Sobol (surface)")
-            ax.set_ylim(0, 1.05)
-            ax.set_ylabel("share of variance")
-            ax.set_xlabel("error type (Table 4 letter)")
-            ax.set_title(RESPONSE_LABEL[r])
-            ax.legend(fontsize=7)
-        fig.tight_layout()
-        out["mc_shares_png"] = str(save_figure_atomic(fig, figs / "mc_shares.png"))
-    return out
-
-
 def _fit_figures(res: StudyResult, figs: Path) -> dict[str, str]:
     from itertools import combinations
 
@@ -422,15 +369,13 @@ def summary(res: StudyResult) -> dict[str, Any]:
         st = b.results.fit_statistics()
         s[resp] = {"r2": st["r2"], "r2_adj": st["r2_adj"], "r2_pred": st["r2_pred"],
                    "coefficients_actual": b.results.params_actual.to_dict(),
-                   "paper_mode_terms": list(b.comparison.paper.terms),
-                   "backward_terms": list(b.comparison.backward.terms),
+                   "paper_mode_terms": list(b.comparison.paper.terms) if b.comparison is not None else [],
+                   "backward_terms": list(b.comparison.backward.terms) if b.comparison is not None else [],
                    "validation": {k: v.to_dict() for k, v in b.validation.items()}}
-    mc = res.mc
-    if mc:
-        s["monte_carlo"] = {k: mc[k] for k in ("yield_surface", "yield_solver", "outside_box_fraction",
-                                               "check_mean_abs_arcmin", "check_pp_arcmin") if k in mc}
-        if "distribution" in mc:
-            s["monte_carlo"]["distribution"] = mc["distribution"].to_dict(orient="records")
+    s["reducer"] = {"design": res.reducer.to_dict(), "ratio": res.reducer.ratio,
+                    "description": report_mc.reducer_text(res.reducer), "source": res.config.reducer or "paper default"}
+    if res.mc:
+        s["monte_carlo"] = report_mc.summary_part(res.mc)
     s["files"] = res.files
     return clean(s)
 
@@ -462,9 +407,16 @@ def write_report(res: StudyResult) -> Path:
         "of ours below is computed by this run; the paper's numbers sit beside ours where the paper gives them.\n")
     add("## Run\n")
     run_rows = pd.DataFrame([
+        {"item": "reducer", "value": report_mc.reducer_text(res.reducer)
+                                     + (f" (from {cfg.reducer})" if cfg.reducer else " (the paper's, default)")},
         {"item": "solver / steps per output revolution", "value": f"{cfg.solver} / {cfg.steps}"},
         {"item": "output load [N m] / direction", "value": f"{cfg.load_Nm:g} / +1"},
-        {"item": "contact law", "value": f"F = {cfg.K:g} delta^{cfg.n:g} (N, mm)"},
+        {"item": "contact model of the paper-reproduction sections (screen, design, validation, readings)",
+         "value": f"impact: F = {cfg.K:g} delta^{cfg.n:g} (N, mm), paper Eq. 1 without damping"},
+        {"item": "contact model of the Monte Carlo (section 9)",
+         "value": (f"impact: F = {cfg.K:g} delta^{cfg.n:g} (N, mm)" if cfg.mc_contact == "impact" else
+                   "physical: Hertz line contact at the pins, ISO 6336-1 mesh stiffness, elastic supports")
+         + " (--mc-contact)"},
         {"item": "executor", "value": res.executor},
         {"item": "design / factors", "value": f"{res.design_kind or '-'} / " + ", ".join(
             f"{f}={fs.spec(f)}" for f in fs.names)},
@@ -494,7 +446,7 @@ def write_report(res: StudyResult) -> Path:
         if cfg.figures:
             files["screen_png"] = str(plot_screen(s, figs / "screen.png"))
         if res.screen.curves and cfg.figures:
-            files["te_curves_png"] = str(plot_te_curves(res.screen.curves, figs / "te_curves.png"))
+            files["te_curves_png"] = str(report_mc.plot_te_small_multiples(res.screen.curves, figs / "te_curves.png"))
         tab(s, "screen")
         add("## 1. Single-factor screen (paper Table 4, Fig. 9)\n")
         add("Each Table 4 error alone at its paper value (default instance) and at minus it; rank 1 = largest "
@@ -577,6 +529,10 @@ def write_report(res: StudyResult) -> Path:
         for resp, b in res.fits.items():
             if b.results is None:
                 continue
+            if b.comparison is None:
+                add(f"### {RESPONSE_LABEL[resp]}\n")
+                add("No reduced models: " + "; ".join(n for n in b.notes if n.startswith("reduced models")) + "\n")
+                continue
             e9 = eq9_compare(b, with_paper and resp == PRIMARY)
             tab(e9, f"eq9_compare_{resp}")
             rt = b.comparison.table.reset_index()
@@ -623,75 +579,7 @@ def write_report(res: StudyResult) -> Path:
 
     # ---------------------------------------------------------------- Monte Carlo
     if res.mc:
-        mc = res.mc
-        from rvstudy.montecarlo import tolerance_table
-
-        tt = tolerance_table(mc["tolerances"])
-        tab(tt, "mc_tolerances")
-        add("## 9. Monte Carlo tolerance stack-up\n")
-        add(f"Tolerances (default: normal, sigma = paper Table 4 value / 3, on each error's default instance; "
-            f"`--tolerance KEY=DIST:PARAMS` changes one). {cfg.mc_samples} draws go through the fitted surfaces "
-            f"(which know only the RSM factors {', '.join(fs.names)}); {cfg.mc_check} draws of all eleven errors "
-            f"go through the full solver. Spec: TE peak-to-peak <= {cfg.spec_arcmin:g} arcmin.\n")
-        add(md_table(tt) + "\n")
-        dist = mc.get("distribution")
-        if dist is not None and len(dist):
-            tab(dist, "mc_distribution")
-            add("### TE distribution (arcmin)\n")
-            add(md_table(dist) + "\n")
-            neg = dist["negative_fraction"].dropna() if "negative_fraction" in dist else pd.Series(dtype=float)
-            if len(neg) and neg.max() > 0:
-                add(f"The fitted quadratic predicts negative values for up to {100 * neg.max():.1f} % of the draws "
-                    "(impossible for |TE| and pp): near the centre the surface is an extrapolating fit of a "
-                    "V-shaped response, so read the surface percentiles with the full-solver check beside them.\n")
-        yrows = []
-        for k, lab in (("yield_surface", "surface, RSM factors only"), ("yield_solver", "full solver, all 11 errors")):
-            if k in mc:
-                yrows.append({"source": lab, **mc[k]})
-        if yrows:
-            yt = pd.DataFrame(yrows)
-            tab(yt, "mc_yield")
-            add(f"### Yield (TE pp <= {cfg.spec_arcmin:g} arcmin, 95 % Wilson interval)\n")
-            add(md_table(yt) + "\n")
-        add(f"Fraction of surface draws outside the design box (extrapolation): "
-            f"{_fmt(mc.get('outside_box_fraction'))}.\n")
-        for resp in RESPONSES:
-            if f"check_{resp}" in mc:
-                d = mc[f"check_{resp}"]
-                add(f"- Surface vs full solver on the check draws, {resp}: RMSE {_fmt(d['rmse'])}, bias "
-                    f"{_fmt(d['bias'])}, max |error| {_fmt(d['max_abs'])} arcmin (n = {d['n']}); the difference is "
-                    "the surface's own error plus the effect of the seven errors the surface does not know.")
-        add("")
-        if "check" in mc:
-            tab(mc["check"], "mc_check_cases")
-        if "surface_samples" in mc:
-            files["mc_surface_samples_parquet"] = write_table(mc["surface_samples"], tables, "mc_surface_samples")["parquet"]
-        if "sobol" in mc and len(mc["sobol"]):
-            tab(mc["sobol"], "mc_sobol")
-            add("### Variance shares\n")
-            add("First-order (S1) and total (ST) Sobol indices of the fitted surfaces under the tolerances "
-                "(Saltelli/Jansen estimators, RSM factors only):\n")
-            add(md_table(mc["sobol"]) + "\n")
-        if "oat" in mc:
-            tab(mc["oat"], "mc_oat_shares")
-            add("One-at-a-time variance shares of all eleven errors: each error's single-factor solver response "
-                "(screen at -v, 0, +v and the sweeps; piecewise linear between them) under its tolerance; "
-                "interactions are not represented:\n")
-            piv = mc["oat"].pivot(index=["letter", "error"], columns="response", values="share").reset_index()
-            add(md_table(piv) + "\n")
-            rsm_keys = set(fs.error_keys)
-            for resp in RESPONSES:
-                if resp not in piv:
-                    continue
-                top = piv.sort_values(resp, ascending=False).iloc[0]
-                in_rsm = float(piv.loc[piv["error"].isin(rsm_keys), resp].sum())
-                add(f"- {RESPONSE_LABEL[resp]}: the largest one-at-a-time share is {top['letter']} ({top['error']}), "
-                    f"{100 * top[resp]:.1f} %; the RSM factors together carry {100 * in_rsm:.1f} %.")
-            add("")
-        if cfg.figures:
-            files.update(_mc_figures(res, figs))
-        fig_link("mc_distribution_png", "Monte Carlo distributions")
-        fig_link("mc_shares_png", "variance shares")
+        report_mc.section(res, add, tab, fig_link, files, figs, md_table)
 
     # ---------------------------------------------------------------- conclusions
     cc = conclusions(res)

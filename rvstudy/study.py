@@ -12,10 +12,13 @@ Stages (each one a list of cases solved through the cached, parallel :class:`rvd
    shortcut, Eq. 9), surfaces and contours (Fig. 12).
 3. ``validation`` -- random cases inside the design box (seeded), predicted vs simulated (Fig. 13):
    RMSE and prediction-interval coverage.
-4. ``mc`` -- Monte Carlo tolerance stack-up: every error type drawn from its tolerance
-   distribution; many draws through the fitted surfaces (the RSM factors), a sample through the
-   full solver with all eleven errors, TE percentiles, yield against the pp spec, variance shares
-   (Sobol indices on the surface; one-at-a-time shares of all eleven errors from the screen).
+4. ``mc`` -- Monte Carlo tolerance stack-up through the full solver (:mod:`rvstudy.stackup`): every
+   toleranced feature of the drawing drawn, every draw solved (analytic; fcl on a check subsample),
+   stack-up statistics per response (Cp, Cpk, out of spec with an exact interval), variance-based
+   contributors from a designed sample, tolerance allocation; the fitted surface only as a comparison.
+
+The reducer is the paper's by default or a user's design JSON (``--reducer``): every count and ratio
+of the study comes from that :class:`rvcad.params.Design`.
 
 :func:`run_study` returns a :class:`StudyResult`; :func:`rvstudy.report.write_report` writes it.
 """
@@ -51,15 +54,8 @@ from rvdyn.cache import CaseCache
 from rvdyn.runner import Executor, make_executor
 from rvdyn.runner import Runner as CachedRunner
 from rvstudy.paper_readings import READINGS_STEPS, run_readings
-from rvstudy.montecarlo import (
-    Tolerance,
-    default_tolerances,
-    oat_variance_shares,
-    percentiles,
-    sample_errors,
-    sobol_indices,
-    yield_estimate,
-)
+from rvstudy.montecarlo import Tolerance, default_tolerances
+from rvstudy.stackup import MC_RESPONSES, play_positions, run_full_mc
 
 STAGES = ("screen", "doe", "validation", "mc", "readings")
 DESIGNS = ("bbd", "ccd")
@@ -71,6 +67,10 @@ RESPONSE_LABEL = {"mean_abs_arcmin": "mean |TE| [arcmin]", "pp_arcmin": "TE peak
 #: fewer alias the peak-to-peak TE of several Table 4 errors by up to a factor 3).
 DEFAULT_STEPS = 360
 DEFAULT_SEED = 20240
+#: Full-solver Monte Carlo draws, designed-sample block size, fcl check draws (defaults).
+DEFAULT_MC_DRAWS = 2000
+DEFAULT_MC_SOBOL = 40
+DEFAULT_MC_CHECK = 8
 
 
 @dataclass
@@ -109,14 +109,33 @@ class StudyConfig:
         Random validation cases (``--validation-cases``).
     seed : int
         Seed of the validation and Monte Carlo draws (``--seed``).
-    mc_samples : int
-        Monte Carlo draws through the fitted surfaces (``--mc-samples``).
+    mc_draws : int
+        Independent Monte Carlo draws, each solved by the full (analytic) solver (``--mc-draws``).
+    mc_sobol : int
+        Rows of each block of the designed sample for the contributors (``--mc-sobol``): the first
+        2 x mc_sobol draws are A and B, plus mc_sobol solver draws per tolerance; 0 = no contributors.
     mc_check : int
-        Monte Carlo draws through the full solver (``--mc-check``).
+        Draws solved again with the fcl provider to check the analytic one (``--mc-check``).
     tolerances : dict
         ``{error key: Tolerance}`` (``--tolerance``, ``--tolerances``).
     spec_arcmin : float
-        TE peak-to-peak specification for the yield, arcmin (``--spec-arcmin``).
+        USL of TE peak-to-peak, arcmin (``--spec-arcmin``).
+    play_spec_arcmin : float
+        USL of the two-direction play at +-3 % rated torque, arcmin (``--play-spec-arcmin``).
+    spec_limits : dict
+        ``{response: (LSL, USL)}`` overriding the above (``--spec RESPONSE=LSL:USL``).
+    rated_Nm : float
+        Rated output torque, N m (``--rated-Nm``; 167 = the RV-20E class of the paper's reducer).
+    mc_contact : str
+        Contact law of the Monte Carlo solves (``--mc-contact``): ``impact`` (the paper's Eq. 1 with
+        ``K``, ``n``, as every paper-reproduction section uses) or ``physical`` (Hertz line contact,
+        ISO 6336 mesh stiffness, elastic supports; ``rvdyn.contacts.ContactLaw``).
+    rigidity_lsl : float
+        LSL of the torsional rigidity, N m/arcmin (``--rigidity-lsl``; 49 = the RV-20E datasheet figure).
+    yield_target : float
+        Yield the tolerance allocation aims at (``--yield-target``).
+    reducer : str or None
+        Design JSON of the reducer (``--reducer``); default the paper's.
     cache_dir : Path or None
         Case cache (``--cache``; default ``OUT/cache``).
     use_cache : bool
@@ -148,10 +167,18 @@ class StudyConfig:
     sweep_points: int = 7
     n_validation: int = 15
     seed: int = DEFAULT_SEED
-    mc_samples: int = 20000
-    mc_check: int = 100
+    mc_draws: int = DEFAULT_MC_DRAWS
+    mc_sobol: int = DEFAULT_MC_SOBOL
+    mc_check: int = DEFAULT_MC_CHECK
     tolerances: dict[str, Tolerance] = field(default_factory=default_tolerances)
     spec_arcmin: float = 1.0
+    play_spec_arcmin: float = 1.0
+    spec_limits: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
+    rated_Nm: float = 167.0
+    rigidity_lsl: float = 49.0
+    mc_contact: str = "impact"
+    yield_target: float = 0.9973
+    reducer: str | None = None
     cache_dir: Path | None = None
     use_cache: bool = True
     stages: tuple[str, ...] = STAGES
@@ -173,8 +200,22 @@ class StudyConfig:
         integer(self.workers, "--workers", 1)
         integer(self.sweep_points, "--sweep-points", 2)
         integer(self.n_validation, "--validation-cases", 0)
-        integer(self.mc_samples, "--mc-samples", 100)
+        integer(self.mc_draws, "--mc-draws", 2)
+        integer(self.mc_sobol, "--mc-sobol", 0)
         integer(self.mc_check, "--mc-check", 0)
+        for opt, v in (("--rated-Nm", self.rated_Nm), ("--play-spec-arcmin", self.play_spec_arcmin),
+                       ("--rigidity-lsl", self.rigidity_lsl)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{opt} {v!r} must be a finite number > 0")
+        if self.mc_contact not in ContactLaw.KINDS:
+            raise ValueError(f"--mc-contact {self.mc_contact!r} is unknown; allowed: {list(ContactLaw.KINDS)}")
+        if not 0 < self.yield_target < 1:
+            raise ValueError(f"--yield-target {self.yield_target!r} must lie in (0, 1)")
+        for r, (lo, hi) in self.spec_limits.items():
+            if r not in MC_RESPONSES:
+                raise ValueError(f"--spec {r!r}: unknown response; allowed: {list(MC_RESPONSES)}")
+            if lo is not None and hi is not None and not lo < hi:
+                raise ValueError(f"--spec {r}: LSL {lo} must be below USL {hi}")
         integer(self.seed, "--seed", 0)
         if self.center is not None:
             integer(self.center, "--center", 0)
@@ -199,16 +240,62 @@ class StudyConfig:
                 raise ValueError("--solver fcl: the fcl contact provider (rvdyn.fcl_contacts) is not installed "
                                  "in this version; use --solver analytic")
 
+    def specs(self) -> dict[str, tuple[float | None, float | None]]:
+        """``{response: (LSL, USL)}`` of the Monte Carlo responses (None = no limit)."""
+        d: dict[str, tuple[float | None, float | None]] = {
+            "te_pp_arcmin": (None, float(self.spec_arcmin)), "play_3pct_arcmin": (None, float(self.play_spec_arcmin)),
+            "torsional_rigidity_Nm_per_arcmin": (float(self.rigidity_lsl), None), "te_mean_abs_arcmin": (None, None)}
+        d.update(self.spec_limits)
+        return d
+
+    def reducer_design(self) -> Design:
+        """The reducer of the study: ``--reducer`` design JSON, or the paper's default design."""
+        return load_reducer(self.reducer)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready settings (tolerances as text)."""
         d = {k: (str(v) if isinstance(v, Path) else v) for k, v in self.__dict__.items() if k != "tolerances"}
         d["stages"] = list(self.stages)
         d["tolerances"] = {k: t.describe() for k, t in self.tolerances.items()}
+        d["spec_limits"] = {k: list(v) for k, v in self.spec_limits.items()}
         return d
 
 
-#: Steps per output revolution that sample the crank order 121 (one period per input turn) twice.
-MIN_RESOLVING_STEPS = 2 * 121
+def load_reducer(path: str | None) -> Design:
+    """Design of a reducer from a JSON file: the ``design`` object of a case (``rvcad.Design`` fields), or a
+    whole case whose ``design`` is used; None = the paper's default design. ValueError names the file."""
+    if path is None:
+        return Design()
+    import json
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"--reducer file {str(p)!r} does not exist")
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--reducer file {str(p)!r} is not valid JSON: {exc}") from None
+    if isinstance(d, dict) and isinstance(d.get("design"), dict):
+        d = d["design"]
+    if not isinstance(d, dict):
+        raise ValueError(f"--reducer file {str(p)!r} must hold a JSON object of Design fields (e.g. "
+                         '{"z_sun": 18, "z_planet": 36})')
+    try:
+        design = Design.from_dict(d)
+        Case.from_dict({"design": design.to_dict()})  # the parts of the nominal reducer are valid
+    except ValueError as exc:
+        raise ValueError(f"--reducer {p.name}: {exc}") from None
+    return design
+
+
+def min_resolving_steps(design: Design) -> int:
+    """Steps per output revolution that sample the input order (one period per input turn, the ratio's
+    order: 121 for the paper's design) twice."""
+    return 2 * math.ceil(design.ratio)
+
+
+#: For the paper's design: 242.
+MIN_RESOLVING_STEPS = min_resolving_steps(Design())
 
 # ---------------------------------------------------------------------------------------------- factors
 #: Pin patterns a factor of a pin-wise error (pin_pitch, pin_circle_diameter, pin_radius) can take,
@@ -243,6 +330,7 @@ class FactorSet:
     table: pd.DataFrame
     is_paper: bool
     patterns: dict[str, str | None] = field(default_factory=dict)
+    z_pins: int = field(default_factory=lambda: Design().z_pins)
 
     @property
     def error_keys(self) -> list[str]:
@@ -257,7 +345,7 @@ class FactorSet:
         """Case-JSON errors of error values keyed by error type: a factor's pattern is applied to its
         error type's value; other error types keep their default instance."""
         pat = {self.errors[f]: self.patterns.get(f) for f in self.names}
-        return {k: pattern_value(k, pat.get(k), float(v)) for k, v in values.items()}
+        return {k: pattern_value(k, pat.get(k), float(v), self.z_pins) for k, v in values.items()}
 
 
 def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSet:
@@ -320,7 +408,7 @@ def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSe
         for lev in ("low", "center", "high"):
             x = getattr(levels[f], lev)
             if not (math.isfinite(x) and abs(x) <= lim):
-                raise TableError(f"--levels: factor {f!r} ({key}) {lev} {x!r} {ERROR_TYPES[key].unit}; allowed: a finite "
+                raise TableError(f"--levels: factor {f!r} ({key}) {lev} {x!r} {ERROR_TYPES[key].unit} is out of range; allowed: a finite "
                                  f"value with |value| <= {lim:g} {ERROR_TYPES[key].unit}", field=f"{f}.{lev}", value=x)
         errors[f] = key
     if len(set(errors.values())) != len(errors):
@@ -368,6 +456,7 @@ class StudyResult:
     cache_counters: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
+    reducer: Design = field(default_factory=Design)
     readings: Any = None                   # rvstudy.paper_readings.ReadingsResult
 
 
@@ -386,12 +475,13 @@ def _responses(results: list[dict[str, Any]]) -> pd.DataFrame:
     })
 
 
-def _cases_for(fs: FactorSet, actual: np.ndarray, prefix: str, cfg: StudyConfig) -> list[Case]:
+def _cases_for(fs: FactorSet, actual: np.ndarray, prefix: str, cfg: StudyConfig,
+               base: dict[str, Any] | None = None) -> list[Case]:
     out = []
     for i, row in enumerate(np.atleast_2d(actual)):
         errs = fs.case_errors({fs.errors[f]: float(v) for f, v in zip(fs.names, row)})
         try:
-            out.append(make_case(errs, f"{prefix}-{i + 1}", cfg.load_Nm))
+            out.append(make_case(errs, f"{prefix}-{i + 1}", cfg.load_Nm, base=base))
         except ValueError as exc:
             raise ValueError(f"{prefix} point {i + 1} ({errs}) is not a valid case: {exc}; "
                              "narrow --levels or --ccd-alpha") from None
@@ -457,8 +547,12 @@ def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitB
                     names = [t for t in names if t not in bad]
                     dropped.extend(bad)
             b.results = model.fit(alpha=alpha)
-            b.comparison = rsm.compare_reductions(b.results, alpha=alpha, alpha_out=alpha)
-        b.notes = list(dict.fromkeys([str(x.message) for x in w] + list(b.results.notes)))
+            try:
+                b.comparison = rsm.compare_reductions(b.results, alpha=alpha, alpha_out=alpha)
+            except ValueError as exc:  # the full fit stands; only the reduced models are missing
+                b.comparison = None
+                b.notes.append(f"reduced models (Eq. 9) could not be formed from the {len(ok)} solved runs: {exc}")
+        b.notes = list(dict.fromkeys(b.notes + [str(x.message) for x in w] + list(b.results.notes)))
         if dropped:
             b.notes.insert(0, f"{len(ok)} of {len(data)} runs solved; terms not estimable from them and left out "
                               f"of the model: {', '.join(dropped)}")
@@ -480,31 +574,45 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
     """
     cfg.validate()
     fs = load_factors(cfg.levels, cfg.factors)
+    design = cfg.reducer_design()
+    fs.z_pins = design.z_pins
+    if design != Design():
+        fs.is_paper = False  # the paper's numbers are of its own reducer: no side-by-side for another one
+    base = {"design": design.to_dict()}
     t_start = time.perf_counter()
     own = executor is None
     ex = make_executor(cfg.workers, cfg.scheduler, cfg.scheduler_timeout_s) if own else executor
     cache = CaseCache((cfg.cache_dir or Path(cfg.out) / "cache") if cfg.use_cache else None)
     kw = {} if solve_fn is None else {"solve_fn": solve_fn}
-    runner = CachedRunner(ex, cache, cfg.solver, cfg.steps, ContactLaw(cfg.K, cfg.n), progress=cfg.progress, **kw)
-    res = StudyResult(config=cfg, factors=fs, executor=getattr(ex, "describe", lambda: ex.name)())
-    if cfg.steps < MIN_RESOLVING_STEPS:
-        res.notes.append(f"--steps {cfg.steps} is below {MIN_RESOLVING_STEPS}: the TE has content at the crank "
-                         "order 121 (one period per input turn), which needs two steps a period, so peak-to-peak "
-                         "values are undersampled (the mean is less affected)")
+    law = ContactLaw(cfg.K, cfg.n)
+
+    made: list[CachedRunner] = []
+
+    def make_runner(solver: str, steps: int, law: ContactLaw = law) -> CachedRunner:
+        made.append(CachedRunner(ex, cache, solver, steps, law, progress=cfg.progress, **kw))
+        return made[-1]
+
+    runner = make_runner(cfg.solver, cfg.steps)
+    res = StudyResult(config=cfg, factors=fs, executor=getattr(ex, "describe", lambda: ex.name)(), reducer=design)
+    n_min = min_resolving_steps(design)
+    if cfg.steps < n_min:
+        res.notes.append(f"--steps {cfg.steps} is below {n_min}: the TE has content at the input order "
+                         f"{design.ratio:g} (one period per input turn), which needs two steps a period, so "
+                         "peak-to-peak values are undersampled (the mean is less affected)")
     try:
-        if "screen" in cfg.stages or "mc" in cfg.stages:
+        if "screen" in cfg.stages:
             t0 = time.perf_counter()
             half = {f: fs.levels[f].half_range for f in fs.names if f in RSM_FACTORS and fs.errors[f] == RSM_FACTORS[f]
                     and fs.patterns.get(f) is None and fs.levels[f].center == 0}
             res.screen = run_screen(cfg.solver, cfg.steps, cfg.sweep_points, cfg.load_Nm, runner=runner,
                                     both_signs=True, half_range=half or None, progress=cfg.progress,
-                                    sweeps="screen" in cfg.stages)
+                                    sweeps="screen" in cfg.stages, base=base)
             res.timings["screen"] = time.perf_counter() - t0
         if {"doe", "validation", "mc"} & set(cfg.stages):
             t0 = time.perf_counter()
             coded, res.paper_order = _design(cfg, fs)
             actual = fs.levels.coded_to_actual(coded[fs.names].to_numpy(float), fs.names)
-            cases = _cases_for(fs, actual, "doe", cfg)
+            cases = _cases_for(fs, actual, "doe", cfg, base)
             out = runner(cases, f"design ({cfg.design}, {len(cases)} runs)")
             table = coded.copy()
             for j, f in enumerate(fs.names):
@@ -519,11 +627,21 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
             res.timings["doe"] = time.perf_counter() - t0
         if "validation" in cfg.stages and cfg.n_validation > 0:
             t0 = time.perf_counter()
-            res.validation = _validation(cfg, fs, runner, res)
+            res.validation = _validation(cfg, fs, runner, res, base)
             res.timings["validation"] = time.perf_counter() - t0
         if "mc" in cfg.stages:
             t0 = time.perf_counter()
-            res.mc = _monte_carlo(cfg, fs, runner, res)
+            mc_law = law if cfg.mc_contact == "impact" else ContactLaw(cfg.K, cfg.n, kind=cfg.mc_contact)
+            runners = {"te": make_runner("analytic", cfg.steps, mc_law),
+                       "play": make_runner("analytic", play_positions(design), mc_law)}
+            if cfg.mc_check > 0:
+                import importlib.util
+
+                if importlib.util.find_spec("fcl") is None or importlib.util.find_spec("rvdyn.fcl_contacts") is None:
+                    res.notes.append("the fcl check of the Monte Carlo is skipped: python-fcl is not installed")
+                else:
+                    runners["check"] = make_runner("fcl", cfg.steps, mc_law)
+            res.mc = run_full_mc(cfg, fs, design, runners, res.fits, res.notes, workers=getattr(ex, "workers", 1))
             res.timings["mc"] = time.perf_counter() - t0
         if "readings" in cfg.stages and fs.is_paper:  # Table 6 as measurements (rvstudy.paper_readings)
             t0 = time.perf_counter()
@@ -535,18 +653,30 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
         if own:
             ex.close()
     res.timings["total"] = time.perf_counter() - t_start
-    res.counters = runner.counters()
+    res.counters = _merged_counters(made)
     res.cache_counters = cache.counters()
     return res
 
 
-def _validation(cfg: StudyConfig, fs: FactorSet, runner: CachedRunner, res: StudyResult) -> pd.DataFrame:
+def _merged_counters(runners: list[CachedRunner]) -> dict[str, Any]:
+    """The counters of every runner of the run added up (solve-time statistics over all computed cases)."""
+    out = {k: sum(getattr(r, k) for r in runners) for k in ("computed", "reused", "failed")}
+    s = np.array([x for r in runners for x in r.solve_seconds], dtype=float)
+    out.update({"solve_seconds_mean": float(np.nanmean(s)) if s.size else float("nan"),
+                "solve_seconds_median": float(np.nanmedian(s)) if s.size else float("nan"),
+                "solve_seconds_total": float(np.nansum(s)) if s.size else 0.0,
+                "wall_seconds": float(sum(r.wall_seconds for r in runners))})
+    return out
+
+
+def _validation(cfg: StudyConfig, fs: FactorSet, runner: CachedRunner, res: StudyResult,
+                base: dict[str, Any] | None = None) -> pd.DataFrame:
     """Random cases uniform in the coded box [-1, 1]^k (seed ``[seed, 1]``), simulated and predicted."""
     rng = np.random.default_rng([cfg.seed, 1])
     z = rng.uniform(-1.0, 1.0, (cfg.n_validation, len(fs.names)))
     actual = np.vectorize(lambda v: float(f"{v:.6g}"))(fs.levels.coded_to_actual(z, fs.names))
     z = fs.levels.actual_to_coded(actual, fs.names)
-    out = runner(_cases_for(fs, actual, "validation", cfg), f"validation ({cfg.n_validation} cases)")
+    out = runner(_cases_for(fs, actual, "validation", cfg, base), f"validation ({cfg.n_validation} cases)")
     df = pd.DataFrame({"case": np.arange(1, len(z) + 1)})
     for j, f in enumerate(fs.names):
         df[f] = z[:, j]
@@ -563,6 +693,9 @@ def _validation(cfg: StudyConfig, fs: FactorSet, runner: CachedRunner, res: Stud
         df[f"{resp}_pred_full"] = pred["mean"].to_numpy()
         df[f"{resp}_pi_lower"] = pred["obs_ci_lower"].to_numpy()
         df[f"{resp}_pi_upper"] = pred["obs_ci_upper"].to_numpy()
+        if b.comparison is None:
+            b.validation = {"full": b.results.validate(ok, response=resp, units="coded")}
+            continue
         df[f"{resp}_pred_paper_mode"] = b.comparison.paper.predict(df, units="coded")
         df[f"{resp}_pred_backward"] = b.comparison.backward.results.predict(df, units="coded")["mean"].to_numpy()
         b.validation = {
@@ -571,103 +704,3 @@ def _validation(cfg: StudyConfig, fs: FactorSet, runner: CachedRunner, res: Stud
             "backward": b.comparison.backward.results.validate(ok, response=resp, units="coded"),
         }
     return df
-
-
-def _screen_nodes(screen: ScreenResult, column: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Single-factor (value, response) nodes of every error type from the screen and the sweeps."""
-    s = screen.screen
-    a = float(s.loc[s["letter"] == "A", column].iloc[0])
-    nodes: dict[str, tuple[list[float], list[float]]] = {k: ([0.0], [a]) for k in ERROR_TYPES}
-    for r in s[s["letter"] != "A"].itertuples():
-        nodes[r.error][0].append(float(r.value))
-        nodes[r.error][1].append(float(getattr(r, column)))
-    if len(screen.sweeps):
-        for r in screen.sweeps.itertuples():
-            if r.error in nodes and float(r.value) not in nodes[r.error][0]:
-                nodes[r.error][0].append(float(r.value))
-                nodes[r.error][1].append(float(getattr(r, column)))
-    out = {}
-    for k, (x, y) in nodes.items():
-        x, y = np.array(x, float), np.array(y, float)
-        keep = np.isfinite(y)  # a failed single-factor case is left out of the interpolation
-        out[k] = (x[keep], y[keep])
-    return out
-
-
-def _monte_carlo(cfg: StudyConfig, fs: FactorSet, runner: CachedRunner, res: StudyResult) -> dict[str, Any]:
-    """Tolerance stack-up through the fitted surfaces and a full-solver check sample."""
-    tols = cfg.tolerances
-    out: dict[str, Any] = {"tolerances": tols, "spec_arcmin": cfg.spec_arcmin}
-    rng = np.random.default_rng([cfg.seed, 2])
-    S = sample_errors(tols, cfg.mc_samples, rng)
-    keys = fs.error_keys
-    X = pd.DataFrame({f: S[fs.errors[f]].to_numpy() for f in fs.names})
-    z = fs.levels.actual_to_coded(X.to_numpy(float), fs.names)
-    out["outside_box_fraction"] = float(np.mean(np.any(np.abs(z) > 1.0 + 1e-12, axis=1)))
-    surf: dict[str, np.ndarray] = {}
-    dist_rows, sobol = [], []
-    for resp, b in res.fits.items():
-        if b.results is None:
-            continue
-        surface = b.results.surface
-        y = surface.predict(X, units="actual")
-        surf[resp] = y
-        dist_rows.append({"source": "surface (RSM factors only)", "response": resp, "n": len(y),
-                          **percentiles(y), "negative_fraction": float(np.mean(y < 0))})
-
-        def f(D: pd.DataFrame, surface: Any = surface) -> np.ndarray:
-            return surface.predict(pd.DataFrame({g: D[fs.errors[g]].to_numpy() for g in fs.names}), units="actual")
-
-        si = sobol_indices(f, tols, keys, max(1000, cfg.mc_samples // 4), np.random.default_rng([cfg.seed, 4]))
-        si.insert(0, "response", resp)
-        si.insert(1, "factor", [next(g for g in fs.names if fs.errors[g] == k) for k in si["error"]])
-        sobol.append(si)
-    out["surface_samples"] = pd.concat([S, pd.DataFrame({f"{r}_surface": v for r, v in surf.items()})], axis=1)
-    if "pp_arcmin" in surf:
-        out["yield_surface"] = yield_estimate(surf["pp_arcmin"], cfg.spec_arcmin)
-    out["sobol"] = pd.concat(sobol, ignore_index=True) if sobol else pd.DataFrame()
-    # one-at-a-time shares of all eleven errors, from the screen's single-factor solver runs
-    if res.screen is not None:
-        oat = []
-        for col, resp in (("te_mean_abs_arcmin", "mean_abs_arcmin"), ("te_pp_arcmin", "pp_arcmin")):
-            o = oat_variance_shares(_screen_nodes(res.screen, col), S)
-            o.insert(0, "response", resp)
-            o.insert(1, "letter", [ERROR_TYPES[k].letter for k in o["error"]])
-            oat.append(o)
-        out["oat"] = pd.concat(oat, ignore_index=True)
-    # full-solver check with every error type drawn
-    if cfg.mc_check > 0:
-        C = sample_errors(tols, cfg.mc_check, np.random.default_rng([cfg.seed, 3]))
-        C = C.apply(lambda col: col.map(lambda v: float(f"{v:.6g}")))
-        cases, valid = [], []
-        for i, row in C.iterrows():
-            try:
-                cases.append(make_case(fs.case_errors(row.to_dict()), f"mc-{i + 1}", cfg.load_Nm))
-                valid.append(i)
-            except ValueError as exc:
-                res.notes.append(f"Monte Carlo check draw {i + 1} is not a valid case and is skipped: {exc}")
-        rr = runner(cases, f"MC check ({len(cases)} cases, all errors)")
-        chk = pd.concat([C.loc[valid].reset_index(drop=True).rename(columns=lambda c: f"{c}"),
-                         _responses(rr)], axis=1)
-        chk.insert(0, "case", [v + 1 for v in valid])
-        Xc = pd.DataFrame({f: chk[fs.errors[f]].to_numpy() for f in fs.names})
-        for resp, b in res.fits.items():
-            if b.results is None:
-                continue
-            chk[f"{resp}_surface"] = b.results.surface.predict(Xc, units="actual")
-        ok = chk[chk["status"] == "ok"]
-        for r in chk[chk["status"] != "ok"].itertuples():
-            res.notes.append(f"Monte Carlo check case {r.case} failed and is left out: {r.error_message}")
-        out["check"] = chk
-        for resp in RESPONSES:
-            if len(ok):
-                dist_rows.append({"source": "full solver (all 11 errors)", "response": resp, "n": len(ok),
-                                  **percentiles(ok[resp].to_numpy())})
-            if f"{resp}_surface" in chk and len(ok):
-                e = ok[f"{resp}_surface"].to_numpy() - ok[resp].to_numpy()
-                out[f"check_{resp}"] = {"rmse": float(np.sqrt(np.mean(e ** 2))), "bias": float(np.mean(e)),
-                                        "max_abs": float(np.max(np.abs(e))), "n": int(len(e))}
-        if len(ok):
-            out["yield_solver"] = yield_estimate(ok["pp_arcmin"].to_numpy(), cfg.spec_arcmin)
-    out["distribution"] = pd.DataFrame(dist_rows)
-    return out

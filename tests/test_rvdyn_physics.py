@@ -156,7 +156,7 @@ def test_unresolvable_interference_is_refused() -> None:
 def test_bad_input_clear_errors_and_no_partial_csv(tmp_path, capsys) -> None:
     out = tmp_path / "te.csv"
     assert rvdyn_main(["te", "--steps", "1", "--out", str(out)]) == 2
-    assert "steps 1 must be an integer >= 2" in capsys.readouterr().err
+    assert "--steps 1 is out of range; allowed: an integer in [2, " in capsys.readouterr().err
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"errors": {"pin_radius": "NaN"}}))
     assert rvdyn_main(["te", str(bad), "--out", str(out)]) == 2

@@ -1,0 +1,300 @@
+"""Monte Carlo tolerance stack-up through the full solver (``rv-stackup`` stage ``mc``).
+
+Every draw of every toleranced feature (:mod:`rvstudy.features`) is a case solved by the quasi-static
+solver (rvdyn): the analytic contact provider for all draws, the fcl provider again on a check
+subsample, with their agreement reported. Responses a user puts a specification on:
+
+* ``te_pp_arcmin`` -- TE peak-to-peak over one output revolution at the study's load (the industry's
+  angular transmission error), arcmin;
+* ``play_3pct_arcmin`` -- a two-direction proxy of lost motion: at each of :func:`play_positions`
+  locked input positions evenly spread over one output revolution, the output angle under an output
+  torque of +3 % of rated minus that under -3 % (the solver's TE of direction -1 minus that of
+  direction +1 at a load of 3 % rated: an external torque +tau is direction -1 with load tau), the
+  largest over the positions, arcmin. It is read on the elastic (friction-free) curve of
+  ``rvdyn.stiffness`` (equal to its points, tested); the maker's lost motion of ``rvdyn.stiffness`` is
+  read on the hysteresis curve with its friction band (0.02 % apart for a 5 um pin clearance at
+  input 0, tested to 0.1 %), and is taken at one input angle, hence the other name. ``rvdyn.stiffness.hysteresis`` itself is not used per draw: its
+  zero-torque point is the rigid limit, which refuses a preloaded draw (nearly every draw of the pin
+  tolerances) as an interference;
+* ``torsional_rigidity_Nm_per_arcmin`` -- b/a of the same elastic curve as ``rvdyn.stiffness`` reads it
+  (secant between 3 % and 100 % of rated torque, b = 0.97 T_rated, mean of both sides) but on the
+  elastic curve, without the friction band (2.7 % stiffer figure from rvdyn.stiffness for the 5 um
+  clearance case), smallest over the positions, N m/arcmin;
+* ``te_mean_abs_arcmin`` -- the paper's mean |TE| (for the paper reproduction; no specification by
+  default).
+
+Draws: ``mc_draws`` independent draws (seed ``[seed, 2]``) give every distribution statistic. The
+contributors come from a designed sample (Saltelli): A and B are the first two blocks of
+``mc_sobol`` independent draws, and for every tolerance one more block of ``mc_sobol`` cases, A with
+that tolerance's features taken from B (:func:`rvstudy.capability.sobol_from_design`). Tolerance
+allocation re-weights the independent draws (:func:`rvstudy.capability.allocation`; no new solves).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from rvcad.errors import ERROR_TYPES
+from rvcad.params import Design
+from rvstudy.capability import allocation, capability, recommend, sobol_from_design
+from rvstudy.features import Feature, draw, features, group_columns, make_draw_case
+
+ARCSEC_PER_ARCMIN = 60.0
+#: Fraction of the rated torque at which lost motion is read (conventions: +-3 %).
+PLAY_LOAD_FRACTION = 0.03
+#: Responses of the full-solver Monte Carlo and their labels.
+MC_RESPONSES = {
+    "te_pp_arcmin": "TE peak-to-peak [arcmin]",
+    "play_3pct_arcmin": "two-direction play at +-3 % rated torque [arcmin] (lost-motion proxy)",
+    "torsional_rigidity_Nm_per_arcmin": "torsional rigidity b/a [N m/arcmin]",
+    "te_mean_abs_arcmin": "mean |TE| [arcmin] (paper's response)",
+}
+
+Runner = Callable[[list, str], list[dict[str, Any]]]
+
+
+def play_positions(design: Design) -> int:
+    """Number of input positions of the play proxy: the first of 37, 41, 43, 47, 53 that divides none of
+    Zp, Zc and the rounded ratio, so that the positions fall at distinct crank phases."""
+    for p in (37, 41, 43, 47, 53):
+        if all(int(v) % p for v in (design.z_pins, design.z_disc, round(design.ratio))):
+            return p
+    return 59
+
+
+def factor_values(feats: list[Feature], X: pd.DataFrame, fs: Any) -> pd.DataFrame | None:
+    """Each RSM factor's value in the draws as the surface knows it: the default-instance feature (pin 0's
+    pitch, disc 0 hole 0, ...), or the mean over the pins for an all-pins error or an ``all`` pattern;
+    None when a factor has no such reading (an ``alternate`` pattern)."""
+    out = {}
+    for f in fs.names:
+        key, pat = fs.errors[f], fs.patterns.get(f)
+        et = ERROR_TYPES[key]
+        cols = [ft for ft in feats if ft.tolerance == key and ft.component == "value"]
+        if pat == "alternate":
+            return None
+        if not cols:
+            out[f] = np.zeros(len(X))
+            continue
+        all_pins = pat == "all" or (et.pinwise and et.defaults.get("pin", 0) is None)
+        if all_pins:
+            out[f] = X[[c.name for c in cols]].to_numpy(float).mean(axis=1)
+            continue
+        d = tuple(sorted((k, v) for k, v in et.defaults.items() if v is not None))
+        hit = [c for c in cols if d in c.instances]
+        out[f] = X[hit[0].name].to_numpy(float) if hit else np.zeros(len(X))
+    return pd.DataFrame(out)
+
+
+def _cases(feats, X: pd.DataFrame, design: Design, prefix: str, load: float, direction: int,
+           base_model: dict, notes: list[str]) -> tuple[list, list[int]]:
+    cases, idx = [], []
+    vals = X.to_numpy(float)
+    for i in range(len(X)):
+        try:
+            cases.append(make_draw_case(feats, vals[i], design, f"{prefix}-{i + 1}", load, direction, base_model))
+            idx.append(i)
+        except ValueError as exc:
+            if direction == 1:
+                notes.append(f"Monte Carlo draw {prefix}-{i + 1} is not a valid case (counted as a failed "
+                             f"draw): {exc}")
+    return cases, idx
+
+
+def _solve(runner: Runner, feats, X: pd.DataFrame, design: Design, prefix: str, load: float, direction: int,
+           base_model: dict, notes: list[str], desc: str) -> list[dict[str, Any] | None]:
+    cases, idx = _cases(feats, X, design, prefix, load, direction, base_model, notes)
+    out: list[dict[str, Any] | None] = [None] * len(X)
+    for i, r in zip(idx, runner(cases, desc) if cases else []):
+        out[i] = r
+    return out
+
+
+def _stat(r: dict[str, Any] | None, k: str) -> float:
+    if r is None or r.get("status", "ok") != "ok":
+        return float("nan")
+    return float(r["stats"][k]) / ARCSEC_PER_ARCMIN
+
+
+def torsion_arcmin(r: dict | None) -> np.ndarray | None:
+    """Output torsion angle (arcmin) at the positions in input-angle order (a direction -1 run is reversed),
+    or None for a failed solve."""
+    if r is None or r.get("status") != "ok" or r.get("te_arcsec") is None:
+        return None
+    te = np.asarray(r["te_arcsec"], float) / ARCSEC_PER_ARCMIN
+    return te[::-1] if r.get("direction", 1) == -1 else te
+
+
+def play_at_positions(plus3: dict | None, minus3: dict | None) -> np.ndarray | None:
+    """theta(+3 %) - theta(-3 %) at each position, arcmin: TE of direction -1 minus TE of direction +1."""
+    a, b = torsion_arcmin(minus3), torsion_arcmin(plus3)
+    return None if a is None or b is None else a - b
+
+
+def rigidity_at_positions(r: dict[str, dict | None], rated_Nm: float) -> np.ndarray | None:
+    """b/a at each position, N m/arcmin: b = 0.97 T_rated, a = the torsion between 3 % and 100 % of rated
+    torque on each side, mean of both sides (``rvdyn.stiffness`` reads the curve so)."""
+    t = {k: torsion_arcmin(v) for k, v in r.items()}
+    if any(v is None for v in t.values()):
+        return None
+    b = (1.0 - PLAY_LOAD_FRACTION) * rated_Nm
+    # positive torque = direction -1; angles of +100 % minus +3 %, and of -3 % minus -100 %
+    return 0.5 * (b / (t["dm_full"] - t["dm_3"]) + b / (t["dp_3"] - t["dp_full"]))
+
+
+def responses_of(feats, X: pd.DataFrame, design: Design, cfg: Any, runners: dict[str, Runner], base_model: dict,
+                 notes: list[str], prefix: str) -> pd.DataFrame:
+    """Solve the draws ``X`` (TE at the study load; play at +-3 % rated) and return the responses."""
+    te = _solve(runners["te"], feats, X, design, prefix, cfg.load_Nm, 1, base_model, notes,
+                f"MC {prefix}: TE ({len(X)} draws)")
+    curve: dict[str, list] = {}
+    for name, frac, d in (("dp_3", PLAY_LOAD_FRACTION, 1), ("dm_3", PLAY_LOAD_FRACTION, -1),
+                          ("dp_full", 1.0, 1), ("dm_full", 1.0, -1)):
+        res = _solve(runners["play"], feats, X, design, prefix, frac * cfg.rated_Nm, d, base_model, notes,
+                     f"MC {prefix}: torque {'+' if d < 0 else '-'}{100 * frac:g} % rated")
+        curve[name] = [None if r is None else {**r, "direction": d} for r in res]
+    play, rig = [], []
+    for i in range(len(X)):
+        pl = play_at_positions(curve["dp_3"][i], curve["dm_3"][i])
+        rg = rigidity_at_positions({k: v[i] for k, v in curve.items()}, cfg.rated_Nm)
+        play.append(float(np.max(pl)) if pl is not None else float("nan"))
+        rig.append(float(np.min(rg)) if rg is not None else float("nan"))
+    return pd.DataFrame({
+        "te_pp_arcmin": [_stat(r, "pp") for r in te],
+        "play_3pct_arcmin": play,
+        "torsional_rigidity_Nm_per_arcmin": rig,
+        "te_mean_abs_arcmin": [_stat(r, "mean_abs") for r in te],
+        "status": ["ok" if r is not None and r.get("status") == "ok" else "failed" for r in te],
+        "error_message": ["invalid case" if r is None else r.get("error", "") for r in te],
+    })
+
+
+def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], fits: dict[str, Any],
+                notes: list[str], base_model: dict | None = None, workers: int = 1) -> dict[str, Any]:
+    """The full-solver Monte Carlo of the study (see the module docstring).
+
+    Parameters
+    ----------
+    cfg : StudyConfig
+        Uses ``tolerances, mc_draws, mc_sobol, mc_check, seed, load_Nm, rated_Nm, specs()``.
+    fs : FactorSet
+        The RSM factors (for the surface comparison).
+    design : Design
+        The reducer.
+    runners : dict
+        ``te`` (analytic, ``cfg.steps``), ``play`` (analytic, :func:`play_positions` steps) and ``check``
+        (fcl, ``cfg.steps``) runners, ``runner(cases, desc) -> results``.
+    fits : dict
+        Response -> FitBundle of the design stage (surface comparison), may be empty.
+    notes : list
+        Notes of the run (appended to).
+    """
+    t0 = time.perf_counter()
+    done0 = {k: (getattr(r, "computed", 0), getattr(r, "reused", 0)) for k, r in runners.items()}
+    tols = cfg.tolerances
+    base_model = dict(base_model or {})
+    feats = features(tols, design)
+    X = draw(tols, feats, cfg.mc_draws, np.random.default_rng([cfg.seed, 2]))
+    Y = responses_of(feats, X, design, cfg, runners, base_model, notes, "mc")
+    specs = cfg.specs()
+    out: dict[str, Any] = {"tolerances": tols, "n_features": len(feats), "specs": specs,
+                           "play_positions": play_positions(design), "play_load_Nm": PLAY_LOAD_FRACTION * cfg.rated_Nm,
+                           "features": pd.DataFrame([{"feature": f.name, "tolerance": f.tolerance,
+                                                      "component": f.component} for f in feats])}
+    groups = {g: c for g, c in group_columns(feats).items() if tols[g].std > 0}
+    # designed sample for the contributors: A, B = first two blocks of the independent draws
+    n_s = min(int(cfg.mc_sobol), len(X) // 2)
+    sob_rows = []
+    n_design = 0
+    if n_s >= 2 and groups:
+        A, B = X.iloc[:n_s].reset_index(drop=True), X.iloc[n_s:2 * n_s].reset_index(drop=True)
+        AB = []
+        for g, cols in groups.items():
+            m = A.copy()
+            m[cols] = B[cols].to_numpy()
+            AB.append(m)
+        Xab = pd.concat(AB, ignore_index=True)
+        Yab = responses_of(feats, Xab, design, cfg, runners, base_model, notes, "sobol")
+        n_design = len(Xab)
+        for resp in MC_RESPONSES:
+            yA, yB = Y[resp].to_numpy()[:n_s], Y[resp].to_numpy()[n_s:2 * n_s]
+            yab = {g: Yab[resp].to_numpy()[j * n_s:(j + 1) * n_s] for j, g in enumerate(groups)}
+            s = sobol_from_design(yA, yB, yab, var=float(np.nanvar(Y[resp].to_numpy())), seed=cfg.seed)
+            s.insert(0, "response", resp)
+            sob_rows.append(s)
+    out["sobol"] = pd.concat(sob_rows, ignore_index=True) if sob_rows else pd.DataFrame()
+    out["sobol_n"] = n_s
+    per: dict[str, Any] = {}
+    alloc_rows = []
+    for resp in MC_RESPONSES:
+        lsl, usl = specs.get(resp, (None, None))
+        c = capability(Y[resp].to_numpy(), lsl, usl)
+        s = out["sobol"]
+        c["contributors"] = ([{"tolerance": r.tolerance, "first_order": r.first_order, "total": r.total}
+                              for r in s[s["response"] == resp].itertuples()] if len(s) else [])
+        if lsl is not None or usl is not None:
+            a = allocation(X, groups, tols, Y[resp].to_numpy(), lsl, usl)
+            if len(a):
+                a.insert(0, "response", resp)
+                alloc_rows.append(a)
+                c["allocation"] = recommend(a, target=cfg.yield_target)
+        per[resp] = c
+    out["responses"] = per
+    out["allocation"] = pd.concat(alloc_rows, ignore_index=True) if alloc_rows else pd.DataFrame()
+    # the quadratic surface on the same draws (comparison only)
+    Z = factor_values(feats, X, fs)
+    surf = {}
+    for resp, key in (("te_pp_arcmin", "pp_arcmin"), ("te_mean_abs_arcmin", "mean_abs_arcmin")):
+        b = fits.get(key)
+        if Z is None or b is None or getattr(b, "results", None) is None:
+            continue
+        pred = np.asarray(b.results.surface.predict(Z, units="actual"), float)
+        Y[f"{resp}_surface"] = pred
+        ok = np.isfinite(Y[resp].to_numpy())
+        e = pred[ok] - Y[resp].to_numpy()[ok]
+        lsl, usl = specs.get(resp, (None, None))
+        surf[resp] = {"n": int(ok.sum()), "rmse": float(np.sqrt(np.mean(e ** 2))), "bias": float(np.mean(e)),
+                      "max_abs": float(np.max(np.abs(e))), "negative_fraction": float(np.mean(pred < 0)),
+                      "corr": float(np.corrcoef(pred[ok], Y[resp].to_numpy()[ok])[0, 1]) if ok.sum() > 2 else None,
+                      "yield_surface": (capability(pred, lsl, usl)["yield"] if lsl is not None or usl is not None
+                                        else None)}
+    out["surface"] = surf
+    # fcl on a check subsample of the independent draws
+    n_chk = min(int(cfg.mc_check), len(X))
+    if n_chk > 0 and "check" in runners:
+        chk = _solve(runners["check"], feats, X.iloc[:n_chk], design, "mc", cfg.load_Nm, 1, base_model, [],
+                     f"MC check: fcl ({n_chk} draws)")
+        cdf = pd.DataFrame({"draw": np.arange(1, n_chk + 1),
+                            "te_pp_arcmin_analytic": Y["te_pp_arcmin"].to_numpy()[:n_chk],
+                            "te_pp_arcmin_fcl": [_stat(r, "pp") for r in chk],
+                            "te_mean_abs_arcmin_analytic": Y["te_mean_abs_arcmin"].to_numpy()[:n_chk],
+                            "te_mean_abs_arcmin_fcl": [_stat(r, "mean_abs") for r in chk]})
+        out["check"] = cdf
+        agr = {}
+        for r in ("te_pp_arcmin", "te_mean_abs_arcmin"):
+            d = (cdf[f"{r}_fcl"] - cdf[f"{r}_analytic"]).to_numpy()
+            d = d[np.isfinite(d)]
+            agr[r] = {"n": int(d.size), "max_abs_diff": float(np.max(np.abs(d))) if d.size else None,
+                      "rms_diff": float(np.sqrt(np.mean(d ** 2))) if d.size else None}
+        out["check_agreement"] = agr
+    out["draws"] = pd.concat([X, Y], axis=1)
+    wall = time.perf_counter() - t0
+    n_eval = len(X) + n_design
+    computed = sum(getattr(r, "computed", 0) - done0[k][0] for k, r in runners.items() if k != "check")
+    reused = sum(getattr(r, "reused", 0) - done0[k][1] for k, r in runners.items() if k != "check")
+    out["timing"] = {"wall_s": wall, "full_solver_draws": n_eval, "independent_draws": len(X),
+                     "analytic_solves_computed": computed, "analytic_solves_reused": reused,
+                     "design_draws": n_design, "solves_per_draw": 5, "workers": workers,
+                     "draws_per_s_per_worker": n_eval / wall / max(1, workers) if wall > 0 else float("nan")}
+    return out
+
+
+def closed_form_lever_mm(design: Design) -> float:
+    """The largest pin lever ``(i Z1/Z2) e`` of the clearance closed form (docs/physics.md section 6), mm:
+    an upper bound of max_i lambda_i (52.4 mm for the paper's design)."""
+    return design.ratio * design.z_sun / design.z_planet * design.eccentricity_mm
+
