@@ -1,15 +1,16 @@
 """Geometric check of a case: refuse parts that cannot be built or assembled, naming the field.
 
-:meth:`rvcad.params.Design.validate` already refuses a *design* that cannot be built (pointed teeth
-from ``design.stage1_backlash_mm``, cranks too close in ``design.crank_angles_deg``, holes through
-the disc root, ...). :func:`check_case` runs before anything is exported (and in
-:func:`rvcad.reducer`) and adds what needs the error-perturbed geometry of the case, raising
-:class:`rvcad.validation.DesignError` (a ``ValueError``) whose message names the field, its value
-and what is allowed:
+:meth:`rvcad.params.Design.validate` refuses bad field values and the relations between fields
+(pins apart, the two planets apart on the crank circle, radii). :func:`check_case` runs before
+anything is exported (and in :func:`rvcad.reducer`) and checks what the solids need, on the
+error-perturbed geometry of the case, raising :class:`rvcad.validation.DesignError` (a
+``ValueError``) whose message names the field, its value and what is allowed:
 
-* stage I teeth: a positive root gap (neighbouring teeth do not overlap at the root circle);
-* crank holes: the perturbed holes of the two cranks in each disc (radius ``cam_radius_mm``, moved
-  by ``errors.disc_hole_eccentricity``) do not overlap and stay inside the disc root circle; the
+* stage I teeth: a tip land and a root gap on both gears. Thinning the planet teeth by
+  ``design.stage1_backlash_mm`` turns both flanks by b / (2 r_pitch); the tip land vanishes at
+  ``b_max = b + s_tip r_pitch / r_tip`` (0.99 mm with the default gears: 1.0 mm points the planet);
+* crank holes: the holes of the two cranks in each disc (radius ``cam_radius_mm``, moved by
+  ``errors.disc_hole_eccentricity``) do not overlap and stay inside the disc root circle; the
   journal holes of the plates (moved by ``errors.carrier_hole_eccentricity``) stay inside the rim;
 * contacts (:func:`pin_interference`): the smallest largest penetration of the pins into the
   discs and of the loaded stage I flanks over the poses the solver can take (its coordinates:
@@ -45,10 +46,6 @@ INTERFERENCE_STATES = 12
 MIN_TOOTH_LAND_MM = 1e-3
 
 
-# DesignError: the case cannot give valid, assemblable solids; the message names the field. It is the
-# validation layer's class (rvcad.validation), so Design.validate and this check raise one family.
-
-
 # ----------------------------------------------------------------------------- stage I teeth
 def _tooth_lands(gear) -> tuple[float, float]:
     """(tip land, root gap) of an involute gear, mm: chord widths at the tip and root circles."""
@@ -60,24 +57,24 @@ def _tooth_lands(gear) -> tuple[float, float]:
 
 
 def _check_gears(g: ReducerGeometry) -> None:
+    """Tip lands and root gaps of both stage I gears (the planet thinned by the backlash)."""
     d = g.design
     tip, root = _tooth_lands(g.planet)
     if tip < MIN_TOOTH_LAND_MM:
-        b_max = d.stage1_backlash_mm + 2.0 * g.planet.pitch_radius * (g.planet.tip_half_angle()
-                                                                        - MIN_TOOTH_LAND_MM / (2 * g.planet.tip_radius))
-        raise DesignError(
-            f"design.stage1_backlash_mm {d.stage1_backlash_mm:g} mm thins the planet teeth to a point (tip land "
-            f"{tip * 1e3:.1f} um): the planet is not a valid solid; allowed: below {max(b_max, 0.0):.4f} mm")
+        # thinning by b turns each flank by b / (2 r_pitch): the land shrinks by b r_tip / r_pitch
+        b_max = d.stage1_backlash_mm + (tip - MIN_TOOTH_LAND_MM) * g.planet.pitch_radius / g.planet.tip_radius
+        reject("design.stage1_backlash_mm", d.stage1_backlash_mm, f"below {max(b_max, 0.0):.4f} mm",
+               f"mm thins the planet teeth to a point (tip land {tip * 1e3:.1f} um): the planet is not a valid solid",
+               DesignError)
     stip, sroot = _tooth_lands(g.sun)
     if stip < MIN_TOOTH_LAND_MM:
-        raise DesignError(
-            f"design.z_sun {d.z_sun} with module_mm {d.module_mm:g} and pressure_angle_deg "
-            f"{d.pressure_angle_deg:g} gives pointed sun teeth (tip land {stip * 1e3:.1f} um); allowed: more "
-            "teeth or a smaller pressure angle")
+        reject("design.z_sun", d.z_sun, "more teeth, a smaller module or pressure angle",
+               f"with module_mm {d.module_mm:g} and pressure_angle_deg {d.pressure_angle_deg:g} gives pointed sun "
+               f"teeth (tip land {stip * 1e3:.1f} um)", DesignError)
     for name, gap in (("z_sun", sroot), ("z_planet", root)):
         if gap < MIN_TOOTH_LAND_MM:
-            raise DesignError(f"design.{name} {getattr(d, name)}: neighbouring teeth overlap at the root circle "
-                              f"(gap {gap * 1e3:.1f} um); allowed: a tooth count with a positive root gap")
+            reject(f"design.{name}", getattr(d, name), "a tooth count with a positive root gap",
+                   f"makes neighbouring teeth overlap at the root circle (gap {gap * 1e3:.1f} um)", DesignError)
 
 
 # ----------------------------------------------------------------------------- crank holes
@@ -97,6 +94,11 @@ def _check_holes(g: ReducerGeometry) -> None:
         reach = float(np.max(np.linalg.norm(holes, axis=-1))) + r
         if reach >= limit:
             where = "root circle" if part.startswith("disc") else "rim"
+            if d.center_distance_mm + r >= limit:  # the design alone: the hole radius is the field
+                name = "design.cam_radius_mm" if part.startswith("disc") else "design.crank_journal_radius_mm"
+                reject(name, r, f"below {limit - d.center_distance_mm:.4f} mm", f"mm puts the crank holes of {part} "
+                       f"(at the {d.center_distance_mm:g} mm crank radius) through its {where} {limit:.4f} mm",
+                       DesignError)
             reject(field, g.case.raw_errors.get(field.split(".", 1)[1]), f"holes inside the {where} ({limit:.4f} mm)",
                    f"moves a crank hole of {part} out to {reach:.4f} mm", DesignError)
 

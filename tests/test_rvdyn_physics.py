@@ -330,8 +330,7 @@ def test_crank_beam_and_cam_statics_closed_forms() -> None:
 
 @pytest.fixture(scope="module")
 def physical_nominal():
-    g = ReducerGeometry(Case.from_dict({}))
-    th = np.linspace(0.0, 2 * math.pi * 121 / 39, 6)            # a crank turn (one mesh cycle of the discs)
+    th = np.linspace(0.0, 2 * math.pi * 121 / 39, 6)            # an output turn of one lobe pitch (360/39 deg)
     out = {}
     for sup in ("elastic", "rigid"):
         c = Case.from_dict({"model": {"contact": "physical", "supports": sup}})
