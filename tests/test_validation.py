@@ -320,7 +320,7 @@ def test_rvcad_export_refuses_before_writing(tmp_path: Path, capsys: pytest.Capt
 
     out = tmp_path / "o"
     for text, needle in (('{"design": {"crank_angles_deg": 0}}', "design.crank_angles_deg 0"),
-                         ('{"design": {"stage1_backlash_mm": 1.0}}', "design.stage1_backlash_mm 1 mm"),
+                         ('{"design": {"stage1_backlash_mm": 1.0}}', "design.stage1_backlash_mm 1.0 mm"),
                          ('{"design": {"crank_angles_deg": [0, 0]}}', "design.crank_angles_deg [0, 0]"),
                          ('{"errors": {}, "errors": {}}', "key 'errors' appears twice")):
         _one_line_exit_2(capsys, main(["export", str(_case_file(tmp_path, text)), "--out", str(out)]), needle)
