@@ -39,7 +39,7 @@ import rsm
 from rsm.terms import preset_terms
 from rvcad.errors import ERROR_TYPES, MAX_ABS, Case
 from rvcad.params import Design
-from rvcad.validation import DesignError, TableError, read_json_file
+from rvcad.validation import DesignError, TableError, as_mapping, read_json_file
 from rvdyn.contacts import ContactLaw
 from rvstudy.screen import (
     ARCSEC_PER_ARCMIN,
@@ -268,8 +268,8 @@ def load_reducer(path: str | None) -> Design:
         return Design()
     p = Path(path)
     d = read_json_file(p, "--reducer file", DesignError)  # strict: a repeated key or NaN is an error
-    if isinstance(d, dict) and isinstance(d.get("design"), dict):
-        d = d["design"]
+    if isinstance(d, dict) and "design" in d:  # a whole case: its design object
+        d = as_mapping(d["design"], f"--reducer {p.name}: design", "an object of Design fields", DesignError)
     if not isinstance(d, dict):
         raise DesignError(f"--reducer file {str(p)!r} must hold a JSON object of Design fields (e.g. "
                           '{"z_sun": 18, "z_planet": 36})', field="--reducer", value=str(p))
