@@ -367,7 +367,8 @@ def _verdict(start: RSMResults, before: RSMResults, after: RSMResults, added: li
     if added:
         text = (f"{head}; the runs support adding {', '.join(added)}: residual SS {before.ssr:.4g} -> "
                 f"{after.ssr:.4g}, RMSE {before.rmse:.4g} -> {after.rmse:.4g}, R2pred {before.r2_pred:.4f} -> "
-                f"{after.r2_pred:.4f}, {_lof_text(after)}.")
+                f"{after.r2_pred:.4f}" + (f", {_lof_text(after)}." if math.isfinite(float(after.anova.loc[
+                    "Lack of fit", "F"])) else "."))
     else:
         text = f"{head}; no estimable higher-order or physical term is supported (Bonferroni-adjusted F test and BIC)."
     if new_check is not None:

@@ -86,9 +86,33 @@ def jsonable(obj: Any) -> Any:
     return obj
 
 
+#: Largest number of centre runs of a generated design (each is one run of the experiment or solver;
+#: the same bound as rvcad.validation.MAX_CENTER_RUNS, kept here so rsm imports nothing of rvcad).
+MAX_CENTER_RUNS = 1000
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line on stderr, exit status 2 (like the other command lines)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+def _output_path(path: str, opt: str, folder: bool) -> None:
+    """Refuse an output path that is the wrong kind of existing thing, before any work (ValueError)."""
+    p = Path(path)
+    if folder and p.exists() and not p.is_dir():
+        raise ValueError(f"{opt} '{p}' is an existing file; allowed: a folder (created if missing)")
+    if not folder and p.is_dir():
+        raise ValueError(f"{opt} '{p}' is an existing folder; allowed: a file path")
+    for parent in p.parents:
+        if parent.exists() and not parent.is_dir():
+            raise ValueError(f"{opt} '{p}' lies under the file '{parent}'; allowed: a path whose folders are folders")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for documentation tools)."""
-    p = argparse.ArgumentParser(prog="rsm", description="Response-surface designs and fits.")
+    p = _Parser(prog="rsm", description="Response-surface designs and fits.")
     sub = p.add_subparsers(dest="command", required=True)
 
     f = sub.add_parser("fit", help="fit a response surface to a CSV of runs",
@@ -163,6 +187,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     path = Path(args.data)
     if not path.is_file():
         raise ValueError(f"data file '{path}' does not exist")
+    if args.plots:
+        _output_path(args.plots, "--plots", folder=True)
     if not args.augment:
         for flag, given in (("--new-data", args.new_data is not None), ("--max-add", args.max_add != 2),
                             ("--no-physical", args.no_physical)):
@@ -264,6 +290,10 @@ def _cmd_design(args: argparse.Namespace) -> int:
     from .coding import Levels
     from .design import make_design
 
+    if args.out:
+        _output_path(args.out, "--out", folder=False)
+    if args.center is not None and not 0 <= args.center <= MAX_CENTER_RUNS:
+        raise ValueError(f"--center {args.center} is out of range; allowed: an integer in [0, {MAX_CENTER_RUNS}]")
     levels = Levels.coerce(args.levels)
     k = args.factors
     if k is None:
@@ -320,5 +350,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_fit(args)
         return _cmd_design(args)
     except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        print(f"rsm: error: {exc}", file=sys.stderr)
+        print(f"rsm: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"rsm: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
         return 2

@@ -11,10 +11,11 @@ from rvcad.params import Design
 from rvcad.profile import CycloidProfile, InvoluteGear
 from rvcad.tolerances import TOL, Tolerances
 
-__all__ = ["ERROR_TYPES", "Case", "CycloidProfile", "Design", "DesignError", "InvoluteGear", "Reducer", "ReducerGeometry",
-           "TOL", "Tolerances", "check_case", "load_case", "reducer"]
+__all__ = ["ERROR_TYPES", "Case", "CycloidProfile", "Design", "DesignError", "InvoluteGear", "Reducer",
+           "ReducerGeometry", "TOL", "Tolerances", "check_case", "load_case", "reducer"]
 
-_LAZY = {"Reducer": "rvcad.build", "reducer": "rvcad.build", "DesignError": "rvcad.check", "check_case": "rvcad.check"}
+_LAZY = {"Reducer": "rvcad.build", "reducer": "rvcad.build", "DesignError": "rvcad.validation",
+         "check_case": "rvcad.check"}
 
 
 def __getattr__(name: str):  # the part layer (shapely, scipy.optimize) loads on first use only
@@ -23,3 +24,7 @@ def __getattr__(name: str):  # the part layer (shapely, scipy.optimize) loads on
 
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'rvcad' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:  # tab completion shows the lazy names too
+    return sorted(set(globals()) | set(_LAZY))

@@ -29,10 +29,13 @@ from rvcad.errors import Case, load_case
 from rvcad.geometry import ReducerGeometry
 from rvcad.params import Design
 from rvcad.plan import DEFAULT_TOLERANCE_MM, AxialLayout
+from rvcad.validation import CaseError, OptionError, reject
 
 
 def as_case(case: Case | dict[str, Any] | str | Path | None) -> Case:
-    """A validated :class:`Case` from a case, a dict (the case JSON object) or a JSON file path."""
+    """A validated :class:`Case` from a case, a dict (the case JSON object) or a JSON file path.
+
+    Raises :class:`rvcad.validation.CaseError` (a ``ValueError``) for anything else."""
     if case is None:
         return Case.from_dict({"name": "nominal"})
     if isinstance(case, Case):
@@ -43,7 +46,8 @@ def as_case(case: Case | dict[str, Any] | str | Path | None) -> Case:
         return Case.from_dict(json.loads(json.dumps(d)))
     if isinstance(case, (str, Path)):
         return load_case(case)
-    raise TypeError(f"case {case!r} must be a rvcad.Case, a dict or the path of a case JSON file")
+    reject("case", case, "a rvcad.Case, a dict (the case JSON object) or the path of a case JSON file",
+           f"is of type {type(case).__name__}", CaseError)
 
 
 class _Parts(Mapping):
@@ -111,8 +115,10 @@ class Reducer:
                  tolerance_mm: float = DEFAULT_TOLERANCE_MM, state: tuple[float, Any] | None = None,
                  check: bool = True) -> None:
         self.case = as_case(case)
-        if not (isinstance(tolerance_mm, (int, float)) and math.isfinite(tolerance_mm) and 1e-5 <= tolerance_mm <= 0.1):
-            raise ValueError(f"tolerance_mm {tolerance_mm!r} must be a number in [1e-05, 0.1] mm")
+        if isinstance(tolerance_mm, bool) or not (isinstance(tolerance_mm, (int, float)) and math.isfinite(tolerance_mm)
+                                                  and 1e-5 <= tolerance_mm <= 0.1):
+            reject("tolerance_mm", tolerance_mm, "a number in [1e-05, 0.1] mm (0.01 to 100 um)", "is out of range",
+                   OptionError)
         self.tolerance_mm = float(tolerance_mm)
         self.geometry = ReducerGeometry(self.case)
         self.check = check_case(self.case, self.geometry) if check else {}

@@ -1,23 +1,24 @@
-"""Geometric design check: refuse a case whose parts cannot be built or assembled, naming the field.
+"""Geometric check of a case: refuse parts that cannot be built or assembled, naming the field.
 
-:func:`check_case` runs before anything is exported (and in :func:`rvcad.reducer`). It checks
-what the solids need, in closed form where one exists, and raises :class:`DesignError` (a
-``ValueError``) whose message names the case field, its value and what is allowed:
+:meth:`rvcad.params.Design.validate` refuses bad field values and the relations between fields
+(pins apart, the two planets apart on the crank circle, radii). :func:`check_case` runs before
+anything is exported (and in :func:`rvcad.reducer`) and checks what the solids need, on the
+error-perturbed geometry of the case, raising :class:`rvcad.validation.DesignError` (a
+``ValueError``) whose message names the field, its value and what is allowed:
 
-* stage I teeth: each tooth keeps a positive tip land (its two flanks meet above the tip circle)
-  and a positive root gap (neighbouring teeth do not overlap at the root circle). Thinning the
-  planet teeth by ``design.stage1_backlash_mm`` moves both flanks by b / (2 r) in angle; the tip
-  land vanishes at ``b_max = b + 2 r_pitch * (tip half angle)`` (1.0 mm points the default planet);
-* crank holes: the holes of the two cranks in a disc (radius ``cam_radius_mm``) and in the plates
-  (``crank_journal_radius_mm``) do not overlap (centre distance ``2 a sin(|beta_1 - beta_0| / 2)``,
-  ``design.crank_angles_deg`` = [0, 0] puts both holes on one spot) and lie inside the disc root
-  circle and the plate rim;
-* pins against the discs (:func:`pin_interference`): the smallest largest penetration of the
-  pins into a disc that any rigid in-plane motion of the disc reaches (a relaxation of every
-  pose the solver can take: the cams restrict the disc further), over one crank revolution. Above
-  :data:`MAX_PENETRATION_MM` (the elastic limit of ``rvdyn``, 100 um) no pose resolves it:
-  ``errors.pin_radius`` +1000 um or ``errors.pin_circle_diameter`` -1000 um. The message names
-  the error types whose removal brings it below the limit.
+* stage I teeth: a tip land and a root gap on both gears. Thinning the planet teeth by
+  ``design.stage1_backlash_mm`` turns both flanks by b / (2 r_pitch); the tip land vanishes at
+  ``b_max = b + s_tip r_pitch / r_tip`` (0.99 mm with the default gears: 1.0 mm points the planet);
+* crank holes: the holes of the two cranks in each disc (radius ``cam_radius_mm``, moved by
+  ``errors.disc_hole_eccentricity``) do not overlap and stay inside the disc root circle; the
+  journal holes of the plates (moved by ``errors.carrier_hole_eccentricity``) stay inside the rim;
+* contacts (:func:`pin_interference`): the smallest largest penetration of the pins into the
+  discs and of the loaded stage I flanks over the poses the solver can take (its coordinates:
+  output and crank angles), at states over one crank revolution. The solver keeps these gaps and
+  more, so its equilibrium penetrates at least as much. Above :data:`MAX_PENETRATION_MM` (the
+  elastic limit of ``rvdyn``, 100 um) it would refuse the case too: ``errors.pin_radius`` +1000 um
+  (1000.0 um), ``errors.pin_circle_diameter`` -1000 um (500.0 um), a pin 150 um too large (149 um;
+  rvdyn: 155 um). The message names the error types whose removal brings it below the limit.
 
 Lengths in mm at the API, angles in rad inside.
 """
@@ -32,6 +33,7 @@ from scipy.optimize import linprog
 from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvcad.plan import PLATE_RIM_CLEARANCE_MM
+from rvcad.validation import DesignError, quote, reject
 
 #: Largest pin-disc penetration a pose may keep, mm: the elastic contact limit of the solver
 #: (``rvdyn.solver.MAX_ELASTIC_PENETRATION_MM``, 0.1 mm); a case above it everywhere is refused.
@@ -40,12 +42,8 @@ MAX_PENETRATION_MM = 0.1
 #: States sampled over one crank revolution for the pin-disc check (each pin meets a whole lobe).
 INTERFERENCE_STATES = 12
 
-#: Smallest tip land and root gap of a stage I tooth that still gives a valid solid, mm.
+#: Smallest root gap between two stage I teeth that still gives a valid solid, mm.
 MIN_TOOTH_LAND_MM = 1e-3
-
-
-class DesignError(ValueError):
-    """The case cannot give valid, assemblable solids; the message names the field."""
 
 
 # ----------------------------------------------------------------------------- stage I teeth
@@ -59,51 +57,50 @@ def _tooth_lands(gear) -> tuple[float, float]:
 
 
 def _check_gears(g: ReducerGeometry) -> None:
+    """Tip lands and root gaps of both stage I gears (the planet thinned by the backlash)."""
     d = g.design
     tip, root = _tooth_lands(g.planet)
     if tip < MIN_TOOTH_LAND_MM:
-        b_max = d.stage1_backlash_mm + 2.0 * g.planet.pitch_radius * (g.planet.tip_half_angle()
-                                                                        - MIN_TOOTH_LAND_MM / (2 * g.planet.tip_radius))
-        raise DesignError(
-            f"design.stage1_backlash_mm {d.stage1_backlash_mm:g} mm thins the planet teeth to a point (tip land "
-            f"{tip * 1e3:.1f} um): the planet is not a valid solid; allowed: below {max(b_max, 0.0):.4f} mm")
+        # thinning by b turns each flank by b / (2 r_pitch): the land shrinks by b r_tip / r_pitch
+        b_max = d.stage1_backlash_mm + (tip - MIN_TOOTH_LAND_MM) * g.planet.pitch_radius / g.planet.tip_radius
+        reject("design.stage1_backlash_mm", d.stage1_backlash_mm, f"below {max(b_max, 0.0):.4f} mm",
+               f"mm thins the planet teeth to a point (tip land {tip * 1e3:.1f} um): the planet is not a valid solid",
+               DesignError)
     stip, sroot = _tooth_lands(g.sun)
     if stip < MIN_TOOTH_LAND_MM:
-        raise DesignError(
-            f"design.z_sun {d.z_sun} with module_mm {d.module_mm:g} and pressure_angle_deg "
-            f"{d.pressure_angle_deg:g} gives pointed sun teeth (tip land {stip * 1e3:.1f} um); allowed: more "
-            "teeth or a smaller pressure angle")
+        reject("design.z_sun", d.z_sun, "more teeth, a smaller module or pressure angle",
+               f"with module_mm {d.module_mm:g} and pressure_angle_deg {d.pressure_angle_deg:g} gives pointed sun "
+               f"teeth (tip land {stip * 1e3:.1f} um)", DesignError)
     for name, gap in (("z_sun", sroot), ("z_planet", root)):
         if gap < MIN_TOOTH_LAND_MM:
-            raise DesignError(f"design.{name} {getattr(d, name)}: neighbouring teeth overlap at the root circle "
-                              f"(gap {gap * 1e3:.1f} um); allowed: a tooth count with a positive root gap")
+            reject(f"design.{name}", getattr(d, name), "a tooth count with a positive root gap",
+                   f"makes neighbouring teeth overlap at the root circle (gap {gap * 1e3:.1f} um)", DesignError)
 
 
 # ----------------------------------------------------------------------------- crank holes
 def _check_holes(g: ReducerGeometry) -> None:
+    """The perturbed crank holes of each disc and plate: apart from each other, inside root and rim."""
     d = g.design
-    beta = np.radians(np.asarray(d.crank_angles_deg, dtype=float))
-    a = d.center_distance_mm
-    sep = 2.0 * a * abs(math.sin(0.5 * (beta[1] - beta[0])))
-    need = 2.0 * d.cam_radius_mm
-    if sep <= need:
-        min_deg = math.degrees(2.0 * math.asin(min(1.0, need / (2.0 * a))))
-        raise DesignError(
-            f"design.crank_angles_deg {list(d.crank_angles_deg)} put the two crank holes {sep:.4f} mm apart, less "
-            f"than two cam radii ({need:g} mm): the disc is not a valid solid; allowed: cranks at least "
-            f"{min_deg:.2f} deg apart (and at most {360 - min_deg:.2f} deg)")
-    root = min(p.root_radius for p in g.profiles) - float(np.max(np.abs(g.cam_ecc - d.eccentricity_mm)))
-    reach = float(np.max(np.linalg.norm(g.disc_holes, axis=-1))) + d.cam_radius_mm
-    if reach >= root:
-        raise DesignError(
-            f"design.cam_radius_mm {d.cam_radius_mm:g} mm: the crank holes reach {reach:.4f} mm from the disc centre, "
-            f"beyond the disc root circle {root:.4f} mm; allowed: below {root - a:.4f} mm at crank radius {a:g} mm")
+    r_hole, r_journal = d.cam_radius_mm, d.crank_journal_radius_mm
+    root = min(p.root_radius for p in g.profiles)
     rim = d.pin_circle_radius_mm - d.eccentricity_mm - d.pin_radius_mm - PLATE_RIM_CLEARANCE_MM
-    reach_p = float(np.max(np.linalg.norm(g.carrier_holes, axis=-1))) + d.crank_journal_radius_mm
-    if reach_p >= rim:
-        raise DesignError(
-            f"design.crank_journal_radius_mm {d.crank_journal_radius_mm:g} mm: the journal holes reach "
-            f"{reach_p:.4f} mm, beyond the plate rim {rim:.4f} mm; allowed: below {rim - a:.4f} mm")
+    checks = [(f"disc{k}", g.disc_holes[k], r_hole, root, "errors.disc_hole_eccentricity") for k in range(d.n_discs)]
+    checks.append(("flange and carrier", g.carrier_holes, r_journal, rim, "errors.carrier_hole_eccentricity"))
+    for part, holes, r, limit, field in checks:
+        sep = float(np.linalg.norm(holes[1] - holes[0]))
+        if sep <= 2.0 * r:
+            reject("design.crank_angles_deg", list(d.crank_angles_deg), f"holes more than {2 * r:g} mm apart",
+                   f"with the errors puts the crank holes of {part} {sep:.4f} mm apart (they overlap)", DesignError)
+        reach = float(np.max(np.linalg.norm(holes, axis=-1))) + r
+        if reach >= limit:
+            where = "root circle" if part.startswith("disc") else "rim"
+            if d.center_distance_mm + r >= limit:  # the design alone: the hole radius is the field
+                name = "design.cam_radius_mm" if part.startswith("disc") else "design.crank_journal_radius_mm"
+                reject(name, r, f"below {limit - d.center_distance_mm:.4f} mm", f"mm puts the crank holes of {part} "
+                       f"(at the {d.center_distance_mm:g} mm crank radius) through its {where} {limit:.4f} mm",
+                       DesignError)
+            reject(field, g.case.raw_errors.get(field.split(".", 1)[1]), f"holes inside the {where} ({limit:.4f} mm)",
+                   f"moves a crank hole of {part} out to {reach:.4f} mm", DesignError)
 
 
 # ----------------------------------------------------------------------------- pins against discs
@@ -114,22 +111,73 @@ def crank_period_input(g: ReducerGeometry) -> float:
 
 
 def pin_interference(g: ReducerGeometry, states: int = INTERFERENCE_STATES, rounds: int = 8) -> np.ndarray:
-    """Smallest largest pin penetration into each disc over small rigid in-plane disc motions, mm.
+    """Smallest largest contact penetration (pins in the discs, loaded stage I flanks) over the poses
+    the solver can take, mm.
 
-    At each of ``states`` ideal states over one crank revolution the disc may move by
-    (dx, dy, dtheta); the linearised gaps ``g_i - n_i . (d + dtheta perp(f_i))`` (outward normal
-    n_i at the foot point f_i, disc profile frame) give a linear programme ``min t, -g_i' <= t``
-    (scipy ``linprog``) inside a trust region, re-linearised ``rounds`` times; a move is kept only
-    if the exact penetration drops, else the trust region halves. The trust region matters: the
-    ideal contact normals all pass through the pitch point, so rolling about it is a first-order
-    free motion (the reducer's own kinematics, sampled by the states instead). The disc's real
-    motion is further restricted by the cams, so a solver pose penetrates about this much or more.
+    At each of ``states`` ideal states over one crank revolution the solver's coordinates, the
+    output angle and the crank angles (``x = (Rp dtheta_out, e dpsi_0, e dpsi_1)``, mm, as in
+    ``rvdyn.solver``), may change; the gaps the solver keeps, the pins of both discs and the loaded
+    stage I flanks (the case's direction), linearised by finite differences (``g + J x``), give a
+    linear programme ``min t, -(g + J x) <= t`` (scipy ``linprog``) inside a trust region,
+    re-linearised ``rounds`` times; a move is kept only if the exact penetration drops, else the
+    trust region halves. The solver keeps
+    the same gaps and more (supports, bearings), so every pose it reaches penetrates at least this
+    much (a lower bound). Where the case's
+    model lets the discs float in a cam-bearing clearance, each disc may instead move freely in its
+    plane (a weaker bound).
 
     Returns
     -------
-    (states, n_discs) float64
+    (states,) float64
         Penetration, mm (<= 0: a pose without pin-disc overlap exists).
     """
+    try:
+        floating = float(g.case.model.get("cam_bearing_clearance_um", 0.0) or 0.0) > 0.0
+    except (TypeError, ValueError):
+        floating = True
+    if floating:
+        return _free_disc_interference(g, states, rounds)
+    th = np.linspace(0.0, crank_period_input(g), states, endpoint=False)
+    to0, ps0 = g.ideal_state(th)
+    d = g.design
+    rp, e, nc = d.pin_circle_radius_mm, d.eccentricity_mm, d.n_cranks
+
+    def gaps(x: np.ndarray) -> np.ndarray:
+        to, ps = to0 + x[:, 0] / rp, ps0 + x[:, 1:] / e
+        pins = g.pin_gaps(to, ps)[0].reshape(states, -1)
+        return np.concatenate([pins, g.stage1_gaps(th, to, ps, g.case.direction)], axis=1)
+
+    x = np.zeros((states, 1 + nc))
+    G = gaps(x)
+    best = (-G).max(axis=1)
+    radius = np.maximum(np.abs(best), 1e-3)
+    done = np.zeros(states, dtype=bool)
+    h = 1e-6  # mm: the gaps are exact to ~1e-10 mm (foot-point tolerance), the slopes to ~1e-4
+    for _ in range(rounds):
+        J = np.stack([(gaps(x + h * np.eye(1 + nc)[i]) - G) / h for i in range(1 + nc)], axis=-1)
+        step = np.zeros_like(x)
+        for s in np.nonzero(~done)[0]:
+            A = np.c_[-J[s], -np.ones(len(G[s]))]
+            res = linprog(np.r_[np.zeros(1 + nc), 1.0], A_ub=A, b_ub=G[s], method="highs",
+                          bounds=[(-radius[s], radius[s])] * (1 + nc) + [(None, None)])
+            if res.status != 0 or res.x[-1] > best[s] - 1e-9:  # no improvement predicted
+                done[s] = True
+                continue
+            step[s] = res.x[:-1]
+        if done.all():
+            break
+        Gn = gaps(x + step)
+        pen = (-Gn).max(axis=1)
+        better = (pen < best) & ~done
+        x[better], G[better], best[better] = x[better] + step[better], Gn[better], pen[better]
+        radius[~better] *= 0.5
+    return best
+
+
+def _free_disc_interference(g: ReducerGeometry, states: int, rounds: int) -> np.ndarray:
+    """Per state, the largest over the discs of the smallest largest pin penetration when each disc
+    may move freely in its plane (x, y, rotation): the relaxation for discs that float in a cam-bearing
+    clearance. Linear programmes in a trust region as in :func:`pin_interference`; (states,) mm."""
     th = np.linspace(0.0, crank_period_input(g), states, endpoint=False)
     to, ps = g.ideal_state(th)
     nd = g.design.n_discs
@@ -168,7 +216,7 @@ def pin_interference(g: ReducerGeometry, states: int = INTERFERENCE_STATES, roun
                 else:
                     radius *= 0.5
             out[s, k] = best
-    return out
+    return out.max(axis=1)
 
 
 def _blame(case: Case, limit: float) -> list[str]:
@@ -202,7 +250,7 @@ def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool 
     -------
     dict
         ``planet_tip_land_mm``, ``sun_tip_land_mm``, ``crank_hole_separation_mm``,
-        ``pin_penetration_mm`` (largest over the states of the smallest reachable penetration).
+        ``pin_penetration_mm`` (largest over the states of the smallest reachable contact penetration).
 
     Raises
     ------
@@ -232,12 +280,13 @@ def _check(case: Case, geometry: ReducerGeometry | None) -> dict[str, Any]:
     pen = float(pin_interference(g).max())
     if pen > MAX_PENETRATION_MM:
         fields = _blame(case, MAX_PENETRATION_MM)
-        vals = ", ".join(f"{f} = {json_short(case.raw_errors.get(f.split('.', 1)[1]))}" for f in fields
-                         if f.startswith("errors."))
+        values = [case.raw_errors.get(f.split(".", 1)[1]) for f in fields]
+        given = quote(values[0]) if len(fields) == 1 else "(" + ", ".join(map(quote, values)) + ")"
         raise DesignError(
-            f"{' / '.join(fields)}{' (' + vals + ')' if vals else ''}: the pins overlap the discs by at least "
-            f"{pen * 1e3:.1f} um in every pose of the disc; allowed: at most {MAX_PENETRATION_MM * 1e3:g} um "
-            "(the solver's elastic limit)")
+            f"{' + '.join(fields)} {given} makes the parts overlap (pins in the discs, loaded stage I flanks) by at "
+            f"least {pen * 1e3:.1f} um in every pose the solver can take; allowed: an overlap of at most "
+            f"{MAX_PENETRATION_MM * 1e3:g} um (the solver's elastic contact limit)", field=fields[0], value=values[0],
+            allowed=f"an overlap of at most {MAX_PENETRATION_MM * 1e3:g} um")
     d = g.design
     sep = 2.0 * d.center_distance_mm * abs(math.sin(0.5 * math.radians(d.crank_angles_deg[1] - d.crank_angles_deg[0])))
     return {"planet_tip_land_mm": _tooth_lands(g.planet)[0], "sun_tip_land_mm": _tooth_lands(g.sun)[0],
@@ -246,14 +295,6 @@ def _check(case: Case, geometry: ReducerGeometry | None) -> dict[str, Any]:
 
 #: Outcome (margins or the refusal) of the cases checked, by case key: a case is checked once per process.
 _MEMO: dict[str, Any] = {}
-
-
-def json_short(v: Any, n: int = 40) -> str:
-    """Short text of a JSON value for messages."""
-    import json
-
-    s = json.dumps(v)
-    return s if len(s) <= n else s[:n - 3] + "..."
 
 
 __all__ = ["INTERFERENCE_STATES", "MAX_PENETRATION_MM", "MIN_TOOTH_LAND_MM", "DesignError", "check_case",

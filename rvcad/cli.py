@@ -6,18 +6,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
-from rvcad.check import check_case
-from rvcad.errors import Case, load_case
-from rvcad.geometry import ReducerGeometry
+from rvcad import validation
+from rvcad.errors import load_case
+from rvcad.validation import MAX_ANGLE_DEG
 from rvcad.export import DEFAULT_TOLERANCE_UM, FORMATS, TOLERANCE_RANGE_UM, ExportedFile, export_case
 
 _EXPORT_EPILOG = """\
 files written to DIR:
   <part>.step, <part>.stl  one per part: sun, planet0, planet1, crank0, crank1, flange,
                            disc0, disc1, carrier, housing, pin00..pin39
-  assembly.step            every part placed at --theta-in-deg (--pose), one labelled solid per part
-  assembly.stl             every part placed at --theta-in-deg (--pose), one mesh
+  assembly.step            every part placed at --theta-in-deg (or --state), one labelled solid per part
+  assembly.stl             every part placed at --theta-in-deg (or --state), one mesh
   case.json, manifest.json the exported case and the cache manifest
 
 frames: moving parts (sun, planets, cranks, plates, discs) are written in their own frame:
@@ -72,12 +73,25 @@ def _angle(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number of degrees") from None
     if v != v or v in (float("inf"), float("-inf")):
         raise argparse.ArgumentTypeError(f"{text} must be a finite number of degrees")
+    if abs(v) > MAX_ANGLE_DEG:
+        raise argparse.ArgumentTypeError(f"{text} deg is out of range; allowed: |angle| <= {MAX_ANGLE_DEG:g} deg "
+                                         "(float64 keeps sub-arcsecond positions there)")
     return v
+
+
+def _state(text: str) -> list[float]:
+    try:
+        vals = [float(t) for t in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma separated list of angles in degrees") from None
+    if not all(math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"{text} must hold finite angles in degrees")
+    return vals
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``rvcad`` (subcommand ``export``)."""
-    p = argparse.ArgumentParser(
+    p = validation.ArgumentParser(
         prog="rvcad",
         description="Error-perturbed CAD of the RV reducer: exact parts as STEP and STL files.",
         epilog="Run 'rvcad export --help' for the export options. Lengths in mm, angles in degrees, "
@@ -101,9 +115,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--theta-in-deg", type=_angle, default=0.0, metavar="DEG",
                    help="input (sun) angle at which the assembly files place the moving parts, degrees "
                         "(default 0; the others follow the ideal kinematics)")
-    e.add_argument("--pose", choices=("ideal", "solved"), default="ideal",
-                   help="place the assembly by the ideal kinematics (default) or at the equilibrium that rvdyn "
-                        "solves for the case's load and direction at --theta-in-deg (analytic contacts)")
+    e.add_argument("--state", type=_state, default=None, metavar="OUT_DEG,CRANK0_DEG,CRANK1_DEG",
+                   help="place the assembly at this output angle and these crank angles (degrees) instead of the "
+                        "ideal kinematics at --theta-in-deg, e.g. the equilibrium printed by "
+                        "'python -m rvdyn.pose CASE.json --theta-in-deg DEG'")
     e.add_argument("--parts", default=None, metavar="PATTERNS",
                    help="comma separated shell patterns of the parts to write, e.g. 'disc*,pin0?,assembly' "
                         "(default: all)")
@@ -116,30 +131,15 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def solved_state(case: Case, theta_in_deg: float) -> tuple[float, tuple[float, ...]]:
-    """Output and crank angles (rad) of the quasi-static equilibrium at one input angle (rvdyn).
-
-    rvdyn builds on rvcad, so no rvcad library module imports it; only this command line (the top
-    layer) reaches up to it, inside the function, for ``--pose solved``. The discs are placed on
-    their cams (a floating disc in a cam-bearing clearance, a model option, is not shown).
-    """
-    import numpy as np
-
-    from rvdyn.contacts import AnalyticContacts
-    from rvdyn.solver import QuasiStaticSolver
-
-    g = ReducerGeometry(case)
-    sol = QuasiStaticSolver(g, AnalyticContacts(g)).solve(np.radians([theta_in_deg]), direction=case.direction,
-                                                         load_Nm=case.load_Nm)
-    return float(sol.theta_out[0]), tuple(float(v) for v in sol.psi[0])
-
-
 def _export(args: argparse.Namespace) -> int:
+    validation.output_dir(args.out)
     case = load_case(args.case)
     state = None
-    if args.pose == "solved":
-        check_case(case)  # a case the geometry refuses is named before the solver sees it
-        state = solved_state(case, args.theta_in_deg)
+    if args.state is not None:
+        if len(args.state) != case.design.n_cranks + 1:
+            raise ValueError(f"--state {','.join(f'{v:g}' for v in args.state)} must give the output angle and "
+                             f"{case.design.n_cranks} crank angles, degrees")
+        state = (math.radians(args.state[0]), tuple(math.radians(v) for v in args.state[1:]))
     parts = [s.strip() for s in args.parts.split(",") if s.strip()] if args.parts else None
 
     def progress(f: ExportedFile) -> None:
@@ -149,7 +149,7 @@ def _export(args: argparse.Namespace) -> int:
 
     rep = export_case(case, args.out, formats=args.format, tolerance_um=args.tolerance_um,
                       theta_in_deg=args.theta_in_deg, parts=parts, force=args.force, progress=progress,
-                      state=state, pose=args.pose)
+                      state=state, pose="ideal" if state is None else "state")
     if args.json:
         print(json.dumps(rep.to_dict(), indent=1))
     else:
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return _export(args)
     except ValueError as exc:
-        print(f"rvcad {args.command}: error: {exc}", file=sys.stderr)
+        print(f"rvcad {args.command}: error: {validation.one_line(exc)}", file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"rvcad {args.command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "),

@@ -149,6 +149,9 @@ class ExportReport:
             lines.append(f"  design check: {'ok' if dc.get('ok') else 'PROBLEMS'}; undercut: "
                          f"{'yes' if dc.get('undercut') else 'no'}; min pin gap {dc['pins']['min_gap_mm']:.4f} mm; "
                          f"disc tip to housing bore {dc['disc_tip_to_housing_bore_mm']:.4f} mm")
+            if dc.get("geometry"):
+                lines.append(f"    contact overlap no solver pose avoids: "
+                             f"{max(dc['geometry']['pin_penetration_mm'], 0.0) * 1e3:.2f} um (refused above 100 um)")
             for m in dc.get("messages", []):
                 lines.append(f"    {m}")
         big = sorted(w, key=lambda f: -f.seconds)[:5]

@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
+from rvcad.profile import MAX_MODIFICATION
 from rvcad.validation import DesignError, as_int, as_mapping, as_real, read_json_file, reject
 
 #: Profile shift coefficients of the stage I gears (assumption; x1 = -x2 keeps the 30 mm centre
@@ -167,9 +168,11 @@ class Design:
         Checks, in this order: the type of every field (integers, finite numbers, two crank
         angles), the physical range of every field (:data:`FIELD_RANGES`), then the relations
         between fields: Zc = Zp - 1, pins that do not overlap, the shortening coefficient
-        e Zp / Rp < 1, involute teeth with a tip land and a stage I contact ratio above 1, the two
-        planets and cam holes apart on the crank circle, the cam holes inside the disc root, and
-        the bearing, centre-hole and housing radii. Undercut (pin radius above the smallest
+        e Zp / Rp < 1, the two planets apart on the crank circle
+        (radius = the stage I centre distance), and the cam, journal, centre-hole and housing radii.
+        What the solids need beyond these relations (tip lands and root gaps of the teeth, crank
+        holes apart and inside the disc root and plate rim, pins against the discs with the errors
+        applied) is :func:`rvcad.check.check_case`, run before anything is exported. Undercut (pin radius above the smallest
         convex radius of curvature of the pin-centre curve, :attr:`min_convex_radius_mm`) is
         allowed: the CAD trims the loops and the design check reports it (conventions).
 
@@ -204,7 +207,7 @@ class Design:
     def _check_ranges(self) -> None:
         for name, (lo, hi, lo_open, why) in FIELD_RANGES.items():
             v = getattr(self, name)
-            if name.startswith("z_"):
+            if type(self.__dataclass_fields__[name].default) is int:
                 as_int(v, f"design.{name}", lo=int(lo), hi=int(hi), cls=DesignError, why=why)
             elif name == "crank_angles_deg":
                 if len(v) != 2:
@@ -232,42 +235,22 @@ class Design:
         if not k1 < 1.0:
             bad("eccentricity_mm", self.eccentricity_mm, f"< Rp / Zp = {rp / self.z_pins:.4f} mm",
                 f"mm gives a shortening coefficient e*Zp/Rp = {k1:.4f} >= 1 (a looped, unusable profile)")
-        # stage I: a tip land on both gears (the planet thinned by the backlash) and a contact ratio > 1
-        for gear, z, shift, thin in (("sun", self.z_sun, SUN_SHIFT, 0.0),
-                                     ("planet", self.z_planet, PLANET_SHIFT, self.stage1_backlash_mm)):
-            land = self.tooth_tip_thickness_mm(z, shift, thin)
-            if land <= 0.0:
-                name, value = ("stage1_backlash_mm", thin) if thin > 0 and \
-                    self.tooth_tip_thickness_mm(z, shift, 0.0) > 0 else (f"z_{gear}", z)
-                bad(name, value, f"a {gear} tooth with a tip land (tip thickness > 0)",
-                    f"gives a pointed {gear} tooth (tip thickness {land:.4f} mm; module {self.module_mm:g} mm, "
-                    f"{z} teeth, profile shift {shift:+g})")
-        eps = self.stage1_contact_ratio
-        if not eps > 1.0:
-            bad("module_mm", self.module_mm, "a stage I contact ratio > 1 (continuous mesh)",
-                f"with z_sun {self.z_sun}, z_planet {self.z_planet} and pressure angle "
-                f"{self.pressure_angle_deg:g} deg gives a contact ratio {eps:.3f}")
-        # the two cranks on the crank circle (radius = stage I centre distance a)
+        # the two planets on the crank circle: its radius is the stage I centre distance a, so two planets
+        # (tip radius m (Z2/2 + 1 + x2)) at crank angles beta_0, beta_1 stand 2 a sin(|beta_1 - beta_0| / 2)
+        # apart and must not overlap (the crank holes in the discs and plates are rvcad.check's)
         a = self.center_distance_mm
         c0, c1 = self.crank_angles_deg
-        sep = abs((c1 - c0 + 180.0) % 360.0 - 180.0)
-        chord = 2.0 * a * math.sin(math.radians(sep) / 2.0)
-        planet_tip = self.planet_pitch_radius_mm + self.module_mm * (1.0 + PLANET_SHIFT)
-        need = max(2.0 * planet_tip, 2.0 * self.cam_radius_mm)
+        chord = 2.0 * a * abs(math.sin(math.radians(c1 - c0) / 2.0))
+        need = 2.0 * (self.planet_pitch_radius_mm + self.module_mm * (1.0 + PLANET_SHIFT))
         if chord <= need:
-            what = "planet tip circles" if 2.0 * planet_tip >= 2.0 * self.cam_radius_mm else "cam holes"
-            bad("crank_angles_deg", [c0, c1],
-                f"cranks at least {2.0 * math.degrees(math.asin(min(1.0, need / (2.0 * a)))):.2f} deg apart",
-                f"puts the two cranks {chord:.3f} mm apart on the {a:g} mm crank circle (the stage I centre "
-                f"distance): their {what} ({need:.3f} mm across) overlap")
+            min_deg = 2.0 * math.degrees(math.asin(min(1.0, need / (2.0 * a))))
+            bad("crank_angles_deg", [int(c) if float(c).is_integer() else c for c in (c0, c1)],
+                f"cranks at least {min_deg:.2f} deg apart (and at most {360 - min_deg:.2f} deg)",
+                f"puts the two planets {chord:.3f} mm apart on the {a:g} mm crank circle (the stage I centre "
+                f"distance): their tip circles ({need:.3f} mm across) overlap")
         if self.cam_radius_mm + self.eccentricity_mm >= a:
             bad("cam_radius_mm", self.cam_radius_mm, f"< crank radius - eccentricity = {a - self.eccentricity_mm:g} mm",
                 "mm plus the eccentricity reaches the disc centre")
-        root = rp - self.eccentricity_mm - self.pin_radius_mm
-        if a + self.cam_radius_mm >= root:
-            bad("cam_radius_mm", self.cam_radius_mm, f"< disc root radius - crank radius = {root - a:.4f} mm",
-                f"mm puts the cam holes (at the {a:g} mm crank radius) through the disc's root circle "
-                f"{root:.4f} mm (Rp - e - pin radius)")
         if self.crank_journal_radius_mm >= self.cam_radius_mm - self.eccentricity_mm:
             bad("crank_journal_radius_mm", self.crank_journal_radius_mm,
                 f"< cam_radius_mm - eccentricity_mm = {self.cam_radius_mm - self.eccentricity_mm:g} mm",
@@ -284,34 +267,6 @@ class Design:
         if self.housing_outer_radius_mm <= rp + self.pin_radius_mm:
             bad("housing_outer_radius_mm", self.housing_outer_radius_mm,
                 f"> Rp + pin radius = {rp + self.pin_radius_mm:g} mm", "mm does not hold the pins")
-
-    def tooth_tip_thickness_mm(self, z: int, shift: float, thinning: float = 0.0) -> float:
-        """Tip thickness of a stage I gear, mm (standard formula, e.g. ISO 21771).
-
-        ``s_a = d_a (s / d + inv(alpha) - inv(alpha_a))`` with ``d = m z``, the tip diameter
-        ``d_a = d + 2 m (1 + x)``, the pitch tooth thickness ``s = m (pi/2 + 2 x tan alpha) - thinning``
-        and ``cos(alpha_a) = d cos(alpha) / d_a``. Negative: the tooth is pointed below its tip.
-        """
-        m, al = self.module_mm, math.radians(self.pressure_angle_deg)
-        d = m * z
-        da = d + 2.0 * m * (1.0 + shift)
-        s = m * (math.pi / 2.0 + 2.0 * shift * math.tan(al)) - thinning
-        aa = math.acos(min(1.0, d * math.cos(al) / da))
-        return da * (s / d + _inv(al) - _inv(aa))
-
-    @property
-    def stage1_contact_ratio(self) -> float:
-        """Transverse contact ratio of the stage I mesh (profile shifts sum to zero: working angle = alpha).
-
-        ``eps = (sqrt(ra1^2 - rb1^2) + sqrt(ra2^2 - rb2^2) - a sin(alpha)) / (pi m cos(alpha))``.
-        """
-        m, al = self.module_mm, math.radians(self.pressure_angle_deg)
-        out = -self.center_distance_mm * math.sin(al)
-        for z, x in ((self.z_sun, SUN_SHIFT), (self.z_planet, PLANET_SHIFT)):
-            rb = m * z / 2.0 * math.cos(al)
-            ra = m * z / 2.0 + m * (1.0 + x)
-            out += math.sqrt(max(ra * ra - rb * rb, 0.0))
-        return out / (math.pi * m * math.cos(al))
 
     @property
     def min_convex_radius_mm(self) -> float:
@@ -370,11 +325,6 @@ class Design:
         return cls(**kw).validate()
 
 
-def _inv(a: float) -> float:
-    """Involute function tan(a) - a."""
-    return math.tan(a) - a
-
-
 #: Physical range of every Design field: (low, high, low bound open?, reason). Relations between
 #: fields are checked in :meth:`Design.validate` after these.
 FIELD_RANGES: dict[str, tuple[float, float, bool, str]] = {
@@ -397,6 +347,13 @@ FIELD_RANGES: dict[str, tuple[float, float, bool, str]] = {
     "crank_journal_radius_mm": (0.0, 1000.0, True, "inside the cam as well"),
     "disc_center_hole_radius_mm": (0.0, 1000.0, True, "between the sun and the crank holes as well"),
     "housing_outer_radius_mm": (0.0, 2000.0, True, "a reducer below 2 m"),
+    "cam_bearing_rollers": (3, 200, False, "rolling elements of one bearing"),
+    "cam_bearing_roller_diameter_mm": (0.0, 100.0, True, "needle rollers below 100 mm"),
+    "cam_bearing_roller_length_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "journal_bearing_rollers": (3, 200, False, "rolling elements of one bearing"),
+    "journal_bearing_roller_diameter_mm": (0.0, 100.0, True, "rollers below 100 mm"),
+    "journal_bearing_roller_length_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    **{k: (-lim, lim, False, "rvcad.profile.MAX_MODIFICATION") for k, lim in MAX_MODIFICATION.items()},
 }
 
 

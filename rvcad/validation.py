@@ -17,6 +17,7 @@ is in the comments below the constants); the bound is quoted in the refusal mess
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import numbers
@@ -101,6 +102,10 @@ MAX_CENTER_RUNS = 1_000
 #: (88 bytes per draw); the Sobol estimator holds A, B and k + 2 <= 9 evaluation sets for up to
 #: 7 factors, about 11 * 88 = 1 kB per draw, so 2,000,000 draws = 2 GB = MEMORY_BUDGET_BYTES.
 MAX_MC_SAMPLES = 2_000_000
+#: Largest number of full-solver Monte Carlo draws: each draw keeps one row of its drawn features
+#: (every pin, hole, cam and crank: about 250 float64 = 2 kB) and its responses, so 1,000,000 draws hold
+#: about 2 GB = MEMORY_BUDGET_BYTES; at ~0.2 s a solve that is ~55 worker-hours, a Dask cluster's job.
+MAX_MC_DRAWS = 1_000_000
 #: Largest number of local worker processes: each holds about 160 MB before solving (the 156 MB
 #: peak of a 360-step run above) plus up to MEMORY_BUDGET_BYTES per solve at MAX_STEPS; 32 workers
 #: at the default steps need 32 * 0.16 = 5 GB.
@@ -114,17 +119,26 @@ MAX_GRID_STEPS = 14_400
 #: reducer, beyond which the loop would be fitting pin-by-pin noise.
 MAX_TERMS = 40
 
+#: Largest contact stiffness K of the impact law, N/mm^n: stiffer is the rigid limit (--rigid). At the
+#: default 20 N m a pin carries about 20e3 N mm / 64 mm / 20 contacts = 16 N, which deflects
+#: (16 / 1e9)^(1/1.5) mm = 0.006 um at K = 1e9 (n = 1.5); beyond, the Newton steps overflow.
+MAX_CONTACT_K = 1.0e9
+#: Largest input angle of a placement, degrees: beyond it float64 (ulp 1.2e-10 deg at 1e6 deg) starts
+#: to lose the sub-arcsecond positions; 1e6 deg is 23 output revolutions of the 121:1 reducer.
+MAX_ANGLE_DEG = 1.0e6
+
 #: Longest text quoted back in a message, characters.
 _QUOTE = 60
 
 
 def quote(value: Any) -> str:
-    """Short ``repr`` of a value for a message (cut to 60 characters)."""
+    """Short ``repr`` of a value for a message (cut to 60 characters, strings to 300)."""
     try:
         text = repr(value)
     except Exception:  # noqa: BLE001 - a broken __repr__ must not hide the real error
         text = f"<{type(value).__name__}>"
-    return text if len(text) <= _QUOTE else text[:_QUOTE - 3] + "..."
+    limit = 5 * _QUOTE if isinstance(value, str) else _QUOTE  # paths and names in full
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def reject(field: str, value: Any, allowed: str, problem: str = "is not allowed",
@@ -316,7 +330,7 @@ def output_file(path: str | Path, name: str = "--out") -> Path:
     """An output file path: not an existing folder, and its parent not an existing file."""
     p = Path(path)
     if p.is_dir():
-        reject(name, str(p), "a file path (the folder is not overwritten)", "is an existing folder", OptionError)
+        reject(name, str(p), "a file path (the folder is not overwritten)", "is an existing folder, not a file", OptionError)
     for parent in p.parents:
         if parent.exists() and not parent.is_dir():
             reject(name, str(p), "a path whose folders are folders", f"lies under the file {str(parent)!r}",
@@ -328,7 +342,7 @@ def output_dir(path: str | Path, name: str = "--out") -> Path:
     """An output folder path: not an existing file (nor under one)."""
     p = Path(path)
     if p.exists() and not p.is_dir():
-        reject(name, str(p), "a folder (created if missing)", "is an existing file", OptionError)
+        reject(name, str(p), "a folder (created if missing)", "is an existing file, not a folder", OptionError)
     for parent in p.parents:
         if parent.exists() and not parent.is_dir():
             reject(name, str(p), "a path whose folders are folders", f"lies under the file {str(parent)!r}",
@@ -339,3 +353,15 @@ def output_dir(path: str | Path, name: str = "--out") -> Path:
 def one_line(exc: BaseException) -> str:
     """The message of an exception on one line (newlines folded), for the command lines' stderr."""
     return " ".join(str(exc).split())
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """``argparse.ArgumentParser`` whose usage errors are one line on stderr (exit status 2).
+
+    argparse prints the usage block and then the error; the project's command lines print only
+    ``PROG: error: MESSAGE (see PROG --help)`` so every bad-input exit is one line. Subcommand parsers
+    created with ``add_subparsers`` inherit the class.
+    """
+
+    def error(self, message: str) -> NoReturn:  # noqa: D401 - argparse API
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")

@@ -10,10 +10,11 @@ on stderr, exit status 2.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections.abc import Sequence
 
+from rvcad import validation as v
+from rvcad.params import Design
 from rvcalib.dataset import MeasuredDataset, read_dataset
 
 
@@ -35,7 +36,7 @@ def auto_steps(ds: MeasuredDataset) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser."""
-    p = argparse.ArgumentParser(
+    p = v.ArgumentParser(
         prog="rv-calibrate",
         description="Close the loop on measured TE data: residual -> missing effect -> model update -> "
                     "error before and after.")
@@ -51,6 +52,27 @@ def build_parser() -> argparse.ArgumentParser:
                    help="largest screening grid, points per output revolution (default 120)")
     p.add_argument("--verbose", action="store_true", help="progress messages on stderr")
     return p
+
+
+def check_options(args: argparse.Namespace) -> None:
+    """Ranges of the options, before the dataset is read (OptionError naming the option and its bound).
+
+    ``--steps`` and ``--screen-points`` are bounded by :data:`rvcad.validation.MAX_GRID_STEPS` (the
+    time budget of the grid solves), ``--max-terms`` by :data:`rvcad.validation.MAX_TERMS`; the
+    screening grid needs more than two points per period of the pin order Zp (sampling theorem),
+    i.e. at least 2 Zp + 1 points per output revolution.
+    """
+    if args.steps is not None:
+        v.option_int(args.steps, "--steps", 40, v.MAX_GRID_STEPS, why="the time budget of the grid solves")
+        if args.steps % 40:
+            raise v.OptionError(f"--steps {args.steps} is not a multiple of 40; allowed: a multiple of 40 in "
+                                f"[40, {v.MAX_GRID_STEPS}]", field="--steps", value=args.steps)
+    v.option_real(args.alpha, "--alpha", 0.0, 1.0, lo_open=True, hi_open=True)
+    v.option_int(args.max_terms, "--max-terms", 1, v.MAX_TERMS, why="effects plus empirical terms the loop may add")
+    zp = Design().z_pins
+    v.option_int(args.screen_points, "--screen-points", 2 * zp + 1, v.MAX_GRID_STEPS,
+                 why=f"more than 2 points per period of the pin order {zp}")
+    v.output_dir(args.out)
 
 
 def summary(res, paths: dict) -> str:
@@ -85,12 +107,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rvcalib.report import result_json, write_report
 
     try:
-        if args.steps is not None and (args.steps < 40 or args.steps % 40):
-            raise ValueError(f"--steps {args.steps} must be a multiple of 40 (>= 40)")
-        if not (0 < args.alpha < 1 and math.isfinite(args.alpha)):
-            raise ValueError(f"--alpha {args.alpha} must lie in (0, 1)")
-        if args.max_terms < 0:
-            raise ValueError(f"--max-terms {args.max_terms} must be >= 0")
+        check_options(args)
         ds = read_dataset(args.dataset)
         steps = args.steps if args.steps is not None else auto_steps(ds)
         log = (lambda s: print(f"rv-calibrate: {s}", file=sys.stderr, flush=True)) if args.verbose else None
@@ -98,7 +115,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         screen_points=args.screen_points)
         paths = write_report(res, args.out)
     except ValueError as exc:
-        print(f"rv-calibrate: error: {exc}", file=sys.stderr)
+        print(f"rv-calibrate: error: {v.one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"rv-calibrate: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
         return 2
     if args.json:
         print(result_json(res, paths["figures"], paths["report"]))

@@ -193,7 +193,7 @@ def _read_csv(path: Path, what: str) -> pd.DataFrame:
     if dup:
         raise DatasetError(f"{path.name}: column '{dup[0]}' appears more than once")
     if "run" in df.columns:
-        df["run"] = df["run"].astype(str).str.strip()
+        df["run"] = df["run"].fillna("").astype(str).str.strip()  # pandas 3 keeps NaN through astype(str)
     return df
 
 
@@ -412,6 +412,8 @@ def read_dataset(path: str | Path) -> MeasuredDataset:
             raise DatasetError(f"samples.csv: column '{c}' is unknown; allowed: {list(SAMPLE_REQUIRED)} and "
                              f"optional {list(SAMPLE_OPTIONAL)}")
     srun = sdf["run"]
+    if (srun == "").any():
+        raise DatasetError(f"samples.csv: column 'run' row {int(np.flatnonzero((srun == '').to_numpy())[0]) + 2} is empty")
     inp_all = _numeric(sdf, "input_deg", "samples.csv", srun)
     out_all = _numeric(sdf, "output_deg", "samples.csv", srun)
     t_all = _numeric(sdf, "time_s", "samples.csv", srun) if "time_s" in sdf.columns else None

@@ -33,29 +33,41 @@ from rvdyn.contacts import ContactLaw
 #: Bump when the entry layout changes.
 CACHE_VERSION = 1
 
-#: Modules whose source decides the numbers of a solve (their bytes enter every key).
-PHYSICS_MODULES = ("rvcad.params", "rvcad.errors", "rvcad.profile", "rvcad.geometry", "rvcad.tolerances",
-                   "rvdyn.contacts", "rvdyn.solver", "rvdyn.te")
-#: Added to the fingerprint of fcl jobs.
-FCL_MODULES = ("rvdyn.collision", "rvdyn.fcl_contacts")
+#: Packages whose source decides the numbers of a solve: every module of them enters the key
+#: (a new physics module is covered without being listed), except those below.
+PHYSICS_PACKAGES = ("rvcad", "rvdyn")
+#: Modules of those packages that do not decide the numbers (the runner, this cache, the API and CLIs).
+NOT_PHYSICS = frozenset({"rvcad.__main__", "rvcad.cli", "rvdyn.__main__", "rvdyn.cli", "rvdyn.api",
+                         "rvdyn.cache", "rvdyn.runner"})
+#: Modules used by the fcl provider only (in the fingerprint of fcl jobs only).
+FCL_MODULES = frozenset({"rvdyn.collision", "rvdyn.fcl_contacts"})
+
+
+def physics_modules(solver: str = "analytic") -> list[str]:
+    """Names of the modules whose source enters the key of a ``solver`` job, sorted."""
+    import importlib.util
+
+    out = []
+    for pkg in PHYSICS_PACKAGES:
+        spec = importlib.util.find_spec(pkg)
+        for folder in (spec.submodule_search_locations or []) if spec else []:
+            for f in Path(folder).glob("*.py"):
+                name = pkg if f.stem == "__init__" else f"{pkg}.{f.stem}"
+                if name in NOT_PHYSICS or (name in FCL_MODULES and solver != "fcl"):
+                    continue
+                out.append(name)
+    return sorted(set(out))
 
 
 @lru_cache(maxsize=4)
 def code_fingerprint(solver: str = "analytic") -> str:
-    """sha256 (16 hex) of the source of :data:`PHYSICS_MODULES` (and :data:`FCL_MODULES` for fcl).
-
-    A module that cannot be found contributes its name only.
-    """
+    """sha256 (16 hex) of the source of :func:`physics_modules` (names and bytes)."""
     import importlib.util
 
     h = hashlib.sha256()
-    mods = PHYSICS_MODULES + (FCL_MODULES if solver == "fcl" else ())
-    for m in mods:
+    for m in physics_modules(solver):
         h.update(m.encode())
-        try:
-            spec = importlib.util.find_spec(m)
-        except (ImportError, ValueError):
-            spec = None
+        spec = importlib.util.find_spec(m)
         if spec is not None and spec.origin and os.path.exists(spec.origin):
             h.update(Path(spec.origin).read_bytes())
     return h.hexdigest()[:16]

@@ -14,7 +14,8 @@ import math
 import sys
 from typing import Any
 
-from rvcad.errors import load_case
+from rvcad.errors import MAX_LOAD_NM, load_case
+from rvcad import validation as v
 from rvdyn.contacts import ContactLaw
 from rvdyn.options import CONTACT_LAWS
 from rvdyn.solver import law_from_model
@@ -38,7 +39,7 @@ def _law(args: argparse.Namespace, case) -> ContactLaw:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rvdyn", description="Quasi-static transmission error of an RV reducer.")
+    p = v.ArgumentParser(prog="rvdyn", description="Quasi-static transmission error of an RV reducer.")
     sub = p.add_subparsers(dest="command", required=True)
     te = sub.add_parser("te", help="TE curve of one case (CSV) and its statistics",
                         description="Solve the quasi-static meshing equilibrium at N input angles and write "
@@ -86,7 +87,33 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_te_options(args: argparse.Namespace) -> None:
+    """Bounds of the size options and the output path, before anything is solved (OptionError)."""
+    v.steps_option(args.steps)
+    v.option_real(args.revolutions, "--revolutions", 0.0, v.MAX_REVOLUTIONS, lo_open=True,
+                  why=f"at most {v.MAX_STEPS} steps over them")
+    if args.load_Nm is not None:
+        v.option_real(args.load_Nm, "--load-Nm", 0.0, MAX_LOAD_NM, unit="N m")
+    if not args.rigid and args.K is not None:
+        v.option_real(args.K, "--K", 0.0, v.MAX_CONTACT_K, lo_open=True, unit="N/mm^n",
+                      why="stiffer is the rigid limit, --rigid")
+    if args.out:
+        v.output_file(args.out)
+
+
+def _check_stiffness_options(args: argparse.Namespace) -> None:
+    """Bounds of ``rvdyn stiffness``'s options and its output paths, before anything is solved."""
+    v.option_int(args.points, "--points", 5, v.MAX_SWEEP_POINTS, why="each point is one solve per branch")
+    if args.rated_Nm is not None:
+        v.option_real(args.rated_Nm, "--rated-Nm", 0.0, MAX_LOAD_NM, lo_open=True, unit="N m")
+    v.option_real(args.input_deg, "--input-deg", -v.MAX_ANGLE_DEG, v.MAX_ANGLE_DEG, unit="deg")
+    for name, path in (("--out", args.out), ("--plot", args.plot)):
+        if path:
+            v.output_file(path, name)
+
+
 def _te(args: argparse.Namespace) -> int:
+    _check_te_options(args)
     case = load_case(args.case)
     law = _law(args, case)
     res = run_te(case, args.solver, args.steps, args.revolutions, args.load_Nm, args.direction, law)
@@ -161,10 +188,14 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "stiffness":
+            _check_stiffness_options(args)
             return _stiffness(args)
         return _te(args)
     except ValueError as exc:
-        print(f"rvdyn: error: {exc}", file=sys.stderr)
+        print(f"rvdyn: error: {v.one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"rvdyn: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
         return 2
 
 

@@ -63,7 +63,7 @@ class LineContact:
     With ``b^2 = 4 P R/(pi E*)`` the approach of the cylinder axes is
     ``delta = P/(pi E*) [C - ln P]``, ``C = 2 E* (c1 ln 4R1 + c2 ln 4R2) - ln(4 R/(pi E*)) - 1``
     (P in N/mm, lengths in mm). Inverted exactly: with ``u = C - ln P`` the equation is
-    ``u - ln u = ln(A e^C / delta)`` (solved by Newton, 5 steps to machine precision).
+    ``u - ln u = ln(A e^C / delta)`` (Newton from ``u0 = rhs + ln rhs``, 3 steps to machine precision).
     Energy ``U = L A P^2 (u - 1/2) / 2``; stiffness ``dF/d delta = L / (A (u - 1))``.
 
     Attributes
@@ -99,11 +99,10 @@ class LineContact:
         d = np.maximum(delta, 1e-300)
         rhs = np.log(self.A) + C - np.log(d)           # u - ln u = rhs  (u = C - ln P > 1)
         rhs = np.maximum(rhs, 1.0 + 1e-12)             # delta beyond the law's maximum: clamp at u = 1
-        u = rhs + np.log(rhs)                          # asymptotic start, then Newton
-        for _ in range(5):
+        u = rhs + np.log(rhs)                          # asymptotic start (relative force error < 1e-2),
+        for _ in range(3):                             # then Newton: 3 steps reach machine precision
             u = u - (u - np.log(u) - rhs) / (1.0 - 1.0 / u)
-            u = np.maximum(u, 1.0 + 1e-12)
-        return u
+        return np.maximum(u, 1.0 + 1e-12)
 
     def force(self, delta: np.ndarray, C: np.ndarray | None = None) -> np.ndarray:
         """Force (N) at penetration delta (mm); zero where delta <= 0."""

@@ -15,6 +15,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rvcad import validation as v
+from rvcad.errors import MAX_LOAD_NM
 from rvdyn.contacts import ContactLaw
 from rvdyn.runner import SchedulerError
 from rvdyn.te import SOLVERS
@@ -36,7 +38,7 @@ DEFAULT_SOLVER = "fcl"
 
 def build_parser() -> argparse.ArgumentParser:
     """Argument parser of ``rv-stackup``."""
-    p = argparse.ArgumentParser(
+    p = v.ArgumentParser(
         prog="rv-stackup",
         description="Single-factor screen, Box-Behnken response surface, validation and Monte Carlo "
                     "tolerance stack-up of the RV reducer's transmission error (paper sections 4.2-5).",
@@ -107,8 +109,35 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def check_sizes(args: argparse.Namespace) -> None:
+    """Upper bounds of the size options and the output folders (OptionError naming the option and bound).
+
+    The bounds come from the memory and time budget in :mod:`rvcad.validation` (one solve within
+    ``MEMORY_BUDGET_BYTES``; at most ``MAX_CASES`` full-solver cases per option); the lower bounds
+    stay in :meth:`StudyConfig.validate`.
+    """
+    v.steps_option(args.steps)
+    v.option_real(args.K, "--K", 0.0, v.MAX_CONTACT_K, lo_open=True, unit="N/mm^n", why="stiffer is the rigid limit")
+    v.option_real(args.load_Nm, "--load-Nm", 0.0, MAX_LOAD_NM, unit="N m")
+    v.option_real(args.spec_arcmin, "--spec-arcmin", 0.0, 60.0, lo_open=True, unit="arcmin",
+                  why="a TE peak-to-peak spec; 60 arcmin is a degree")
+    v.option_real(args.scheduler_timeout, "--scheduler-timeout", 0.0, 3600.0, lo_open=True, unit="s")
+    v.option_int(args.workers, "--workers", 1, v.MAX_WORKERS, why="local processes of about 160 MB each")
+    v.option_int(args.sweep_points, "--sweep-points", 2, v.MAX_SWEEP_POINTS, why="each point is one solve per factor")
+    v.option_int(args.n_validation, "--validation-cases", 0, v.MAX_CASES, why="each is one full solve")
+    v.option_int(args.mc_check, "--mc-check", 0, v.MAX_CASES, why="each is one full solve")
+    v.option_int(args.mc_draws, "--mc-draws", 0, v.MAX_MC_DRAWS, why="each draw is one full solve and ~2 kB")
+    v.option_int(args.mc_sobol, "--mc-sobol", 0, v.MAX_CASES, why="each block adds one full solve per tolerance")
+    if args.center is not None:
+        v.option_int(args.center, "--center", 0, v.MAX_CENTER_RUNS, why="each is one full solve")
+    v.output_dir(args.out)
+    if args.cache:
+        v.output_dir(args.cache, "--cache")
+
+
 def config_from_args(args: argparse.Namespace) -> StudyConfig:
     """StudyConfig from parsed options; ValueError naming the option on bad values."""
+    check_sizes(args)
     tols = default_tolerances()
     if args.tolerances:
         tols.update(load_tolerances(args.tolerances))
@@ -214,7 +243,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"rv-stackup: error: --scheduler {exc.address!r}: {exc.reason}", file=sys.stderr)
         return 2
     except ValueError as exc:
-        print(f"rv-stackup: error: {exc}", file=sys.stderr)
+        print(f"rv-stackup: error: {v.one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"rv-stackup: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("rv-stackup: interrupted; finished cases are in the cache, rerun the same command to resume",

@@ -6,8 +6,9 @@
 * :func:`sweep_cases` -- each RSM factor (EA = pin_pitch in deg, EB = pin_circle_diameter in um,
   EC = pin_radius in um, ED = disc_hole_eccentricity in um) alone over the Table 5 range
   (-0.06..0.06 deg, -14..14, -7..7, -14..14 um).
-* :func:`run_screen` -- runs both through a *runner* (default: :func:`serial_runner`, one
-  :func:`rvdyn.te.run_te` after another; ``rv-stackup`` passes its cached, parallel runner) and
+* :func:`run_screen` -- runs both through a *runner* (default: :func:`serial_runner`, an
+  :class:`rvdyn.runner.Runner` in this process without cache; ``rv-stackup`` passes its cached,
+  parallel one) and
   returns the tables, the error ranking and the check of the paper's stage I / stage II claim.
 * :func:`plot_screen`, :func:`plot_te_curves`, :func:`plot_sweeps` -- the figures of the report
   (``rv-stackup --stages screen`` writes the tables, figures and report of this stage).
@@ -41,7 +42,8 @@ from rvpaper import PAPER_DESCRIPTION, RSM_FACTORS, STAGE, TABLE5_HALF_RANGE  # 
 ARCSEC_PER_ARCMIN = 60.0
 
 #: A runner maps a list of cases to one result dict per case (same order): ``{"stats": {pp, mean,
-#: mean_abs, rms, seconds, ...} (arcsec, s), "te_arcsec": array or None, "key": str, "cached": bool}``.
+#: mean_abs, rms, seconds, ...} (arcsec, s), "te_arcsec": array or None, "key": str, "cached": bool}``
+#: (an :class:`rvdyn.runner.Runner` is one).
 Runner = Callable[[Sequence[Case], str], list[dict[str, Any]]]
 
 

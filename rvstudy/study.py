@@ -408,7 +408,7 @@ def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSe
         for lev in ("low", "center", "high"):
             x = getattr(levels[f], lev)
             if not (math.isfinite(x) and abs(x) <= lim):
-                raise TableError(f"--levels: factor {f!r} ({key}) {lev} {x!r} {ERROR_TYPES[key].unit}; allowed: a finite "
+                raise TableError(f"--levels: factor {f!r} ({key}) {lev} {x!r} {ERROR_TYPES[key].unit} is out of range; allowed: a finite "
                                  f"value with |value| <= {lim:g} {ERROR_TYPES[key].unit}", field=f"{f}.{lev}", value=x)
         errors[f] = key
     if len(set(errors.values())) != len(errors):

@@ -29,6 +29,7 @@ def readme_snippet() -> str:
     return found[0]
 
 
+@pytest.mark.slow
 def test_readme_snippet_is_five_lines_and_runs(tmp_path):
     code = readme_snippet()
     assert len(code.strip().splitlines()) == 5
@@ -123,3 +124,16 @@ def test_run_cases_per_case_steps_angles_and_cache(solved, tmp_path):
 def test_run_cases_bad_input_names_the_field(kw, match):
     with pytest.raises(ValueError, match=match):
         rvdyn.run_cases([Case.from_dict({}), Case.from_dict({})], **kw)
+
+
+def test_cache_key_covers_every_solver_module():
+    """Every module of rvcad and rvdyn enters the cache key (so a changed law never serves stale numbers),
+    except the runner, the cache, the API and the CLIs; the fcl provider's modules for fcl jobs only."""
+    from rvdyn.cache import FCL_MODULES, NOT_PHYSICS, code_fingerprint, physics_modules
+
+    every = {p.parent.name if p.stem == "__init__" else f"{p.parent.name}.{p.stem}"
+             for pkg in ("rvcad", "rvdyn") for p in (ROOT / pkg).glob("*.py")}
+    assert set(physics_modules("fcl")) == every - NOT_PHYSICS
+    assert set(physics_modules("analytic")) == every - NOT_PHYSICS - FCL_MODULES
+    assert {"rvcad.geometry", "rvcad.params", "rvdyn.solver", "rvdyn.te", "rvdyn.contacts"} <= set(physics_modules())
+    assert code_fingerprint("analytic") != code_fingerprint("fcl")

@@ -1,8 +1,9 @@
 """Package layering: no import circle, and no package reaching up to a layer above it at import time.
 
 Layers, bottom up: ``rvpaper`` (data) and ``rsm`` (statistics) -> ``rvcad`` (geometry) -> ``rvdyn``
-(solver, runner) -> ``rvcalib`` (loop on measured data) and ``rvstudy`` (the study). ``rvdyn`` does
-not import matplotlib at module level (plots import it inside the function that draws).
+(solver, runner) -> ``rvcalib`` (loop on measured data) and ``rvstudy`` (the study); a command line
+may sit above its package's library (``rvcad export --pose solved`` uses rvdyn). ``rvdyn`` does not
+import matplotlib at module level (plots import it inside the function that draws).
 """
 from __future__ import annotations
 
@@ -23,10 +24,13 @@ PACKAGES = ("rvpaper", "rsm", "rvcad", "rvdyn", "rvcalib", "rvstudy")
 FORBIDDEN = {
     "rvpaper": {"rsm", "rvcad", "rvdyn", "rvcalib", "rvstudy", "matplotlib"},
     "rsm": {"rvpaper", "rvcad", "rvdyn", "rvcalib", "rvstudy"},
-    "rvcad": {"rvdyn", "rvcalib", "rvstudy", "matplotlib"},
+    "rvcad": {"rvcalib", "rvstudy", "matplotlib"},
     "rvdyn": {"rvcalib", "rvstudy", "matplotlib"},
     "rvcalib": {"rvstudy"},
 }
+#: Also forbidden, but to the package's library modules only: its command line (``cli``, ``__main__``)
+#: is an application on top (``rvcad export --pose solved`` places the parts at rvdyn's equilibrium).
+FORBIDDEN_IN_LIBRARY = {"rvcad": {"rvdyn"}}
 
 
 def _module_name(path: Path) -> str:
@@ -171,11 +175,15 @@ def test_loaded_at_import_follows_project_imports():
 def test_package_does_not_import_a_higher_layer(package):
     """Project packages above it: never, not even inside a function; matplotlib: not at import time."""
     mine = [m for m in _graph() if m == package or m.startswith(package + ".")]
+    library = {m for m in mine if m.rpartition(".")[2] not in ("cli", "__main__")}
     bad = {m: sorted((_loaded_at_import(m, lazy=True) & FORBIDDEN[package] - {"matplotlib"})
-                     | (_loaded_at_import(m) & FORBIDDEN[package] & {"matplotlib"})) for m in mine}
+                     | (_loaded_at_import(m) & FORBIDDEN[package] & {"matplotlib"})
+                     | (_loaded_at_import(m, lazy=True) & FORBIDDEN_IN_LIBRARY.get(package, set()) if m in library
+                        else set())) for m in mine}
     assert {m: b for m, b in bad.items() if b} == {}
 
 
+@pytest.mark.slow
 def test_rvdyn_loads_no_study_no_loop_no_matplotlib_at_import():
     """The same at run time: every rvdyn module imported in a fresh interpreter (this also sees what the
     third-party libraries load)."""
@@ -192,3 +200,49 @@ def test_rvdyn_loads_no_study_no_loop_no_matplotlib_at_import():
     loaded = set(json.loads(done.stdout.splitlines()[-1]))
     assert {"rvdyn", "rvcad", "fcl"} <= loaded  # every module was imported (fcl by rvdyn.collision)
     assert loaded & FORBIDDEN["rvdyn"] == set()
+
+
+#: Test files still importing private names, owned by work in progress elsewhere (issue 12); remove a
+#: file from here once it tests through the public API.
+PRIVATE_IMPORTS_PENDING = {"test_rvcad_export.py", "test_rvcad_parts.py"}
+
+
+def _private_uses(path: Path) -> list[str]:
+    """``module._name`` names a test file takes from the project's packages (imports and attributes)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    aliases: dict[str, str] = {}
+    out = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom) and n.module and n.module.split(".")[0] in PACKAGES:
+            for a in n.names:
+                if a.name.startswith("_") and not a.name.startswith("__"):
+                    out.append(f"{n.module}.{a.name}")
+                else:
+                    aliases[a.asname or a.name] = f"{n.module}.{a.name}"
+        elif isinstance(n, ast.Import):
+            for a in n.names:
+                if a.name.split(".")[0] in PACKAGES:
+                    aliases[a.asname or a.name.split(".")[0]] = a.name if a.asname else a.name.split(".")[0]
+    for n in ast.walk(tree):
+        if (isinstance(n, ast.Attribute) and n.attr.startswith("_") and not n.attr.startswith("__")
+                and isinstance(n.value, (ast.Name, ast.Attribute))):
+            base = ast.unparse(n.value)
+            head = base.split(".")[0]
+            if head in aliases:
+                out.append(f"{aliases[head]}{base[len(head):]}.{n.attr}")
+    return sorted(set(out))
+
+
+def test_private_use_finder(tmp_path):
+    probe = tmp_path / "test_probe.py"
+    probe.write_text("import rvdyn.runner as r\n"
+                     "from rvcad.export import _atomic_write, export_case\n"
+                     "from rvcad import parts\n"
+                     "r._hidden(); parts._Gear; export_case.__doc__; other._x\n")
+    assert _private_uses(probe) == ["rvcad.export._atomic_write", "rvcad.parts._Gear", "rvdyn.runner._hidden"]
+
+
+def test_tests_use_public_names_only():
+    bad = {p.name: _private_uses(p) for p in sorted((ROOT / "tests").glob("test_*.py"))
+           if p.name not in PRIVATE_IMPORTS_PENDING}
+    assert {k: v for k, v in bad.items() if v} == {}

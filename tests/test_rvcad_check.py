@@ -14,27 +14,35 @@ import pytest
 
 import rvcad
 from rvcad.atomic import atomic_path, remove_stale_temps
-from rvcad.check import DesignError, check_case, pin_interference
-from rvcad.cli import main, solved_state
+from rvcad.check import check_case, crank_period_input, pin_interference
+from rvcad.cli import main
 from rvcad.errors import Case
 from rvcad.export import ExportFolderError, content_key, export_case
 from rvcad.geometry import ReducerGeometry
 from rvcad.occ import InvalidSolidError
 from rvcad.overlap import overlaps
+from rvcad.params import Design
 from rvcad.parts import Assembly
+from rvcad.validation import DesignError
 
+#: The four examples of issue 14 (items 3 and 4): the crank angles are refused by the design layer
+#: (Design.validate: the planets overlap), the others by the geometric check (rvcad.check).
 BAD = [
-    ({"design": {"stage1_backlash_mm": 1.0}}, r"design\.stage1_backlash_mm 1 mm .* allowed: below 0\.99"),
-    ({"design": {"crank_angles_deg": [0, 0]}}, r"design\.crank_angles_deg \[0, 0\] .* allowed: cranks at least"),
-    ({"errors": {"pin_radius": 1000}}, r"errors\.pin_radius .* 1000\.0 um .* at most 100 um"),
-    ({"errors": {"pin_circle_diameter": -1000}}, r"errors\.pin_circle_diameter .* 500\.0 um .* at most 100 um"),
+    ({"design": {"stage1_backlash_mm": 1.0}}, r"design\.stage1_backlash_mm 1\.0 mm thins the planet teeth to a "
+                                              r"point .* allowed: below 0\.99"),
+    ({"design": {"crank_angles_deg": [0, 0]}}, r"design\.crank_angles_deg \[0, 0\] puts the two planets"),
+    ({"errors": {"pin_radius": 1000}}, r"errors\.pin_radius 1000 makes the parts overlap \(pins in the discs, "
+                                       r"loaded stage I flanks\) by at least 1000\.0 um .* at most 100 um"),
+    ({"errors": {"pin_circle_diameter": -1000}}, r"errors\.pin_circle_diameter -1000 makes the parts overlap .* by "
+                                                 r"at least 500\.0 um .* at most 100 um"),
 ]
 
 
 @pytest.mark.parametrize("case, message", BAD)
 def test_design_check_names_the_field(case: dict, message: str) -> None:
-    with pytest.raises(DesignError, match=message):
+    with pytest.raises(DesignError, match=message) as err:
         check_case(Case.from_dict(case))
+    assert err.value.field == message.split(" ")[0].replace("\\", "")
     with pytest.raises(DesignError, match=message.split(" ")[0]):
         rvcad.reducer(case)
 
@@ -54,11 +62,13 @@ def test_cli_refuses_before_writing(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_tooth_land_closed_form() -> None:
-    """The planet's tip land vanishes at b_max = b + 2 r_pitch * (tip half angle): the refusal sits there."""
+    """The planet's tip land vanishes at b_max = 2 r_pitch * (tip half angle) of the geometry's own
+    involute (thinning by b turns each flank by b / (2 r_pitch)); the check keeps a 1 um land, so it
+    refuses from b_max - 1 um * r_pitch / r_tip on."""
     g = ReducerGeometry(Case.from_dict({}))
     b_max = 2.0 * g.planet.pitch_radius * g.planet.tip_half_angle()
     assert 0.99 < b_max < 1.0
-    check_case(Case.from_dict({"design": {"stage1_backlash_mm": round(b_max - 0.01, 4)}}))
+    check_case(Case.from_dict({"design": {"stage1_backlash_mm": round(b_max - 2e-3, 4)}}))
     with pytest.raises(DesignError, match="stage1_backlash_mm"):
         check_case(Case.from_dict({"design": {"stage1_backlash_mm": round(b_max + 1e-4, 4)}}))
 
@@ -67,7 +77,8 @@ def test_pin_interference_closed_forms() -> None:
     """Nominal: the pins touch (0). All pins larger by d: d in every pose (the disc is surrounded by
     pins on every normal). Pin circle smaller by 2 d: each pin moves d radially, d cos(a) along its
     contact normal (a: angle between normal and radius, 0 at the roots and tips), so the largest
-    penetration lies in (d cos(a_max), d] and reaches d where a pin sits at a root or tip."""
+    penetration lies in (d cos(a_max), d] and reaches d where a pin sits at a root or tip. The
+    bound never exceeds what rvdyn's equilibrium keeps (checked against rvdyn below)."""
     assert np.abs(pin_interference(ReducerGeometry(Case.from_dict({})), states=4)).max() < 1e-9
     pen = pin_interference(ReducerGeometry(Case.from_dict({"errors": {"pin_radius": 50}})), states=4)
     assert pen.min() == pytest.approx(0.05, abs=1e-6)
@@ -75,10 +86,27 @@ def test_pin_interference_closed_forms() -> None:
     assert 0.0495 < pen.min() and pen.max() <= 0.05 + 1e-9
 
 
+def test_interference_bound_below_the_solver() -> None:
+    """One pin 80 um too large: the check's bound (smallest reachable penetration, 45-62 um over the
+    states) lies below the penetration rvdyn's equilibrium keeps at the same states (81-82 um) and
+    is of its size (the solver also holds the planets and the unloaded flanks)."""
+    from rvdyn.contacts import AnalyticContacts
+    from rvdyn.solver import QuasiStaticSolver
+
+    case = Case.from_dict({"errors": {"pin_radius": [{"pin": 3, "value": 80}]}})
+    g = ReducerGeometry(case)
+    bound = pin_interference(g, states=6)
+    th = np.linspace(0.0, crank_period_input(g), 6, endpoint=False)
+    sol = QuasiStaticSolver(g, AnalyticContacts(g)).solve(th, direction=1, load_Nm=case.load_Nm)
+    assert np.all(bound <= sol.max_penetration_mm + 1e-6)
+    assert bound.max() > 0.5 * sol.max_penetration_mm.max()
+
+
 def test_invalid_solid_is_an_error_not_a_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Past the design check (switched off here), BRepCheck stops the pointed planet: no planet0.step."""
+    """Past the design checks (bypassed here: the case is built without validation and the geometric
+    check is switched off), BRepCheck stops the pointed planet: no planet0.step."""
     monkeypatch.setattr("rvcad.export.check_case", lambda case, geometry=None: {})
-    case = Case.from_dict({"name": "pointed", "design": {"stage1_backlash_mm": 1.0}})
+    case = Case(name="pointed", design=Design(stage1_backlash_mm=1.0))
     with pytest.raises(InvalidSolidError, match="part planet0: the built solid is not valid"):
         export_case(case, tmp_path / "o", formats=["step"], parts=["planet0"])
     assert not (tmp_path / "o" / "planet0.step").exists()
@@ -120,23 +148,33 @@ def test_overlaps_pins_and_report(tmp_path: Path, capsys: pytest.CaptureFixture)
 
 
 def test_solved_pose_export(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    """--pose solved places the assembly at rvdyn's equilibrium: output angle within the TE of the
-    ideal one, the pose named in the report, the assembly's cache key changed."""
-    case = Case.from_dict({"errors": {"pin_radius": 5}})
+    """rvcad places the assembly at an explicit state; rvdyn.pose gives the solved one (rvcad sits
+    below rvdyn and never imports it): output angle within the TE of the ideal one, the pose named
+    in the report, the assembly's cache key changed."""
+    from rvdyn.pose import main as pose_main
+    from rvdyn.pose import solved_state
+
+    case = Case.from_dict({"name": "c", "errors": {"pin_radius": 5}})
     to, psi = solved_state(case, 30.0)
     ideal = math.radians(30.0) / case.design.ratio
     assert abs(to - ideal) < math.radians(60 / 3600) and len(psi) == 2
     path = tmp_path / "c.json"
     path.write_text(json.dumps(case.to_dict()))
+    assert pose_main([str(path), "--theta-in-deg", "30"]) == 0
+    text = capsys.readouterr().out.strip()
+    assert [float(v) for v in text.split(",")] == pytest.approx([math.degrees(v) for v in (to,) + psi], abs=1e-9)
     argv = ["export", str(path), "--out", str(tmp_path / "o"), "--parts", "pin00", "--format", "stl",
-            "--theta-in-deg", "30", "--json", "--pose", "solved"]
+            "--theta-in-deg", "30", "--json", "--state", text]
     assert main(argv) == 0
     rep = json.loads(capsys.readouterr().out)
-    assert rep["pose"] == "solved" and rep["overlaps"]["pose"] == "solved"
+    assert rep["pose"] == "state" and rep["overlaps"]["pose"] == "state"
     assert rep["overlaps"]["pin_disc"]["max_depth_mm"] < 0.1  # elastic contact under the case's load
-    # the assembly files of the solved pose are cached under their own key
+    # the assembly files of another state are cached under their own key
     assert content_key(case, 0.1, "stl", "assembly.stl", 30.0, (to, psi)) != \
         content_key(case, 0.1, "stl", "assembly.stl", 30.0)
+    code = main(argv[:-1] + ["1,2"])
+    cap = capsys.readouterr()
+    assert code == 2 and "--state 1,2 must give the output angle and 2 crank angles" in cap.err
 
 
 # ---------------------------------------------------------------------------- export folders

@@ -298,7 +298,7 @@ def test_help_describes_every_option(capsys: pytest.CaptureFixture) -> None:
     assert main(["export", "--help"]) == 0
     text = capsys.readouterr().out
     for opt in ("--out", "--format", "--tolerance-um", "--theta-in-deg", "--parts", "--force", "--json", "CASE.json",
-                "--pose", "own frame", "world frame", "assembly.step", "exit codes", "BRepCheck"):
+                "--state", "own frame", "world frame", "assembly.step", "exit codes", "BRepCheck"):
         assert opt in text
     assert main(["--help"]) == 0
     assert "export" in capsys.readouterr().out
@@ -317,8 +317,8 @@ def test_build123d_parts_match_the_exported_step(full_export: tuple[Path, dict, 
     """rvcad.reducer gives a labelled, placed build123d Solid for every part; volumes and centres of
     mass equal those of the exported assembly.step read back with build123d (same OpenCASCADE
     solids: relative volume difference below 1e-9, centres within 1e-8 mm; measured ~1e-13 and
-    ~1e-11 mm), own-frame solids equal the per-part STEP files (two cheap ones read back), and the closed-form volumes agree to
-    the B-spline budget (OpenCASCADE's volume integration: 2e-6 relative)."""
+    ~1e-11 mm), own-frame solids equal the per-part STEP files (two cheap ones read back), and the
+    closed-form volumes agree to the B-spline budget (OpenCASCADE's volume integration: 2e-6 relative)."""
     import build123d as bd
 
     import rvcad

@@ -156,7 +156,7 @@ def test_unresolvable_interference_is_refused() -> None:
 def test_bad_input_clear_errors_and_no_partial_csv(tmp_path, capsys) -> None:
     out = tmp_path / "te.csv"
     assert rvdyn_main(["te", "--steps", "1", "--out", str(out)]) == 2
-    assert "steps 1 must be an integer >= 2" in capsys.readouterr().err
+    assert "--steps 1 is out of range; allowed: an integer in [2, " in capsys.readouterr().err
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"errors": {"pin_radius": "NaN"}}))
     assert rvdyn_main(["te", str(bad), "--out", str(out)]) == 2
@@ -330,8 +330,7 @@ def test_crank_beam_and_cam_statics_closed_forms() -> None:
 
 @pytest.fixture(scope="module")
 def physical_nominal():
-    g = ReducerGeometry(Case.from_dict({}))
-    th = np.linspace(0.0, 2 * math.pi * 121 / 39, 6)            # a crank turn (one mesh cycle of the discs)
+    th = np.linspace(0.0, 2 * math.pi * 121 / 39, 6)            # an output turn of one lobe pitch (360/39 deg)
     out = {}
     for sup in ("elastic", "rigid"):
         c = Case.from_dict({"model": {"contact": "physical", "supports": sup}})

@@ -97,7 +97,7 @@ def test_cli_stiffness_json_csv_and_bad_input(tmp_path, capsys) -> None:
     df = pd.read_csv(out)
     assert list(df.columns) == ["torque_Nm", "torsion_arcmin", "branch"] and len(df) > 17
     assert rvdyn_main(["stiffness", "--rated-Nm", "0", "--out", str(tmp_path / "x.csv")]) == 2
-    assert "rated torque 0.0 N m must be a finite number > 0" in capsys.readouterr().err
+    assert "--rated-Nm 0.0 is out of range" in capsys.readouterr().err
     assert not (tmp_path / "x.csv").exists()
 
 
@@ -138,5 +138,13 @@ def test_modification_is_in_the_shared_profile_and_checked() -> None:
 
     g = ReducerGeometry(Case.from_dict({"design": {"profile_equidistant_mm": 0.02, "profile_shift_mm": -0.01}}))
     assert g.profiles[0].pin_radius == pytest.approx(3.02) and g.profiles[1].pin_circle_radius == pytest.approx(63.99)
-    with pytest.raises(ValueError, match=r"design.profile_shift_mm 0.5 is out of range; \|value\| <= 0.2"):
+    with pytest.raises(ValueError, match=r"design.profile_shift_mm 0.5 is out of range; allowed: a number in \[-0.2, 0.2\] mm"):
         ReducerGeometry(Case.from_dict({"design": {"profile_shift_mm": 0.5}}))
+
+
+def test_cli_stiffness_plot_png(tmp_path, capsys) -> None:
+    png = tmp_path / "curve.png"
+    assert rvdyn_main(["stiffness", "--contact", "impact", "--points", "5", "--plot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "torsional rigidity" in out and "lost motion" in out and "compliance budget" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -1,8 +1,6 @@
 """Single-factor screen and factor sweeps (rvstudy.screen, ``rv-stackup --stages screen``)."""
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 
 import numpy as np
@@ -22,7 +20,9 @@ from rvstudy.screen import (
     sweep_cases,
 )
 
-STEPS = 24
+from conftest import STUDY_STEPS
+
+STEPS = STUDY_STEPS
 
 
 def test_screen_cases_are_table4_at_paper_values():
@@ -96,17 +96,14 @@ def test_rank_needs_case_a():
 
 
 @pytest.fixture(scope="module")
-def screen_run(tmp_path_factory):
-    """``rv-stackup --stages screen`` once, analytic solver at a few steps: (output folder, JSON summary)."""
-    out = tmp_path_factory.mktemp("screen")
-    argv = ["--out", str(out), "--stages", "screen", "--solver", "analytic", "--steps", str(STEPS),
-            "--sweep-points", "3", "--workers", "1", "--no-progress", "--json"]
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
-        assert cli.main(argv) == 0
-    return out, json.loads(buf.getvalue())
+def screen_run(small_study):
+    """The screen stage of the shared small ``rv-stackup`` run (analytic, few steps, 3 sweep points):
+    (output folder, its summary.json)."""
+    out, _ = small_study
+    return out, json.loads((out / "summary.json").read_text())
 
 
+@pytest.mark.slow
 def test_real_screen_small_steps(screen_run):
     """The analytic solver at a few steps: stage I errors change the TE ripple far less than cam and hole errors."""
     out, summary = screen_run
@@ -123,9 +120,23 @@ def test_real_screen_small_steps(screen_run):
     assert set(summary["stage_check"]) == {"pp", "mean_abs"}
 
 
+@pytest.mark.slow
+def test_default_serial_runner_gives_the_study_numbers(screen_run):
+    """run_screen on its own (serial, no cache) solves the + rows to the same numbers as rv-stackup."""
+    out, _ = screen_run
+    study = pd.read_csv(out / "tables" / "screen.csv")
+    study = study[study["sign"].isin([0, 1])].set_index("letter")
+    alone = run_screen("analytic", STEPS, load_Nm=20.0, progress=False, sweeps=False).screen.set_index("letter")
+    assert list(alone.index) == list(study.index)
+    for col in ("pp_arcsec", "mean_abs_arcsec", "rank_pp"):
+        np.testing.assert_allclose(alone[col], study[col], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.slow
 def test_screen_stage_writes_tables_plots_and_json(screen_run):
     out, summary = screen_run
     assert summary["cases"]["failed"] == 0 and summary["cases"]["computed"] > 0
+    assert summary["config"]["sweep_points"] == 3
     for name in ("tables/screen.csv", "tables/sweeps.csv", "figures/screen.png", "figures/sweeps.png",
                  "figures/te_curves.png", "report.md"):
         assert (out / name).stat().st_size > 0, name
@@ -137,6 +148,7 @@ def test_screen_stage_writes_tables_plots_and_json(screen_run):
     assert "Single-factor screen" in report and "pin_pitch" in report and "reproduced" in report
 
 
+@pytest.mark.slow
 def test_screen_stage_human_summary_reuses_cache(screen_run, tmp_path, capsys):
     out, _ = screen_run
     assert cli.main(["--out", str(tmp_path), "--cache", str(out / "cache"), "--stages", "screen", "--solver",

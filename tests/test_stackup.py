@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -30,11 +31,12 @@ from rvstudy.montecarlo import (
 )
 from rvstudy.study import StudyConfig, run_study
 
-STEPS = 24
+from conftest import DOE_ARGV, STUDY_STEPS
+
+STEPS = STUDY_STEPS
 ROOT = Path(__file__).resolve().parents[1]
 # the design stage alone: 27 runs, 25 unique cases
-DOE = ["--solver", "analytic", "--steps", str(STEPS), "--workers", "1", "--stages", "doe", "--no-progress",
-       "--no-figures"]
+DOE = DOE_ARGV
 
 
 def _cfg(out: Path, **kw) -> StudyConfig:
@@ -49,11 +51,15 @@ def _design_numbers(out: Path) -> pd.DataFrame:
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory) -> Path:
-    """One uninterrupted design-stage run (the numbers every other run must reproduce)."""
-    out = tmp_path_factory.mktemp("reference")
-    assert cli.main(["--out", str(out), *DOE, "--json"]) == 0
-    return out
+def reference(doe_reference) -> Path:
+    """One uninterrupted design-stage run (the numbers every other run must reproduce); read only."""
+    return doe_reference[0]
+
+
+def _copy(reference: Path, to: Path) -> Path:
+    """A copy of the reference run (tables, report and cache) to run again in."""
+    shutil.copytree(reference, to)
+    return to
 
 
 # ---------------------------------------------------------------------------------------------- paper data
@@ -71,12 +77,12 @@ def test_packaged_paper_tables():
 
 
 # ---------------------------------------------------------------------------------------------- cache
-def test_rerun_reuses_every_case(reference, tmp_path, capsys, monkeypatch):
-    out = tmp_path / "run"
-    assert cli.main(["--out", str(out), *DOE, "--json"]) == 0
-    first = json.loads(capsys.readouterr().out)
+@pytest.mark.slow
+def test_rerun_reuses_every_case(doe_reference, tmp_path, capsys, monkeypatch):
+    reference, first = doe_reference  # a first run from an empty cache solves every case
     assert first["cases"]["computed"] == 25 and first["cases"]["reused"] == 0
     assert any("undersampled" in n for n in first["notes"])  # STEPS is below 2 x 121
+    out = _copy(reference, tmp_path / "run")
     calls = []
     real = executor_mod.run_te
     monkeypatch.setattr(executor_mod, "run_te", lambda *a, **k: calls.append(1) or real(*a, **k))
@@ -90,6 +96,7 @@ def test_rerun_reuses_every_case(reference, tmp_path, capsys, monkeypatch):
     assert third["cases"]["computed"] == 25
 
 
+@pytest.mark.slow
 def test_interrupted_run_resumes_without_loss(reference, tmp_path):
     out = tmp_path / "run"
     k = 7
@@ -127,21 +134,6 @@ def _start_run(out: Path, argv: list[str], entries: int) -> tuple[subprocess.Pop
     return proc, cache, cmd, env
 
 
-def test_killed_subprocess_resumes_and_corrupts_nothing(reference, tmp_path):
-    out = tmp_path / "run"
-    proc, cache, cmd, env = _start_run(out, DOE, 5)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait(timeout=30)
-    n = len(cache.entries())
-    assert 0 < n < 25, "the kill should land mid-run"
-    assert all(cache.get(p.stem) is not None for p in cache.entries())
-    r = subprocess.run(cmd + ["--json"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stderr
-    s = json.loads(r.stdout)
-    assert s["cases"]["reused"] >= n and s["cases"]["computed"] + s["cases"]["reused"] == 25
-    pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
-
-
 def _children(pid: int) -> list[int]:
     """Processes whose parent is ``pid`` (Linux /proc)."""
     out = []
@@ -155,13 +147,17 @@ def _children(pid: int) -> list[int]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to list child processes")
-def test_pool_workers_exit_when_the_run_is_killed(tmp_path):
-    """A SIGKILLed run cannot shut its pool down; its workers must not stay behind (they watch their parent)."""
+def test_killed_run_resumes_corrupts_nothing_and_leaves_no_workers(reference, tmp_path):
+    """``rv-stackup`` with a process pool, SIGKILLed mid-run: every cache entry is whole, the pool workers
+    end themselves (a killed run cannot shut its pool down; the workers watch their parent), and a rerun
+    of the same command resumes and gives the uninterrupted run's numbers."""
     from rvdyn.runner import PARENT_POLL_S
 
     argv = [a if a != "1" else "2" for a in DOE]  # --workers 2: a real process pool
-    proc, _, _, _ = _start_run(tmp_path / "run", argv, 2)
+    out = tmp_path / "run"
+    proc, cache, _, _ = _start_run(out, argv, 2)
     kids = _children(proc.pid)
     assert kids, "the run should have started its pool"
     proc.send_signal(signal.SIGKILL)
@@ -174,11 +170,21 @@ def test_pool_workers_exit_when_the_run_is_killed(tmp_path):
             break
         time.sleep(0.2)
     assert not alive, f"pool workers {alive} outlived the killed run"
+    n = len(cache.entries())
+    assert 0 < n < 25, "the kill should land mid-run"
+    assert all(cache.get(p.stem) is not None for p in cache.entries())
+    # the same command again (here in this process): resumes from the entries the killed run left
+    res = run_study(_cfg(out, workers=1))
+    assert res.counters["reused"] >= n and res.counters["computed"] + res.counters["reused"] == 25
+    from rvstudy.report import write_report
+
+    write_report(res)
+    pd.testing.assert_frame_equal(_design_numbers(out), _design_numbers(reference))
 
 
+@pytest.mark.slow
 def test_corrupt_and_partial_entries_are_recomputed(reference, tmp_path):
-    out = tmp_path / "run"
-    run_study(_cfg(out))
+    out = _copy(reference, tmp_path / "run")
     cache = CaseCache(out / "cache")
     entries = cache.entries()
     entries[0].write_text(entries[0].read_text()[:50])  # partial (truncated) file
@@ -206,9 +212,18 @@ def test_job_key_covers_solver_steps_and_law():
     assert Job(c, "analytic", 48).key() != k
     assert Job(c, "analytic", 24, law=ContactLaw(K=1e5)).key() != k
     assert Job(c.with_errors({"pin_pitch": 0.02}), "analytic", 24).key() != k
+    assert Job(Case.from_dict({"errors": {"pin_pitch": 0.01}, "load_Nm": 10.0}), "analytic", 24).key() != k
+    assert Job(Case.from_dict({"errors": {"pin_pitch": 0.01}, "direction": -1}), "analytic", 24).key() != k
+    assert Job(c, "analytic", 24, revolutions=2.0).key() != k
+    # at given input angles: the angles enter the key, the steps follow them
+    th = (0.0, 1.0, 2.0)
+    assert Job(c, "analytic", 24, theta_in_deg=th).key() not in {k, Job(c, "analytic", 3).key()}
+    assert Job(c, "analytic", 24, theta_in_deg=th).key() == Job(c, "analytic", 99, theta_in_deg=th).key()
+    assert Job(c, "analytic", 24, theta_in_deg=(0.0, 1.0, 2.5)).key() != Job(c, "analytic", 24, theta_in_deg=th).key()
 
 
 # ---------------------------------------------------------------------------------------------- report
+@pytest.mark.slow
 def test_report_tables_come_from_the_run(reference, tmp_path):
     t6 = pd.read_csv(reference / "tables" / "table6_compare.csv")
     design = pd.read_csv(reference / "tables" / "design_runs.csv")
@@ -233,14 +248,10 @@ def test_report_tables_come_from_the_run(reference, tmp_path):
     assert "paper_te_arcmin" not in pd.read_csv(out / "tables" / "table6_compare.csv")
 
 
-def test_full_pipeline_small(tmp_path, capsys):
+@pytest.mark.slow
+def test_full_pipeline_small(small_study):
     """Every stage with small counts, figures included; the report sets ours beside the paper's."""
-    out = tmp_path / "run"
-    rc = cli.main(["--out", str(out), "--solver", "analytic", "--steps", str(STEPS), "--workers", "1",
-                   "--sweep-points", "3", "--validation-cases", "4", "--mc-check", "1", "--mc-draws", "6",
-                   "--mc-sobol", "2", "--no-progress"])
-    assert rc == 0
-    text = capsys.readouterr().out
+    out, text = small_study
     assert text.strip().splitlines()[-1] == f"report: {out / 'report.md'}"
     rep = (out / "report.md").read_text()
     for section in ("Single-factor screen", "Factor sweeps", "Table 6", "Table 7", "Eq. 8", "Eq. 9",

@@ -1,4 +1,7 @@
-"""The executors give identical numbers: serial, local process pool and a Dask LocalCluster on loopback."""
+"""The executors give identical numbers: serial, local process pool and a Dask LocalCluster on loopback.
+
+The serial numbers are those of the shared design-stage run (``doe_reference``: this process, one worker).
+"""
 from __future__ import annotations
 
 import json
@@ -11,7 +14,10 @@ from rvstudy import cli
 from rvstudy.montecarlo import parse_tolerance
 from rvstudy.study import StudyConfig, run_study
 
-STEPS = 24
+from conftest import STUDY_STEPS
+
+STEPS = STUDY_STEPS
+pytestmark = pytest.mark.slow  # process pool, Dask cluster, a design run each
 
 
 def _numbers(res) -> pd.DataFrame:
@@ -26,8 +32,12 @@ def _cfg(tmp_path, **kw) -> StudyConfig:
 
 
 @pytest.fixture(scope="module")
-def serial(tmp_path_factory):
-    return run_study(_cfg(tmp_path_factory.mktemp("serial")))
+def serial(doe_reference) -> pd.DataFrame:
+    """Design numbers of the serial run, full precision (the parquet table; the CSV keeps 10 digits)."""
+    out, summary = doe_reference
+    assert summary["executor"].startswith("serial")
+    d = pd.read_parquet(out / "tables" / "design_runs.parquet")
+    return d[["run", "mean_abs_arcmin", "pp_arcmin", "status"]].reset_index(drop=True)
 
 
 def _mc_cfg(tmp_path, **kw) -> StudyConfig:
@@ -45,7 +55,7 @@ def serial_mc(tmp_path_factory):
 def test_local_pool_equals_serial(serial, tmp_path):
     res = run_study(_cfg(tmp_path, workers=2))
     assert res.executor.startswith("local process pool, 2")
-    pd.testing.assert_frame_equal(_numbers(res), _numbers(serial))
+    pd.testing.assert_frame_equal(_numbers(res), serial)
 
 
 def test_dask_local_cluster_equals_serial(serial, tmp_path, capsys):
@@ -54,20 +64,21 @@ def test_dask_local_cluster_equals_serial(serial, tmp_path, capsys):
                                   host="127.0.0.1", dashboard_address=None) as cluster:
         addr = cluster.scheduler_address
         assert addr.startswith("tcp://127.0.0.1:")
-        res = run_study(_cfg(tmp_path / "api", scheduler=addr))
+        # every case solved on the cluster, the results cached here
+        res = run_study(_cfg(tmp_path / "api", scheduler=addr, use_cache=True, cache_dir=tmp_path / "cache"))
         assert res.executor.startswith(f"Dask scheduler {addr}")
-        pd.testing.assert_frame_equal(_numbers(res), _numbers(serial))
-        # through the command line, with the cache: a second run reuses everything
+        assert res.counters["computed"] == 25
+        pd.testing.assert_frame_equal(_numbers(res), serial)
+        # through the command line, on that cache: the entries the Dask results filled are reused
         out = tmp_path / "cli"
-        argv = ["--out", str(out), "--scheduler", addr, "--solver", "analytic", "--steps", str(STEPS),
-                "--stages", "doe", "--no-progress", "--no-figures", "--json"]
+        argv = ["--out", str(out), "--scheduler", addr, "--cache", str(tmp_path / "cache"), "--solver", "analytic",
+                "--steps", str(STEPS), "--stages", "doe", "--no-progress", "--no-figures", "--json"]
         assert cli.main(argv) == 0
         s1 = json.loads(capsys.readouterr().out)
-        assert cli.main(argv) == 0
-        s2 = json.loads(capsys.readouterr().out)
-    assert s1["cases"]["computed"] == 25 and s2["cases"]["computed"] == 0
+    assert s1["executor"].startswith(f"Dask scheduler {addr}")
+    assert s1["cases"]["computed"] == 0 and s1["cases"]["reused"] == 25
     d = pd.read_parquet(out / "tables" / "design_runs.parquet")  # full precision (the CSV keeps 10 digits)
-    np.testing.assert_array_equal(d["mean_abs_arcmin"].to_numpy(), _numbers(serial)["mean_abs_arcmin"].to_numpy())
+    np.testing.assert_array_equal(d["mean_abs_arcmin"].to_numpy(), serial["mean_abs_arcmin"].to_numpy())
 
 
 def test_monte_carlo_same_numbers_serial_pool_and_dask(serial_mc, tmp_path):
