@@ -27,7 +27,7 @@ from rvcad.check import check_case  # noqa: E402
 from rvcad.errors import load_case  # noqa: E402
 from rvcad.export import export_case  # noqa: E402
 from rvcad.overlap import overlap_summary  # noqa: E402
-from rvcad.parts import Assembly, CycloidDisc, _Gear  # noqa: E402
+from rvcad.parts import Assembly, CycloidDisc, GearPart  # noqa: E402
 from rvcad.step import edge_samples, read_step  # noqa: E402
 
 
@@ -82,7 +82,7 @@ def main() -> None:
         if isinstance(part, CycloidDisc):
             d = np.abs(part.boundary_distance(pts[:, :2]))
         else:
-            assert isinstance(part, _Gear)
+            assert isinstance(part, GearPart)
             d = part.flank_distance(pts[:, :2])
         print(f"  {name:8s} STEP max deviation {d.max() * 1e3:.4f} um over {len(pts)} points; "
               f"STL {part.outline_deviation(tol) * 1e3:.4f} um; {time.perf_counter() - t:.2f} s")

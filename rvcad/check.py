@@ -260,7 +260,8 @@ def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool 
     key = case.key()
     if cache and key in _MEMO:
         if isinstance(_MEMO[key], DesignError):
-            raise DesignError(str(_MEMO[key]))
+            e = _MEMO[key]  # a fresh exception with the same field, value and allowed
+            raise DesignError(str(e), field=e.field, value=e.value, allowed=e.allowed)
         return dict(_MEMO[key])
     try:
         out = _check(case, geometry)

@@ -160,7 +160,7 @@ class ExportReport:
         return "\n".join(lines)
 
 
-def _atomic_write(path: Path, writer: Callable[[Path], None]) -> int:
+def atomic_write(path: Path, writer: Callable[[Path], None]) -> int:
     """Run ``writer(tmp)`` on a temporary file in the same folder, then rename it to ``path``."""
     with atomic_path(path) as tmp:
         writer(tmp)
@@ -354,7 +354,7 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
         manifest.update({"version": EXPORT_VERSION, "case_name": case.name, "case_key": case.key(),
                          "tolerance_um": tol_um, "theta_in_deg": float(theta_in_deg)})
         data = json.dumps(manifest, indent=1, sort_keys=True).encode()
-        _atomic_write(out / MANIFEST, _write_bytes(data))
+        atomic_write(out / MANIFEST, _write_bytes(data))
 
     def emit(fname: str, part: str, fmt: str, key: str,
              build: Callable[[], tuple[Callable[[Path], None], int | None, float | None]]) -> None:
@@ -367,7 +367,7 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
         else:
             t0 = time.perf_counter()
             writer, faces, dev = build()
-            size = _atomic_write(path, writer)
+            size = atomic_write(path, writer)
             ef = ExportedFile(fname, part, fmt, bytes=size, seconds=time.perf_counter() - t0, faces=faces,
                               max_deviation_um=dev)
             manifest["files"][fname] = {"key": key, "bytes": size, "faces": faces, "max_deviation_um": dev}

@@ -17,7 +17,7 @@ from rvcad.plane import rotate2d
 from rvcad.profile import InvoluteGear
 
 
-class _Gear(Part):
+class GearPart(Part):
     """Spur gear with a bore: outline from :func:`gear_outline`, bore circle at ``bore_center``."""
 
     gear: InvoluteGear
@@ -73,7 +73,7 @@ class _Gear(Part):
                 "bore_radius_mm": self.bore_radius}
 
 
-class SunGear(_Gear):
+class SunGear(GearPart):
     """Stage I sun gear (input), own frame at the gear centre (turning with the input angle).
 
     Attributes
@@ -99,7 +99,7 @@ class SunGear(_Gear):
         self.bore_radius = SUN_BORE_FRACTION * self.gear.root_radius
 
 
-class PlanetGear(_Gear):
+class PlanetGear(GearPart):
     """Stage I planet gear j on crank j, own frame at the gear centre (turning with psi_j plus the
     tooth phase that makes it mesh).
 

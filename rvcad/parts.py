@@ -10,7 +10,7 @@ from __future__ import annotations
 from rvcad.assembly import Assembly
 from rvcad.curves import gear_outline
 from rvcad.cycloid import Crankshaft, CycloidDisc
-from rvcad.gears import PlanetGear, SunGear, _Gear
+from rvcad.gears import PlanetGear, SunGear, GearPart
 from rvcad.housing import Pin, PinHousing
 from rvcad.plan import (AXIAL_CLEARANCE_MM, DEFAULT_TOLERANCE_MM, PLATE_RIM_CLEARANCE_MM, SUN_BORE_FRACTION,
                         AxialLayout, Part)
@@ -18,4 +18,4 @@ from rvcad.plates import FlangePlate, PlanetaryCarrier
 
 __all__ = ["AXIAL_CLEARANCE_MM", "DEFAULT_TOLERANCE_MM", "PLATE_RIM_CLEARANCE_MM", "SUN_BORE_FRACTION", "Assembly",
            "AxialLayout", "Crankshaft", "CycloidDisc", "FlangePlate", "Part", "Pin", "PinHousing", "PlanetGear",
-           "PlanetaryCarrier", "SunGear", "_Gear", "gear_outline"]
+           "PlanetaryCarrier", "SunGear", "GearPart", "gear_outline"]

@@ -42,9 +42,10 @@ def build_parser() -> argparse.ArgumentParser:
         prog="rv-stackup",
         description="Single-factor screen, Box-Behnken response surface, validation and Monte Carlo "
                     "tolerance stack-up of the RV reducer's transmission error (paper sections 4.2-5).",
-        epilog="Defaults reproduce the paper's study. Tolerance syntax: KEY=normal:SIGMA[:MEAN] | "
-               "uniform:LOW:HIGH | triangular:LOW:MODE:HIGH | fixed:VALUE | none (values in the error's "
-               "unit, um or deg).")
+        epilog="Defaults reproduce the paper's study. Tolerance syntax: KEY[SCOPE]=normal:SIGMA[:MEAN] | "
+               "uniform:LOW:HIGH | truncnormal:SIGMA:LOW:HIGH[:MEAN] | triangular:LOW:MODE:HIGH | fixed:VALUE | "
+               "none (values in the error's unit, um or deg); SCOPE each (every feature, default), common or "
+               "default; KEY may be model.OPTION (an rvdyn model effect).")
     p.add_argument("--out", default="rv-stackup-out", help="output folder (default rv-stackup-out)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786); default: local processes")

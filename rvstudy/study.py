@@ -39,7 +39,7 @@ import rsm
 from rsm.terms import preset_terms
 from rvcad.errors import ERROR_TYPES, MAX_ABS, Case
 from rvcad.params import Design
-from rvcad.validation import TableError
+from rvcad.validation import DesignError, TableError, as_mapping, read_json_file
 from rvdyn.contacts import ContactLaw
 from rvstudy.screen import (
     ARCSEC_PER_ARCMIN,
@@ -68,8 +68,8 @@ RESPONSE_LABEL = {"mean_abs_arcmin": "mean |TE| [arcmin]", "pp_arcmin": "TE peak
 DEFAULT_STEPS = 360
 DEFAULT_SEED = 20240
 #: Full-solver Monte Carlo draws, designed-sample block size, fcl check draws (defaults).
-DEFAULT_MC_DRAWS = 2000
-DEFAULT_MC_SOBOL = 40
+DEFAULT_MC_DRAWS = 200
+DEFAULT_MC_SOBOL = 10
 DEFAULT_MC_CHECK = 8
 
 
@@ -266,25 +266,18 @@ def load_reducer(path: str | None) -> Design:
     whole case whose ``design`` is used; None = the paper's default design. ValueError names the file."""
     if path is None:
         return Design()
-    import json
-
     p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"--reducer file {str(p)!r} does not exist")
-    try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"--reducer file {str(p)!r} is not valid JSON: {exc}") from None
-    if isinstance(d, dict) and isinstance(d.get("design"), dict):
-        d = d["design"]
+    d = read_json_file(p, "--reducer file", DesignError)  # strict: a repeated key or NaN is an error
+    if isinstance(d, dict) and "design" in d:  # a whole case: its design object
+        d = as_mapping(d["design"], f"--reducer {p.name}: design", "an object of Design fields", DesignError)
     if not isinstance(d, dict):
-        raise ValueError(f"--reducer file {str(p)!r} must hold a JSON object of Design fields (e.g. "
-                         '{"z_sun": 18, "z_planet": 36})')
+        raise DesignError(f"--reducer file {str(p)!r} must hold a JSON object of Design fields (e.g. "
+                          '{"z_sun": 18, "z_planet": 36})', field="--reducer", value=str(p))
     try:
         design = Design.from_dict(d)
         Case.from_dict({"design": design.to_dict()})  # the parts of the nominal reducer are valid
     except ValueError as exc:
-        raise ValueError(f"--reducer {p.name}: {exc}") from None
+        raise DesignError(f"--reducer {p.name}: {exc}", field="--reducer", value=str(p)) from None
     return design
 
 

@@ -202,9 +202,8 @@ def test_rvdyn_loads_no_study_no_loop_no_matplotlib_at_import():
     assert loaded & FORBIDDEN["rvdyn"] == set()
 
 
-#: Test files still importing private names, owned by work in progress elsewhere (issue 12); remove a
-#: file from here once it tests through the public API.
-PRIVATE_IMPORTS_PENDING = {"test_rvcad_export.py", "test_rvcad_parts.py"}
+#: Test files still importing private names (none left; keep the set for work in progress).
+PRIVATE_IMPORTS_PENDING: set[str] = set()
 
 
 def _private_uses(path: Path) -> list[str]:

@@ -15,8 +15,8 @@ import pytest
 
 from rvcad.cli import main
 from rvcad.errors import Case
-from rvcad.export import _atomic_write, export_case
-from rvcad.parts import Assembly, CycloidDisc, _Gear
+from rvcad.export import atomic_write, export_case
+from rvcad.parts import Assembly, CycloidDisc, GearPart
 from rvcad.step import edge_samples, read_step
 from rvcad.stl import read_stl
 from test_rvcad_helpers import stl_chords, stl_vertices
@@ -78,7 +78,7 @@ def test_step_cycloid_and_involute_within_tolerance(full_export: tuple[Path, dic
         if isinstance(part, CycloidDisc):
             d = part.boundary_distance(splines[:, :2])
         else:
-            assert isinstance(part, _Gear)
+            assert isinstance(part, GearPart)
             d = part.flank_distance(splines[:, :2])
         assert np.abs(d).max() < min(budget, TOL), name
         # circles are exact circles in the B-rep
@@ -108,7 +108,7 @@ def test_stl_involute_flanks_within_tolerance(full_export: tuple[Path, dict, Non
     out, _, _ = full_export
     for name in ("sun", "planet0"):
         part = nominal[name]
-        assert isinstance(part, _Gear)
+        assert isinstance(part, GearPart)
         g = part.gear
         v = stl_vertices(out / f"{name}.stl")[:, :2]
         r = np.linalg.norm(v, axis=1)
@@ -209,7 +209,7 @@ def test_atomic_write_leaves_nothing_half_written(tmp_path: Path) -> None:
         raise RuntimeError("disk full")
 
     with pytest.raises(RuntimeError, match="disk full"):
-        _atomic_write(target, failing)
+        atomic_write(target, failing)
     assert target.read_bytes() == b"old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["part.stl"]
 

@@ -8,7 +8,7 @@ import pytest
 
 from rvdyn import collision
 from rvcad.errors import Case
-from rvcad.parts import (AXIAL_CLEARANCE_MM, Assembly, CycloidDisc, PinHousing, PlanetGear, SunGear, _Gear)
+from rvcad.parts import (AXIAL_CLEARANCE_MM, Assembly, CycloidDisc, PinHousing, PlanetGear, SunGear, GearPart)
 from rvcad.curves import involute_deviation
 from rvcad.mesh import stacked_circles, triangulate
 from rvcad.outline import Loop
@@ -62,7 +62,7 @@ def test_gear_area_closed_form_against_fine_polygon(nominal: Assembly) -> None:
 
     for name in ("sun", "planet0"):
         g = nominal[name]
-        assert isinstance(g, _Gear)
+        assert isinstance(g, GearPart)
         outer, holes = g.outline()
         poly = Polygon(outer.ring(1e-6), [h.ring(1e-6) for h in holes])
         # the inscribed polygon loses at most sagitta x perimeter

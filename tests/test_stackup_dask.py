@@ -52,44 +52,47 @@ def serial_mc(tmp_path_factory):
     return run_study(_mc_cfg(tmp_path_factory.mktemp("serial_mc"))).mc
 
 
+@pytest.fixture(scope="module")
+def cluster_address():
+    """One Dask LocalCluster on loopback for the tests of this module (its start-up paid once)."""
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        yield cluster.scheduler_address
+
+
 def test_local_pool_equals_serial(serial, tmp_path):
     res = run_study(_cfg(tmp_path, workers=2))
     assert res.executor.startswith("local process pool, 2")
     pd.testing.assert_frame_equal(_numbers(res), serial)
 
 
-def test_dask_local_cluster_equals_serial(serial, tmp_path, capsys):
-    distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
-                                  host="127.0.0.1", dashboard_address=None) as cluster:
-        addr = cluster.scheduler_address
-        assert addr.startswith("tcp://127.0.0.1:")
-        # every case solved on the cluster, the results cached here
-        res = run_study(_cfg(tmp_path / "api", scheduler=addr, use_cache=True, cache_dir=tmp_path / "cache"))
-        assert res.executor.startswith(f"Dask scheduler {addr}")
-        assert res.counters["computed"] == 25
-        pd.testing.assert_frame_equal(_numbers(res), serial)
-        # through the command line, on that cache: the entries the Dask results filled are reused
-        out = tmp_path / "cli"
-        argv = ["--out", str(out), "--scheduler", addr, "--cache", str(tmp_path / "cache"), "--solver", "analytic",
-                "--steps", str(STEPS), "--stages", "doe", "--no-progress", "--no-figures", "--json"]
-        assert cli.main(argv) == 0
-        s1 = json.loads(capsys.readouterr().out)
+def test_dask_local_cluster_equals_serial(serial, cluster_address, tmp_path, capsys):
+    addr = cluster_address
+    assert addr.startswith("tcp://127.0.0.1:")
+    # every case solved on the cluster, the results cached here
+    res = run_study(_cfg(tmp_path / "api", scheduler=addr, use_cache=True, cache_dir=tmp_path / "cache"))
+    assert res.executor.startswith(f"Dask scheduler {addr}")
+    assert res.counters["computed"] == 25
+    pd.testing.assert_frame_equal(_numbers(res), serial)
+    # through the command line, on that cache: the entries the Dask results filled are reused
+    out = tmp_path / "cli"
+    argv = ["--out", str(out), "--scheduler", addr, "--cache", str(tmp_path / "cache"), "--solver", "analytic",
+            "--steps", str(STEPS), "--stages", "doe", "--no-progress", "--no-figures", "--json"]
+    assert cli.main(argv) == 0
+    s1 = json.loads(capsys.readouterr().out)
     assert s1["executor"].startswith(f"Dask scheduler {addr}")
     assert s1["cases"]["computed"] == 0 and s1["cases"]["reused"] == 25
     d = pd.read_parquet(out / "tables" / "design_runs.parquet")  # full precision (the CSV keeps 10 digits)
     np.testing.assert_array_equal(d["mean_abs_arcmin"].to_numpy(), serial["mean_abs_arcmin"].to_numpy())
 
 
-def test_monte_carlo_same_numbers_serial_pool_and_dask(serial_mc, tmp_path):
+def test_monte_carlo_same_numbers_serial_pool_and_dask(serial_mc, cluster_address, tmp_path):
     """The full-solver Monte Carlo gives bit-identical draws and responses on a local pool and a Dask
     LocalCluster as in this process (the draws are seeded; each solve is deterministic)."""
     pool = run_study(_mc_cfg(tmp_path / "pool", workers=2)).mc
     pd.testing.assert_frame_equal(pool["draws"], serial_mc["draws"], check_exact=True)
-    distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
-                                  host="127.0.0.1", dashboard_address=None) as cluster:
-        dk = run_study(_mc_cfg(tmp_path / "dask", scheduler=cluster.scheduler_address)).mc
+    dk = run_study(_mc_cfg(tmp_path / "dask", scheduler=cluster_address)).mc
     pd.testing.assert_frame_equal(dk["draws"], serial_mc["draws"], check_exact=True)
     pd.testing.assert_frame_equal(dk["sobol"], serial_mc["sobol"], check_exact=True)
     assert dk["responses"]["te_pp_arcmin"]["mean"] == serial_mc["responses"]["te_pp_arcmin"]["mean"]

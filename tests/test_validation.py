@@ -201,6 +201,16 @@ def test_design_file(tmp_path: Path) -> None:
         load_design(p)
     with pytest.raises(DesignError, match=r"design file '.*missing.json' does not exist"):
         load_design(tmp_path / "missing.json")
+    from rvstudy.study import load_reducer
+
+    p.write_text('{"design": {"z_sun": 18, "z_sun": 36}}')
+    with pytest.raises(DesignError, match=r"--reducer file '.*design.json': key 'z_sun' appears twice"):
+        load_reducer(str(p))
+    p.write_text('{"design": 5}')
+    with pytest.raises(DesignError, match=r"--reducer design.json: design 5 is of type int, not an object"):
+        load_reducer(str(p))
+    p.write_text('{"design": {"z_sun": 18, "z_planet": 36}}')
+    assert load_reducer(str(p)).ratio == pytest.approx(81.0)
 
 
 # ------------------------------------------------------------------------- tables and datasets
@@ -215,8 +225,8 @@ def test_tolerance_tables(tmp_path: Path) -> None:
     c.write_text("error,dist,p1\npin_radius,normal,1\npin_radius,normal,2\n")
     with pytest.raises(TableError, match=r"row 2: error 'pin_radius' is given twice"):
         load_tolerances(c)
-    c.write_text("error,dist,p1,p4\npin_radius,normal,1,2\n")
-    with pytest.raises(TableError, match=r"column 'p4' is unknown"):
+    c.write_text("error,dist,p1,p5\npin_radius,normal,1,2\n")  # p4 is truncnormal's MEAN
+    with pytest.raises(TableError, match=r"column 'p5' is unknown"):
         load_tolerances(c)
     c.write_bytes(b"error,dist\n\xff\xfe,normal\n")
     with pytest.raises(TableError, match=r"cannot be read as CSV"):
@@ -320,7 +330,7 @@ def test_rvcad_export_refuses_before_writing(tmp_path: Path, capsys: pytest.Capt
 
     out = tmp_path / "o"
     for text, needle in (('{"design": {"crank_angles_deg": 0}}', "design.crank_angles_deg 0"),
-                         ('{"design": {"stage1_backlash_mm": 1.0}}', "design.stage1_backlash_mm 1 mm"),
+                         ('{"design": {"stage1_backlash_mm": 1.0}}', "design.stage1_backlash_mm 1.0 mm"),
                          ('{"design": {"crank_angles_deg": [0, 0]}}', "design.crank_angles_deg [0, 0]"),
                          ('{"errors": {}, "errors": {}}', "key 'errors' appears twice")):
         _one_line_exit_2(capsys, main(["export", str(_case_file(tmp_path, text)), "--out", str(out)]), needle)
