@@ -31,7 +31,6 @@ measured, so input and output encoders must share their zero (no offset is fitte
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +40,7 @@ import pandas as pd
 
 from rvcad.errors import ERROR_TYPES, Case
 from rvcad.params import Design
-from rvcad.validation import DatasetError
+from rvcad.validation import DatasetError, read_json_file
 
 from rvcalib.orders import check_periodic, period_deg
 
@@ -234,10 +233,7 @@ def load_design(source: "str | Path | dict | Design | None", folder: Path | None
         return Design(), "default"
     if not path.is_file():
         raise DatasetError(f"reducer design file '{path}' does not exist")
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise DatasetError(f"reducer design file '{path}' is not valid JSON: {exc}") from None
+    raw = read_json_file(path, "reducer design file", DatasetError)  # strict: a repeated key or NaN is an error
     if isinstance(raw, dict) and isinstance(raw.get("design"), dict):
         raw = raw["design"]
     if not isinstance(raw, dict):

@@ -70,3 +70,10 @@ def test_bad_reducer_files_are_named(tmp_path, design, match):
     simulate_dataset(tmp_path / "ds", RUNS[:1], {}, samples_per_rev=60, seed=1)
     with pytest.raises(ValueError, match=match):
         read_dataset(tmp_path / "ds", design=f)
+
+
+def test_a_repeated_key_in_design_json_is_refused(tmp_path):
+    simulate_dataset(tmp_path / "ds", RUNS[:1], {}, samples_per_rev=60, seed=1)
+    (tmp_path / "ds" / "design.json").write_text('{"z_sun": 18, "z_sun": 12}')
+    with pytest.raises(ValueError, match="z_sun.*twice"):
+        read_dataset(tmp_path / "ds")
