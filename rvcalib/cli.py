@@ -1,8 +1,10 @@
-"""``rv-calibrate DATASET --out DIR [--json] [--steps N]``: the closed loop on measured data.
+"""``rv-calibrate DATASET --out DIR [--reducer DESIGN.json] [--json] [--steps N]``: the closed loop on
+measured data.
 
-Reads the dataset folder (``runs.csv``, ``samples.csv``; see :mod:`rvcalib.dataset`), runs
+Reads the dataset folder (``runs.csv``, ``samples.csv``, optionally ``design.json``: the reducer
+measured; ``--reducer`` names it when the folder does not; see :mod:`rvcalib.dataset`), runs
 :func:`rvcalib.identify.calibrate`, writes the report (:mod:`rvcalib.report`) into ``--out`` and
-prints a human summary, or with ``--json`` one JSON object (``rms_before_arcsec``,
+prints a human summary, or with ``--json`` one JSON object (``reducer``, ``ratio``, ``rms_before_arcsec``,
 ``rms_after_arcsec``, ``effects`` = list of ``{name, value, unit, ci_low, ci_high, ...}``,
 ``unexplained``, per-run figures under ``runs``). Bad input: a message naming the file and column
 on stderr, exit status 2.
@@ -12,26 +14,10 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from rvcad import validation as v
-from rvcad.params import Design
-from rvcalib.dataset import MeasuredDataset, read_dataset
-
-
-def auto_steps(ds: MeasuredDataset) -> int:
-    """Model grid for a dataset (screening and grid fits): its samples per output revolution when
-    every run is sampled on the same uniform grid of a multiple of 40 points (then the screening
-    sees every sample), else 360. Residuals and final fits solve the model at every reading
-    whatever the grid."""
-    per = set()
-    for r in ds.runs:
-        n = r.n / max(r.revolutions, 1e-12)
-        per.add(int(round(n)))
-    if len(per) == 1:
-        n = per.pop()
-        if n % 40 == 0 and 40 <= n <= 1440:
-            return n
-    return 360
+from rvcalib.dataset import read_dataset
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,54 +29,97 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset", metavar="DATASET", help="folder with runs.csv and samples.csv")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for report.md, figures and result.json")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
+    p.add_argument("--reducer", default=None, metavar="DESIGN.json",
+                   help="the reducer measured: a design JSON (the 'design' object of a case JSON, e.g. "
+                        "{\"z_sun\": 18, \"z_planet\": 36}); default: DATASET/design.json, else the paper's design")
     p.add_argument("--steps", type=int, default=None, metavar="N",
-                   help="model grid points per output revolution, a multiple of 40 (default: the samples per "
-                        "revolution when the runs are sampled on such a grid, else 360)")
+                   help="requested screening grid, points per output revolution; used when it resolves the "
+                        "reducer's orders that matter without aliasing (a multiple of the pin count, above twice "
+                        "the highest input order) and is at most 720, else the smallest grid that does is used and "
+                        f"the report says so (default: that grid; at most {v.MAX_GRID_STEPS})")
     p.add_argument("--alpha", type=float, default=0.01, help="family-wise significance level (default 0.01)")
     p.add_argument("--max-terms", type=int, default=6, help="largest number of effects + empirical terms (default 6)")
-    p.add_argument("--screen-points", type=int, default=120,
-                   help="largest screening grid, points per output revolution (default 120)")
+    p.add_argument("--screen-points", type=int, default=None,
+                   help="explicit screening grid, points per output revolution; refused unless it resolves the "
+                        "orders that matter (default: the smallest grid that does)")
+    p.add_argument("--time-budget", type=float, default=None, metavar="SECONDS",
+                   help="stop adding terms after this many seconds (the result says so; default: no budget)")
     p.add_argument("--verbose", action="store_true", help="progress messages on stderr")
     return p
+
+
+def _reducer_for_options(args: argparse.Namespace):
+    """The reducer the options are checked against: ``--reducer``, else DATASET/design.json, else the
+    default design (a bad design file is reported when the dataset is read)."""
+    from rvcad.params import Design
+
+    from rvcalib.dataset import load_design
+
+    try:
+        return load_design(args.reducer, Path(args.dataset))[0]
+    except ValueError:
+        return Design()
 
 
 def check_options(args: argparse.Namespace) -> None:
     """Ranges of the options, before the dataset is read (OptionError naming the option and its bound).
 
     ``--steps`` and ``--screen-points`` are bounded by :data:`rvcad.validation.MAX_GRID_STEPS` (the
-    time budget of the grid solves), ``--max-terms`` by :data:`rvcad.validation.MAX_TERMS`; the
-    screening grid needs more than two points per period of the pin order Zp (sampling theorem),
-    i.e. at least 2 Zp + 1 points per output revolution.
+    time budget of the grid solves), ``--max-terms`` by :data:`rvcad.validation.MAX_TERMS`; both grids
+    are multiples of the reducer's pin count Zp (``--steps``; pin-wise signatures shift by whole pin
+    pitches) and ``--screen-points`` above 2 Zp (sampling theorem). Whether a grid resolves every
+    order that matters (the input orders too) is checked once the dataset is read (:func:`rvcalib.orders.screen_grid`: ``--steps``
+    that would alias is replaced by the smallest grid that does not, with a note; ``--screen-points``
+    that would alias is refused).
     """
+    zp = _reducer_for_options(args).z_pins
     if args.steps is not None:
-        v.option_int(args.steps, "--steps", 40, v.MAX_GRID_STEPS, why="the time budget of the grid solves")
-        if args.steps % 40:
-            raise v.OptionError(f"--steps {args.steps} is not a multiple of 40; allowed: a multiple of 40 in "
-                                f"[40, {v.MAX_GRID_STEPS}]", field="--steps", value=args.steps)
+        v.option_int(args.steps, "--steps", zp, v.MAX_GRID_STEPS, why="the time budget of the grid solves")
+        if args.steps % zp:
+            raise v.OptionError(f"--steps {args.steps} is not a multiple of {zp} (the pin count of the reducer); "
+                                f"allowed: a multiple of {zp} in [{zp}, {v.MAX_GRID_STEPS}]", field="--steps",
+                                value=args.steps)
     v.option_real(args.alpha, "--alpha", 0.0, 1.0, lo_open=True, hi_open=True)
     v.option_int(args.max_terms, "--max-terms", 1, v.MAX_TERMS, why="effects plus empirical terms the loop may add")
-    zp = Design().z_pins
-    v.option_int(args.screen_points, "--screen-points", 2 * zp + 1, v.MAX_GRID_STEPS,
-                 why=f"more than 2 points per period of the pin order {zp}")
+    if args.screen_points is not None:
+        v.option_int(args.screen_points, "--screen-points", 2 * zp + 1, v.MAX_GRID_STEPS,
+                     why=f"more than 2 points per period of the pin order {zp}")
+    if args.time_budget is not None:
+        v.option_real(args.time_budget, "--time-budget", 0.0, 86400.0, lo_open=True)
     v.output_dir(args.out)
 
 
 def summary(res, paths: dict) -> str:
     """Human summary printed by default."""
-    lines = [res.verdict, ""]
+    red = res.dataset.reducer()
+    lines = [res.verdict, "",
+             f"reducer: ratio {red['ratio']:g} (Z1 {red['z_sun']}, Z2 {red['z_planet']}, {red['z_pins']} pins), "
+             f"design from {'the default (paper) design' if red['source'] == 'default' else red['source']}"]
     lines.append(f"residual RMS: before {res.rms_before:.4g} arcsec, after {res.rms_after:.4g} arcsec "
                  f"(noise {res.noise_arcsec:.4g} arcsec)")
     if res.effects:
         lines.append("effects:")
         for e in res.effects:
             ang = f" at {e.angle_deg:.1f} deg" if e.angle_deg is not None else ""
-            alt = f" (indistinguishable: {', '.join(e.alternatives[:3])})" if e.alternatives else ""
+            alt = (" (indistinguishable: " + ", ".join(f"{a['name']} {a['value']:.4g} {a['unit']}" for a in e.alternatives[:3])
+                   + ")") if e.alternatives else ""
+            if e.implied_total is not None:
+                alt += f"; declared {e.declared_value:.5g}, implied total {e.implied_total:.5g} {e.unit}"
             lines.append(f"  {e.name} = {e.value:.5g} {e.unit}{ang}, 95 % [{e.ci_low:.5g}, {e.ci_high:.5g}]{alt}")
     if res.unexplained:
         lines.append("unexplained (outside the library):")
         for u in res.unexplained:
             ph = f", phase {u.phase_deg:.1f} deg" if u.phase_deg is not None else ""
             lines.append(f"  {u.label}: {abs(u.amplitude_arcsec):.4g} arcsec{ph}")
+    for g in res.groups:
+        mem = ", ".join(f"{m['name']} {m['value']:.4g} {m['unit']}" for m in g["members"][:4])
+        lines.append(f"group ({g['kind']}): {mem}")
+    for rec in res.recommended_runs:
+        if rec.get("run"):
+            lines.append(f"recommended run to split {', '.join(rec['members'][:3])}: load {rec['run']['load_Nm']:g} N m, "
+                         f"direction {rec['run']['direction']:+d}")
+    if res.stopped_by and not res.stopped_by.startswith("nothing"):
+        lines.append(f"stopped: {res.stopped_by}")
     lines.append("runs (RMS before -> after, arcsec):")
     for run, b, a in zip(res.dataset.runs, res.before.runs, res.after.runs):
         lines.append(f"  {run.run}: load {run.load_Nm:g} N m, dir {run.direction:+d}: {b.rms:.4g} -> {a.rms:.4g}")
@@ -108,11 +137,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         check_options(args)
-        ds = read_dataset(args.dataset)
-        steps = args.steps if args.steps is not None else auto_steps(ds)
+        ds = read_dataset(args.dataset, design=args.reducer)
+        steps = args.steps
         log = (lambda s: print(f"rv-calibrate: {s}", file=sys.stderr, flush=True)) if args.verbose else None
         res = calibrate(ds, steps=steps, alpha=args.alpha, max_terms=args.max_terms, log=log,
-                        screen_points=args.screen_points)
+                        screen_points=args.screen_points, time_budget_s=args.time_budget)
         paths = write_report(res, args.out)
     except ValueError as exc:
         print(f"rv-calibrate: error: {v.one_line(exc)}", file=sys.stderr)

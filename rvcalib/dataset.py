@@ -11,7 +11,7 @@ What is checked (an error) and what is tolerated (repaired and reported in ``not
 * errors: a missing file or column, an unknown column, a missing or non-numeric cell, a repeated
   run id, a run without samples or samples of an undeclared run, a direction other than +1/-1,
   an input angle that does not move monotonically in the declared direction, a record shorter
-  than one output revolution (121 input turns), angles that look like radians (judged by the
+  than one output revolution (N input turns, N the ratio of the reducer), angles that look like radians (judged by the
   span of the record and the ratio of the input and output spans), declared error columns whose
   magnitudes look like mm (for um columns) or like arcsec/um (for degree columns), temperatures
   that look like kelvin;
@@ -19,6 +19,12 @@ What is checked (an error) and what is tolerated (repaired and reported in ``not
   dropped, keeping the first), and a start-up transient: where a record is longer than one output
   revolution, its first part is compared with the same input angles one output revolution later;
   a leading stretch that disagrees by more than the noise allows is dropped and reported.
+
+The reducer measured is the folder's ``design.json`` (the ``design`` object of a case JSON, e.g.
+``{"z_sun": 18, "z_planet": 36}`` for a ratio-81 RV) or the design given to :func:`read_dataset`
+(``rv-calibrate --reducer``), else the paper's design (ratio 121). Its ratio converts the readings
+to TE; a record whose input/output span ratio does not match it is refused, and without a design
+the message says that the ratio does not match the default.
 
 Angles are absolute encoder readings: the TE mean (lost motion, load wind-up) is taken as
 measured, so input and output encoders must share their zero (no offset is fitted per run).
@@ -34,7 +40,9 @@ import pandas as pd
 
 from rvcad.errors import ERROR_TYPES, Case
 from rvcad.params import Design
-from rvcad.validation import DatasetError
+from rvcad.validation import DatasetError, read_json_file
+
+from rvcalib.orders import check_periodic, period_deg
 
 ARCSEC_PER_DEG = 3600.0
 
@@ -81,6 +89,8 @@ class RunRecord:
         Noise estimate of the TE record, arcsec (robust scatter of second differences / sqrt(6)).
     notes : list of str
         What was repaired or could not be checked.
+    design : Design
+        The reducer measured (its ratio converts the readings to TE).
     """
 
     run: str
@@ -95,6 +105,12 @@ class RunRecord:
     dropped: dict[str, int] = field(default_factory=dict)
     noise_arcsec: float = float("nan")
     notes: list[str] = field(default_factory=list)
+    design: Design = field(default_factory=Design)
+
+    @property
+    def ratio(self) -> float:
+        """Total ratio of the reducer."""
+        return float(self.design.ratio)
 
     @property
     def n(self) -> int:
@@ -103,8 +119,8 @@ class RunRecord:
 
     @property
     def te_arcsec(self) -> np.ndarray:
-        """Measured TE ``output_deg - input_deg / 121`` in arcsec."""
-        return (self.output_deg - self.input_deg / RATIO) * ARCSEC_PER_DEG
+        """Measured TE ``output_deg - input_deg / N`` in arcsec (N the reducer's ratio)."""
+        return (self.output_deg - self.input_deg / self.ratio) * ARCSEC_PER_DEG
 
     @property
     def output_rad(self) -> np.ndarray:
@@ -114,12 +130,15 @@ class RunRecord:
     @property
     def revolutions(self) -> float:
         """Output revolutions covered by the kept samples (span plus one sample step)."""
-        return record_revolutions(self.input_deg)
+        return record_revolutions(self.input_deg, period_deg(self.design))
 
     def case_dict(self) -> dict:
-        """The case JSON of this run with the declared errors only (see ``rvcad.errors``)."""
+        """The case JSON of this run with the declared errors only (see ``rvcad.errors``); its
+        ``design`` is the reducer's (omitted for the default design)."""
         d: dict = {"name": f"run-{self.run}", "errors": {k: v for k, v in self.declared.items()},
                    "load_Nm": self.load_Nm, "direction": self.direction}
+        if self.design != Design():
+            d["design"] = self.design.to_dict()
         if self.temperature_C is not None:
             d["model"] = {"temperature_C": self.temperature_C}
         return d
@@ -138,12 +157,36 @@ class MeasuredDataset:
         Everything that was repaired or not checked, one sentence each.
     declared_keys : list of str
         Table 4 error columns present in ``runs.csv``.
+    design : Design
+        The reducer measured.
+    design_source : str
+        Where the design came from: ``default`` (the paper's reducer), ``design.json`` in the
+        dataset folder, or the file given (``--reducer``).
     """
 
     path: Path
     runs: list[RunRecord]
     notes: list[str] = field(default_factory=list)
     declared_keys: list[str] = field(default_factory=list)
+    design: Design = field(default_factory=Design)
+    design_source: str = "default"
+
+    @property
+    def ratio(self) -> float:
+        """Total ratio of the reducer."""
+        return float(self.design.ratio)
+
+    @property
+    def period_deg(self) -> float:
+        """Input angle of one output revolution, deg."""
+        return period_deg(self.design)
+
+    def reducer(self) -> dict:
+        """What the report and the JSON say about the reducer: ratio, tooth and pin counts, source."""
+        d = self.design
+        return {"ratio": self.ratio, "z_sun": d.z_sun, "z_planet": d.z_planet, "z_pins": d.z_pins,
+                "z_disc": d.z_disc, "pin_circle_diameter_mm": d.pin_circle_diameter_mm,
+                "source": self.design_source, "default": d == Design(), "design": d.to_dict()}
 
     @property
     def n_samples(self) -> int:
@@ -163,18 +206,45 @@ class MeasuredDataset:
         return float(np.sqrt(np.sum(w * s ** 2) / np.sum(w)))
 
 
-RATIO = Design().ratio
-PERIOD_DEG = RATIO * 360.0
-"""Input angle of one output revolution, deg."""
-
-
-def record_revolutions(input_deg: np.ndarray) -> float:
-    """Output revolutions covered by a record: (span + one median sample step) / (121 * 360 deg)."""
+def record_revolutions(input_deg: np.ndarray, period: float) -> float:
+    """Output revolutions covered by a record: (span + one median sample step) / ``period`` (the input
+    angle of one output revolution, deg)."""
     x = np.asarray(input_deg, dtype=float)
     if x.size < 2:
         return 0.0
     step = float(np.median(np.abs(np.diff(x))))
-    return (abs(float(x[-1] - x[0])) + step) / PERIOD_DEG
+    return (abs(float(x[-1] - x[0])) + step) / period
+
+
+def load_design(source: "str | Path | dict | Design | None", folder: Path | None = None) -> tuple[Design, str]:
+    """The reducer of a dataset: ``source`` (a Design, a design dict, or a design JSON file: the
+    ``design`` object of a case JSON, or a whole case JSON holding one), else ``design.json`` in the
+    dataset ``folder``, else the default (paper) design. Returns (design, source description).
+    Errors name the file and the field."""
+    if isinstance(source, Design):
+        check_periodic(source)
+        return source, "given"
+    if isinstance(source, dict):
+        d = Design.from_dict(source)
+        check_periodic(d)
+        return d, "given"
+    path = Path(source) if source is not None else (folder / "design.json" if folder is not None else None)
+    if path is None or (source is None and not path.is_file()):
+        return Design(), "default"
+    if not path.is_file():
+        raise DatasetError(f"reducer design file '{path}' does not exist")
+    raw = read_json_file(path, "reducer design file", DatasetError)  # strict: a repeated key or NaN is an error
+    if isinstance(raw, dict) and isinstance(raw.get("design"), dict):
+        raw = raw["design"]
+    if not isinstance(raw, dict):
+        raise DatasetError(f"reducer design file '{path}' must hold a JSON object of design fields "
+                         f"(e.g. {{\"z_sun\": 18, \"z_planet\": 36}}), got {type(raw).__name__}")
+    try:
+        d = Design.from_dict(raw)
+        check_periodic(d)
+    except (TypeError, ValueError) as exc:
+        raise DatasetError(f"{path.name}: {exc}") from None
+    return d, str(path) if source is not None else "design.json in the dataset folder"
 
 
 def _read_csv(path: Path, what: str) -> pd.DataFrame:
@@ -301,46 +371,49 @@ def noise_estimate(te_arcsec: np.ndarray) -> float:
     return 1.4826 * mad / math.sqrt(6.0)
 
 
-def _check_angle_units(run: str, inp: np.ndarray, out: np.ndarray) -> None:
+def _check_angle_units(run: str, inp: np.ndarray, out: np.ndarray, ratio: float, default: bool) -> None:
     s_in = abs(float(inp[-1] - inp[0]))
     s_out = abs(float(out[-1] - out[0]))
     rad = 180.0 / math.pi
     if s_out > 0 and s_in > 0:
-        r = (s_in / s_out) / RATIO
+        r = (s_in / s_out) / ratio
         if abs(r / rad - 1.0) < 0.05:
             raise DatasetError(
                 f"samples.csv: run {run}: column 'output_deg' looks like radians (input span / output span = "
-                f"{s_in / s_out:.4g}, expected {RATIO:g}, off by the factor 180/pi); give degrees")
+                f"{s_in / s_out:.4g}, expected {ratio:g}, off by the factor 180/pi); give degrees")
         if abs(r * rad - 1.0) < 0.05:
             raise DatasetError(
                 f"samples.csv: run {run}: column 'input_deg' looks like radians (input span / output span = "
-                f"{s_in / s_out:.4g}, expected {RATIO:g}, off by the factor pi/180); give degrees")
-        if abs(r - 1.0) < 0.05 and s_in < 0.5 * PERIOD_DEG and s_in > 0.5 * 2 * math.pi * RATIO:
+                f"{s_in / s_out:.4g}, expected {ratio:g}, off by the factor pi/180); give degrees")
+        if abs(r - 1.0) < 0.05 and s_in < 0.5 * (ratio * 360.0) and s_in > 0.5 * 2 * math.pi * ratio:
             raise DatasetError(
                 f"samples.csv: run {run}: columns 'input_deg' and 'output_deg' look like radians (input span "
-                f"{s_in:.4g} ~ {s_in / (2 * math.pi * RATIO):.3g} output revolutions in radians, but only "
-                f"{s_in / PERIOD_DEG:.3g} in degrees); give degrees")
+                f"{s_in:.4g} ~ {s_in / (2 * math.pi * ratio):.3g} output revolutions in radians, but only "
+                f"{s_in / (ratio * 360.0):.3g} in degrees); give degrees")
         if abs(r - 1.0) > 0.05:
             raise DatasetError(
                 f"samples.csv: run {run}: input span / output span is {s_in / s_out:.5g}, not the ratio "
-                f"{RATIO:g}: check the units and that 'input_deg' is the input (sun) angle and 'output_deg' "
+                f"{ratio:g}{' of the default reducer' if default else ''}: "
+                + ("the ratio does not match the default (paper) design; describe the reducer measured with "
+                   "--reducer DESIGN.json or a design.json in the dataset folder, or " if default else "")
+                + "check the units and that 'input_deg' is the input (sun) angle and 'output_deg' "
                 "the output (carrier) angle")
 
 
 def _drop_transient(run: str, inp: np.ndarray, te: np.ndarray, direction: int, sigma: float,
-                    notes: list[str]) -> int:
+                    notes: list[str], period: float) -> int:
     """Number of leading samples to drop as start-up transient (0 if none or not checkable)."""
     span = abs(float(inp[-1] - inp[0]))
     step = float(np.median(np.abs(np.diff(inp))))
-    if span < PERIOD_DEG + 4 * step:
+    if span < period + 4 * step:
         notes.append(f"run {run}: the record is not longer than one output revolution, so a start-up "
                      "transient could not be checked against the repeat")
         return 0
     x = (inp - inp[0]) * direction          # increasing
-    nover = int(np.searchsorted(x, x[-1] - PERIOD_DEG, side="right"))
+    nover = int(np.searchsorted(x, x[-1] - period, side="right"))
     if nover < 3:
         return 0
-    partner = np.interp(x[:nover] + PERIOD_DEG, x, te)
+    partner = np.interp(x[:nover] + period, x, te)
     d = te[:nover] - partner
     # noise of the repeat difference (the periodic signal cancels; the transient is smooth enough
     # for second differences to ignore it)
@@ -373,7 +446,7 @@ def _drop_transient(run: str, inp: np.ndarray, te: np.ndarray, direction: int, s
         return 0
     cut = min(int(math.ceil(1.5 * end)) + w // 2, len(inp))
     remaining = abs(float(inp[-1] - inp[min(cut, len(inp) - 1)])) + step
-    if remaining < PERIOD_DEG:
+    if remaining < period:
         cut = end + w // 2
     peak = float(np.max(np.abs(d[:max(end, 1)])))
     notes.append(f"run {run}: dropped the first {cut} samples as start-up transient: they differ from the "
@@ -382,13 +455,17 @@ def _drop_transient(run: str, inp: np.ndarray, te: np.ndarray, direction: int, s
     return cut
 
 
-def read_dataset(path: str | Path) -> MeasuredDataset:
+def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" = None) -> MeasuredDataset:
     """Read and validate a measured dataset folder.
 
     Parameters
     ----------
     path : str or Path
-        Folder with ``runs.csv`` and ``samples.csv``.
+        Folder with ``runs.csv`` and ``samples.csv`` (and optionally ``design.json``, the reducer
+        measured: the ``design`` object of a case JSON).
+    design : Design, dict, path or None
+        The reducer measured (``--reducer``); default: the folder's ``design.json``, else the
+        paper's design. Its ratio converts the readings to TE and is checked against them.
 
     Returns
     -------
@@ -402,6 +479,9 @@ def read_dataset(path: str | Path) -> MeasuredDataset:
     root = Path(path)
     if not root.is_dir():
         raise DatasetError(f"dataset folder '{root}' does not exist or is not a folder")
+    des, des_src = load_design(design, root)
+    ratio = float(des.ratio)
+    period = period_deg(des)
     runs_df, keys = _read_runs(root / "runs.csv")
     sdf = _read_csv(root / "samples.csv", "samples")
     for c in SAMPLE_REQUIRED:
@@ -465,20 +545,20 @@ def read_dataset(path: str | Path) -> MeasuredDataset:
             i = int(np.flatnonzero(dx <= 0)[0])
             raise DatasetError(f"samples.csv: run {rid}: column 'input_deg' is not monotonic: sample {i + 2} of the run "
                              f"goes from {inp[i]:.6g} to {inp[i + 1]:.6g} deg against direction {direction:+d}")
-        _check_angle_units(rid, inp, out)
-        revs = record_revolutions(inp)
+        _check_angle_units(rid, inp, out, ratio, des_src == "default")
+        revs = record_revolutions(inp, period)
         step = float(np.median(np.abs(np.diff(inp))))
-        if revs < 1.0 - 0.5 * step / PERIOD_DEG:  # half a sample step of slack for reading errors
+        if revs < 1.0 - 0.5 * step / period:  # half a sample step of slack for reading errors
             raise DatasetError(f"samples.csv: run {rid} covers {revs:.4g} output revolutions (input span "
-                             f"{abs(inp[-1] - inp[0]):.6g} deg); at least one output revolution ({PERIOD_DEG:g} deg "
+                             f"{abs(inp[-1] - inp[0]):.6g} deg); at least one output revolution ({period:g} deg "
                              "of input) is needed")
-        te = (out - inp / RATIO) * ARCSEC_PER_DEG
+        te = (out - inp / ratio) * ARCSEC_PER_DEG
         if abs(float(np.median(te))) > 3600.0:
-            raise DatasetError(f"samples.csv: run {rid}: the TE output_deg - input_deg/{RATIO:g} is "
+            raise DatasetError(f"samples.csv: run {rid}: the TE output_deg - input_deg/{ratio:g} is "
                              f"{np.median(te) / 3600:.4g} deg; the encoders do not share their zero or the columns "
                              "are not the input and output angles")
         sigma = noise_estimate(te)
-        cut = _drop_transient(rid, inp, te, direction, sigma, rnotes)
+        cut = _drop_transient(rid, inp, te, direction, sigma, rnotes, period)
         if cut:
             dropped["transient"] = cut
             inp, out = inp[cut:], out[cut:]
@@ -489,11 +569,11 @@ def read_dataset(path: str | Path) -> MeasuredDataset:
         speed = float(row["speed_rpm"]) if "speed_rpm" in runs_df.columns else None
         rec = RunRecord(run=rid, load_Nm=float(row["load_Nm"]), direction=direction, declared=declared,
                         temperature_C=temp, speed_rpm=speed, input_deg=inp, output_deg=out, time_s=tt,
-                        dropped=dropped, noise_arcsec=noise_estimate(te), notes=rnotes)
+                        dropped=dropped, noise_arcsec=noise_estimate(te), notes=rnotes, design=des)
         try:
             Case.from_dict(rec.case_dict())
         except ValueError as exc:
             raise DatasetError(f"runs.csv: run {rid}: {exc}") from None
         records.append(rec)
         notes.extend(rnotes)
-    return MeasuredDataset(path=root, runs=records, notes=notes, declared_keys=keys)
+    return MeasuredDataset(path=root, runs=records, notes=notes, declared_keys=keys, design=des, design_source=des_src)

@@ -13,12 +13,17 @@ Three families:
   output friction torque (direction dependent), cam-bearing clearance (direction dependent lost
   motion), thermal growth of the pin circle (only where the runs differ in temperature; at one
   temperature it cannot be told from ``pin_circle_diameter``) and pin-circle ovality.
-* ``measurement``: errors of the encoders, implemented here (not physics of the reducer). An
+* ``measurement``: errors of the encoders, implemented here (not physics of the reducer): the
+  output encoder's scale error (a ramp in the TE with the reading, ppm), a drift in time (a ramp
+  with the angle travelled, arcsec per revolution), and the eccentricities. An
   encoder whose scale is mounted with eccentricity ``eps`` at radius ``R`` reads
   ``theta + (eps / R) sin(theta + phi)``. Assumed radii: output (carrier) encoder
   ``OUTPUT_ENCODER_RADIUS_MM`` = 100 mm, input (sun shaft) encoder ``INPUT_ENCODER_RADIUS_MM`` =
   25 mm. The reported eccentricity scales with the assumed radius (the data fix only eps / R).
-  In the TE the output encoder gives order 1, the input encoder order 121 divided by 121.
+  In the TE the output encoder gives order 1, the input encoder order N divided by N (N the
+  reducer's ratio, from its design).
+
+Instances, pin counts and orders come from the dataset's design (``MeasuredDataset.design``).
 
 Each effect has a typical size ``scale`` (the finite-difference/secant step of the screening) and
 bounds. Two-parameter effects are fitted as Cartesian components and reported as a magnitude and
@@ -35,9 +40,10 @@ from rvcad.errors import ERROR_TYPES
 from rvdyn.options import MODEL_OPTIONS
 from rvcad.params import Design
 
-from rvcalib.dataset import RATIO, MeasuredDataset
+from rvcalib.dataset import MeasuredDataset
 
 ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
+ARCSEC_PER_DEG = 3600.0
 
 #: Assumed radius of the output encoder's scale, mm (a ring scale on the output flange).
 OUTPUT_ENCODER_RADIUS_MM = 100.0
@@ -49,13 +55,13 @@ TABLE4_BOUND = {"um": 200.0, "deg": 1.0}
 
 FAMILIES = ("table4", "model", "measurement")
 
-#: Screening grid of the cam-bearing clearance (points per output revolution). With a clearance
-#: the discs float (9 degrees of freedom instead of 3) and rvdyn is 10 to 40 times slower, so the
-#: clearance is screened on a 40-point subset of the coarse grid. There its order-80 ripple (and any
-#: order 40/80 content of the residual) aliases onto the mean, so the screening sees mainly its lost
-#: motion; it is therefore solved only when the residual has an offset, validated only when it
-#: ranks first, and re-validated on the full coarse grid before it can win.
-CLEARANCE_SCREEN_STEPS: int | None = 40
+#: The cam-bearing clearance is screened on a grid of one point per pin (Zp points per output
+#: revolution, a subset of the screening grid). With a clearance the discs float (9 degrees of
+#: freedom instead of 3) and rvdyn is 10 to 40 times slower. On that grid its order-2Zp ripple (and
+#: any order Zp/2Zp content of the residual) aliases onto the mean, so the screening sees mainly its
+#: lost motion; it is therefore solved only when the residual has an offset, validated only when it
+#: ranks first, and re-validated on the full screening grid before it can win.
+CLEARANCE_SCREEN_PER_PIN = True
 
 
 @dataclass(frozen=True)
@@ -89,12 +95,12 @@ class Effect:
         ``angle_shift`` (scale at angle 0; other angles by rotating the signature), ``analytic``.
     template : str or None
         The effect whose screening signatures are this effect's: for pin instances the pin-0
-        effect shifted by ``shift_deg`` of output angle (rotational symmetry of the 40 pins), for
+        effect shifted by ``shift_deg`` of output angle (rotational symmetry of the pins), for
         crank/disc/hole instances their half-turn twin (see :func:`build_library`). Exact for a
         symmetric declared model, a screening approximation otherwise; the fits always solve the
         effect itself.
     screen_steps : int or None
-        Points per output revolution of this effect's screening (a multiple of 40; default the
+        Points per output revolution of this effect's screening (a multiple of the pin count; default the
         coarse grid), for effects that are expensive to solve.
     expensive : bool
         rvdyn is much slower with this effect (validated only when it ranks first).
@@ -107,6 +113,8 @@ class Effect:
         Period of the direction of an ``angle_shift`` effect (360; ovality 180).
     polar_factor : float
         Reported angle = atan2(y, x) / polar_factor (ovality: 2).
+    ratio : float
+        Total ratio N of the reducer (the input encoder's reading error enters the TE divided by N).
     """
 
     name: str
@@ -127,6 +135,7 @@ class Effect:
     screen_steps: int | None = None
     expensive: bool = False
     trial_map: tuple[int, ...] | None = None
+    ratio: float = 1.0
 
     @property
     def n_params(self) -> int:
@@ -170,17 +179,25 @@ class Effect:
         return self.basis(input_deg, output_deg) @ np.asarray(p, dtype=float)
 
     def basis(self, input_deg: np.ndarray, output_deg: np.ndarray) -> np.ndarray:
-        """Columns (n, 2) of a measurement effect's TE reading error per um of each component.
+        """Columns (n, 2) of a measurement effect's TE reading error per um of each component (one
+        column per ppm for the scale error).
 
         Output encoder: ``TE += (eps / R_out) sin(theta_out + phi)`` with components
-        ``(x, y) = eps (cos phi, sin phi)``; input encoder: ``TE -= (eps / R_in) sin(theta_in + phi) / 121``.
+        ``(x, y) = eps (cos phi, sin phi)``; input encoder: ``TE -= (eps / R_in) sin(theta_in + phi) / N``.
         """
+        if self.key == "drift_arcsec_per_rev":
+            # a drift in time at a steady speed: c per output revolution travelled, whatever the direction
+            o = np.asarray(output_deg, dtype=float)
+            return (np.abs(o - o[0]) / 360.0)[:, None] if o.size else np.zeros((0, 1))
+        if self.key == "output_encoder_scale_error":
+            # reading theta_out (1 + s): TE += s * theta_out (the absolute reading), per ppm of s
+            return (np.asarray(output_deg, dtype=float) * ARCSEC_PER_DEG * 1e-6)[:, None]
         if self.key == "output_encoder_eccentricity":
             th = np.radians(np.asarray(output_deg, dtype=float))
             k = 1e-3 / OUTPUT_ENCODER_RADIUS_MM * ARCSEC_PER_RAD
         elif self.key == "input_encoder_eccentricity":
             th = np.radians(np.asarray(input_deg, dtype=float))
-            k = -1e-3 / INPUT_ENCODER_RADIUS_MM * ARCSEC_PER_RAD / RATIO
+            k = -1e-3 / INPUT_ENCODER_RADIUS_MM * ARCSEC_PER_RAD / self.ratio
         else:  # pragma: no cover
             raise ValueError(f"effect {self.name!r} has no reading basis")
         return k * np.column_stack([np.sin(th), np.cos(th)])
@@ -252,7 +269,7 @@ def build_library(dataset: MeasuredDataset | None = None, design: Design | None 
     dataset : MeasuredDataset or None
         Decides which load/temperature-dependent effects are identifiable.
     design : Design or None
-        Instance ranges (default design).
+        Instance ranges, pin count and ratio (default: the dataset's design, else the paper's).
     families : tuple of str
         Families to include.
 
@@ -260,7 +277,7 @@ def build_library(dataset: MeasuredDataset | None = None, design: Design | None 
     -------
     Library
     """
-    d = design or Design()
+    d = design or (dataset.design if dataset is not None else Design())
     out: list[Effect] = []
     notes: list[str] = []
     # half-turn symmetry of the default layout (two cranks 180 deg apart, two discs with eccentrics 180
@@ -329,7 +346,8 @@ def build_library(dataset: MeasuredDataset | None = None, design: Design | None 
         o = mo["cam_bearing_clearance_um"]
         out.append(Effect(o.key, o.key, "model", "um", o.meaning + " (bearing stiffness at its default "
                           f"{mo['cam_bearing_stiffness_N_per_um'].default:g} N/um)", ("value",), 5.0,
-                          (0.0,), (o.high,), (), "one_sided", screen_steps=CLEARANCE_SCREEN_STEPS, expensive=True))
+                          (0.0,), (o.high,), (), "one_sided", screen_steps=d.z_pins if CLEARANCE_SCREEN_PER_PIN else None,
+                          expensive=True))
         if dataset is not None and dataset.temperatures_vary:
             o = mo["pin_circle_diameter_um_per_K"]
             out.append(Effect(o.key, o.key, "model", "um/K", o.meaning, ("value",), 0.5, (o.low,), (o.high,), (),
@@ -348,8 +366,19 @@ def build_library(dataset: MeasuredDataset | None = None, design: Design | None 
                           ("x", "y"), 5.0, (-1000.0, -1000.0), (1000.0, 1000.0), (), "analytic"))
         out.append(Effect("input_encoder_eccentricity", "input_encoder_eccentricity", "measurement", "um",
                           f"eccentricity of the input encoder scale (assumed radius {INPUT_ENCODER_RADIUS_MM:g} mm): "
-                          "reading error (eps/R) sin(theta_in + phi), order 121 in the TE divided by 121; reported "
-                          "with phi", ("x", "y"), 20.0, (-1000.0, -1000.0), (1000.0, 1000.0), (), "analytic"))
+                          f"reading error (eps/R) sin(theta_in + phi), order {d.ratio:g} in the TE divided by "
+                          f"{d.ratio:g}; reported with phi", ("x", "y"), 20.0, (-1000.0, -1000.0), (1000.0, 1000.0), (),
+                          "analytic", ratio=float(d.ratio)))
+        out.append(Effect("output_encoder_scale_error", "output_encoder_scale_error", "measurement", "ppm",
+                          "scale (gain) error s of the output encoder: it reads theta_out (1 + s), so the TE ramps by "
+                          "s theta_out over the record (a sawtooth per revolution); an input encoder scale error of "
+                          "the opposite sign, or a drift in time proportional to the angle travelled in one "
+                          "direction, gives the same ramp", ("value",), 10.0, (-1e4,), (1e4,), (), "analytic"))
+        out.append(Effect("drift_arcsec_per_rev", "drift_arcsec_per_rev", "measurement", "arcsec/rev",
+                          "a drift of the TE reading in time (thermal, electronics) at a steady speed: it grows by the "
+                          "value per output revolution travelled from the start of each run, in either direction "
+                          "(a scale error changes sign with the direction)", ("value",), 5.0, (-1e4,), (1e4,), (),
+                          "analytic"))
     return Library(out, notes)
 
 

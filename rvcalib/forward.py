@@ -1,8 +1,8 @@
 """The forward model of a measured run: rvdyn TE at the readings, or on a uniform grid.
 
 The model TE is solved by :func:`rvdyn.te.run_te` (analytic contacts). TE is periodic in one output
-revolution (input 121 turns, cranks 40, sun relative to the carrier 120), so angles are taken
-modulo it. :func:`grid_te` solves a uniform grid of ``steps`` input angles over one output
+revolution (input N turns, N the ratio of the case's design; see :mod:`rvcalib.orders`), so angles
+are taken modulo it. Every design constant comes from the case (its ``design`` object). :func:`grid_te` solves a uniform grid of ``steps`` input angles over one output
 revolution (the screening and the coarse fits of :mod:`rvcalib.identify`); :func:`te_at` solves
 exactly at given angles (every reading of a run: interpolating a grid is not exact, see there). Solutions are cached by the case's content hash (which holds the
 load and the direction) and the angles, so identical conditions and repeated trial values are
@@ -25,7 +25,7 @@ import numpy as np
 from rvcad.errors import Case
 from rvdyn.te import run_te
 
-from rvcalib.dataset import PERIOD_DEG, RATIO
+from rvcalib.orders import period_deg
 
 #: Maximum number of cached solutions.
 CACHE_SIZE = 20000
@@ -60,9 +60,19 @@ def clear_cache() -> None:
     _STATS["bytes"] = 0
 
 
-def grid_angles_deg(steps: int) -> np.ndarray:
-    """Input angles of the uniform grid over one output revolution, deg (``k * 121 * 360 / steps``)."""
-    return np.arange(steps) * (PERIOD_DEG / steps)
+def grid_angles_deg(steps: int, period: float) -> np.ndarray:
+    """Input angles of the uniform grid over one output revolution, deg (``k * period / steps``;
+    ``period`` = N * 360 deg, see :func:`rvcalib.orders.period_deg`)."""
+    return np.arange(steps) * (float(period) / steps)
+
+
+def case_period_deg(case_dict: dict[str, Any]) -> float:
+    """Input angle of one output revolution of a case JSON's design, deg."""
+    try:
+        case = Case.from_dict(case_dict)
+    except ValueError as exc:
+        raise ModelEvaluationError(str(exc)) from None
+    return period_deg(case.design)
 
 
 def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> np.ndarray:
@@ -83,7 +93,7 @@ def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> 
     ModelEvaluationError
         If rvdyn refuses the case (interference beyond the contact law) or does not converge.
     """
-    return te_at(case_dict, grid_angles_deg(int(steps)), solver)
+    return te_at(case_dict, grid_angles_deg(int(steps), case_period_deg(case_dict)), solver)
 
 
 def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analytic") -> np.ndarray:
@@ -92,7 +102,7 @@ def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analy
     TE is periodic in one output revolution, so each angle is reduced modulo it and equal angles
     (to 1e-9 deg) are solved once. This is the forward model for readings that are not on a
     uniform grid: the TE has kinks where pins pick up or drop load and content up to many times
-    the crank order 121, so interpolating a grid solution is not exact (a single-pin pitch error
+    the input order N, so interpolating a grid solution is not exact (a single-pin pitch error
     of 0.02 deg interpolated from 1440 points per revolution is off by 0.18 arcsec RMS, 1.3 arcsec
     at the worst sample).
 
@@ -105,7 +115,8 @@ def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analy
         case = Case.from_dict(case_dict)
     except ValueError as exc:
         raise ModelEvaluationError(str(exc)) from None
-    x = np.mod(np.asarray(input_deg, dtype=float), PERIOD_DEG)
+    period = period_deg(case.design)
+    x = np.mod(np.asarray(input_deg, dtype=float), period)
     xr = np.round(x, 9)
     u, inv = np.unique(xr, return_inverse=True)
     u_run = u[::-1] if case.direction == -1 else u  # in the order of motion
@@ -113,7 +124,7 @@ def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analy
     hit = _CACHE.get(key)
     if hit is None:
         t0 = time.perf_counter()
-        pts = u_run if u_run.size >= 2 else np.append(u_run, u_run + PERIOD_DEG / 2)
+        pts = u_run if u_run.size >= 2 else np.append(u_run, u_run + period / 2)
         try:
             res = run_te(case, solver=solver, theta_in_deg=pts)
         except (ValueError, RuntimeError) as exc:
@@ -164,23 +175,6 @@ def merge_case(base: dict[str, Any], errors: list[tuple[str, dict]] | None = Non
         m = d.setdefault("model", {})
         m.update(model)
     return d
-
-
-def output_angle_rad(input_deg: np.ndarray) -> np.ndarray:
-    """Ideal output angle for input readings, rad (``input / 121``)."""
-    return np.radians(np.asarray(input_deg, dtype=float) / RATIO)
-
-
-def coarse_stride(steps: int, target: int = 120) -> int:
-    """Stride that takes a grid of ``steps`` (a multiple of 40) to the screening grid.
-
-    The screening grid has at most ``target`` points per revolution and stays a multiple of 40
-    (pin-wise signatures are the pin-0 signature shifted by whole pin pitches).
-    """
-    for s in range(1, steps + 1):
-        if steps % s == 0 and (steps // s) % 40 == 0 and steps // s <= target:
-            return s
-    return 1
 
 
 def fmt_angle(deg: float) -> float:

@@ -4,7 +4,8 @@
 
 * ``report.md``: verdict, effects found (value, unit, 95 % interval, meaning, tests,
   indistinguishable alternatives), what is unexplained, per-run residual statistics before and
-  after (RMS, peak, Ljung-Box p, orders 1, 2, 39, 40, 120, 121 and neighbours), direction and load
+  after (RMS, peak, Ljung-Box p, the reducer's key orders: 1, Zc, Zp, their doubles, the input orders and
+  neighbours), direction and load
   dependence, the iteration log, the data notes and the method;
 * ``residual_before_after.png``: the residual of every run against output angle, before (declared
   model) and after;
@@ -26,11 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from rvcalib.dataset import RATIO
 from rvcalib.effects import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM
-from rvcalib.identify import CalibrationResult
-
-SHOW_ORDERS = (0, 1, 2, 3, 39, 40, 41, 79, 80, 81, 119, 120, 121, 122)
+from rvcalib.orders import key_orders, orders_that_matter
+from rvcalib.results import CalibrationResult
 MAX_PANELS = 12
 
 
@@ -89,7 +88,7 @@ def _fig_residuals(result: CalibrationResult, path: Path) -> None:
     n = len(runs)
     fig, axes = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.8), sharex=True, squeeze=False)
     for ax, run, rb, ra in zip(axes[:, 0], runs, result.residual_before, result.residual_after):
-        x = (run.input_deg - run.input_deg[0]) * run.direction / RATIO
+        x = (run.input_deg - run.input_deg[0]) * run.direction / run.ratio
         ax.plot(x, rb, color="0.6", lw=0.8, label="before (declared model)")
         ax.plot(x, ra, color="C0", lw=0.8, label="after")
         ax.axhline(0.0, color="k", lw=0.4)
@@ -117,12 +116,13 @@ def _fig_spectrum(result: CalibrationResult, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(9, 3.6))
     ax.vlines(k - 0.15, 0, np.abs(sb[: k.size]), color="0.6", lw=1.5, label="before (declared model)")
     ax.vlines(k + 0.15, 0, np.abs(sa[: k.size]), color="C0", lw=1.5, label="after")
-    for o in (1, 2, 39, 40, 120, 121):
+    marks = orders_that_matter(result.dataset.design)
+    for o in marks:
         if o < k.size:
             ax.axvline(o, color="C3", lw=0.5, ls=":")
     ax.set_yscale("log")
     ax.set_ylim(bottom=max(1e-4, 0.3 * float(np.min(np.abs(sa[1:k.size]) + 1e-12))))
-    ax.set_xlabel("order (cycles per output revolution); dotted: 1, 2, 39, 40, 120, 121")
+    ax.set_xlabel("order (cycles per output revolution); dotted: " + ", ".join(map(str, marks)))
     ax.set_ylabel("amplitude (arcsec)")
     ax.set_title("Order spectrum of the residual (sample-weighted mean over runs; order 0 = |mean|)", fontsize=10)
     ax.legend(fontsize=8)
@@ -139,6 +139,10 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
     L.append("")
     L.append(f"**{result.verdict}**")
     L.append("")
+    red = ds.reducer()
+    L.append(f"- reducer: ratio {red['ratio']:g} (Z1 {red['z_sun']}, Z2 {red['z_planet']}, {red['z_pins']} pins, "
+             f"{red['z_disc']} lobes, pin circle {red['pin_circle_diameter_mm']:g} mm); design from "
+             f"{'the default (paper) design' if red['source'] == 'default' else red['source']}")
     L.append(f"- status: `{result.status}`")
     L.append(f"- residual RMS before (declared errors only): {result.rms_before:.4g} arcsec; after: "
              f"{result.rms_after:.4g} arcsec (physical and measurement effects only: {result.after_physical.rms:.4g})")
@@ -155,7 +159,10 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
                  "indistinguishable from |")
         L.append("|---|---|---|---|---|---|---|---|---|---|")
         for e in result.effects:
-            alts = ", ".join(e.alternatives[:6]) + (" ..." if len(e.alternatives) > 6 else "")
+            alts = ", ".join(f"`{a['name']}` {a['value']:.4g} {a['unit']} (RMS {a['rms_after_arcsec']:.3g})"
+                             for a in e.alternatives[:6]) + (" ..." if len(e.alternatives) > 6 else "")
+            if e.implied_total is not None:
+                alts += f"; declared {e.declared_value:.5g} {e.unit}, implied total {e.implied_total:.5g} {e.unit}"
             L.append(f"| `{e.name}` ({e.family}) | {e.value:.5g} | {e.unit} | [{e.ci_low:.5g}, {e.ci_high:.5g}] | "
                      f"{_fmt(e.angle_deg)} | {e.explained_fraction:.3f} | {_fmt(e.F)} | {_fmt(e.p_value, 3)} | "
                      f"{_fmt(e.delta_bic)} | {alts or '-'} |")
@@ -190,6 +197,25 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
         L.append("The final residual is not white: dominant orders per run: " + "; ".join(
             f"run {r.run}: " + ", ".join(f"{k} ({a:.3g})" for k, a in r.dominant) for r in result.after.runs))
     L.append("")
+    L.append("## Identifiability groups and recommended runs")
+    L.append("")
+    if result.stopped_by and not result.stopped_by.startswith("nothing"):
+        L.append(f"**Stopped early:** {result.stopped_by}.")
+        L.append("")
+    if not result.groups:
+        L.append("No group: every effect found is the only candidate that fits as well.")
+    for i, g in enumerate(result.groups):
+        mem = "; ".join(f"`{m['name']}` {m['value']:.4g} {m['unit']}"
+                        + (f" (RMS {m['rms_after_arcsec']:.3g})" if m.get("rms_after_arcsec") is not None else "")
+                        for m in g["members"])
+        L.append(f"- group {i} ({g['kind']}): {mem}. {g.get('note', '')}")
+    for rec in result.recommended_runs:
+        if rec.get("run"):
+            L.append(f"- to split group {rec['group']}: run at {rec['run']['load_Nm']:g} N m, direction "
+                     f"{rec['run']['direction']:+d} ({rec['criterion']}; log det gain {rec['log_det_gain']:.3g})")
+        else:
+            L.append(f"- group {rec['group']}: {rec.get('reason', 'no run recommended')}")
+    L.append("")
     L.append("## Figures")
     L.append("")
     for f in figures:
@@ -210,12 +236,13 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
     L.append("")
     L.append("### Order amplitudes (arcsec; order 0 is the mean)")
     L.append("")
-    L.append("| run | | " + " | ".join(str(o) for o in SHOW_ORDERS) + " |")
-    L.append("|---|---|" + "---|" * len(SHOW_ORDERS))
+    show = key_orders(ds.design)
+    L.append("| run | | " + " | ".join(str(o) for o in show) + " |")
+    L.append("|---|---|" + "---|" * len(show))
     for run, b, a in zip(ds.runs, result.before.runs, result.after.runs):
         for tag, d in (("before", b), ("after", a)):
             cells = []
-            for o in SHOW_ORDERS:
+            for o in show:
                 v = d.orders.get(o)
                 if o > 0 and o >= d.nyquist_order:
                     cells.append("*")

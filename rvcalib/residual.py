@@ -1,7 +1,9 @@
 """Residual = measured TE - model TE, and its diagnostics.
 
 Per run: RMS and peak (max |r|), the order spectrum per output revolution (amplitudes of the
-orders 0, 1, 2, 39, 40, 120, 121 and their neighbours by least squares on the output angle; an
+orders 0-3 and the orders that matter of the reducer (1, Zc, Zp, their doubles, the input orders
+N - 1, N, N + 1; :func:`rvcalib.orders.key_orders`) with their neighbours by least squares on the
+output angle; an
 order at or above half the samples per revolution is aliased and flagged), the lag-1
 autocorrelation and the Ljung-Box whiteness test (statsmodels). Over the runs: the dependence of
 the mean residual on direction and load (least squares on ``1, d, d*L``: a common offset, a
@@ -14,10 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rvcalib.dataset import RATIO, MeasuredDataset, RunRecord
-
-#: Orders reported by default (per output revolution) with their neighbours.
-KEY_ORDERS = (0, 1, 2, 3, 38, 39, 40, 41, 78, 79, 80, 81, 119, 120, 121, 122)
+from rvcalib.dataset import MeasuredDataset, RunRecord
+from rvcalib.orders import key_orders
 
 
 def order_spectrum(output_rad: np.ndarray, resid: np.ndarray, orders: list[int] | tuple[int, ...]) -> dict[int, float]:
@@ -125,7 +125,7 @@ class RunDiagnostics:
     rms, peak, mean : float
         arcsec.
     orders : dict of int to float
-        Amplitudes of :data:`KEY_ORDERS` (arcsec; order 0 is the signed mean); NaN for orders at or
+        Amplitudes of the key orders (:func:`rvcalib.orders.key_orders`) (arcsec; order 0 is the signed mean); NaN for orders at or
         above ``nyquist_order`` (not resolved by the sampling).
     nyquist_order : float
         Half the samples per output revolution; orders at or above it are aliased.
@@ -215,11 +215,12 @@ def diagnose(dataset: MeasuredDataset, residuals: list[np.ndarray], max_order: i
     """
     rds: list[RunDiagnostics] = []
     nyq_all = []
+    korders = key_orders(dataset.design)
     for run, r in zip(dataset.runs, residuals):
-        th = np.radians(run.input_deg / RATIO)
+        th = np.radians(run.input_deg / run.ratio)
         nyq = samples_per_rev(run) / 2.0
         nyq_all.append(nyq)
-        orders = order_spectrum(th, r, [k for k in KEY_ORDERS])
+        orders = order_spectrum(th, r, list(korders))
         for k in orders:
             if k > 0 and k >= nyq:
                 orders[k] = float("nan")  # not resolved by the sampling (aliased)
@@ -237,7 +238,7 @@ def diagnose(dataset: MeasuredDataset, residuals: list[np.ndarray], max_order: i
     spec = np.zeros(mo + 1)
     wsum = 0.0
     for run, r in zip(dataset.runs, residuals):
-        spec += r.size * full_spectrum(np.radians(run.input_deg / RATIO), r, mo)
+        spec += r.size * full_spectrum(np.radians(run.input_deg / run.ratio), r, mo)
         wsum += r.size
     spec /= wsum
     dep = direction_load_dependence(dataset, residuals)
@@ -277,3 +278,35 @@ def direction_load_dependence(dataset: MeasuredDataset, residuals: list[np.ndarr
                    + (f"; not separable from these runs: {', '.join(missing)}" if missing else ""))
     out["run_means_arcsec"] = {r.run: float(v) for r, v in zip(dataset.runs, m)}
     return out
+
+
+def structured_noise(dataset: MeasuredDataset, residuals: list[np.ndarray], low_orders: int = 10) -> float:
+    """Noise of residuals that leftover structure at the orders that matter cannot inflate, arcsec.
+
+    Per run, the residual is fitted by least squares with a constant, a ramp over the record, orders
+    1..``low_orders`` and every key order of the reducer (:func:`rvcalib.orders.key_orders`: 1, Zc,
+    Zp, their doubles, the input orders, neighbours) at the measured output angles; the noise
+    variance is the pooled residual sum of squares over the pooled degrees of freedom
+    (``n - rank``). Unlike second differences (:func:`rvcalib.dataset.noise_estimate`), which count
+    leftover orders 39/40/80 as noise, this estimate is unbiased for white noise whatever structure
+    is left at those orders.
+    """
+    orders = sorted(set(range(1, low_orders + 1)) | {k for k in key_orders(dataset.design) if k > 0})
+    rss, dof = 0.0, 0
+    for run, r in zip(dataset.runs, residuals):
+        r = np.asarray(r, dtype=float)
+        th = np.radians(run.input_deg / run.ratio)
+        t = (th - th.mean()) / max(float(np.ptp(th)), 1e-12)
+        cols = [np.ones_like(th), t]
+        for k in orders:
+            cols += [np.cos(k * th), np.sin(k * th)]
+        A = np.column_stack(cols)
+        coef, _, rank, _ = np.linalg.lstsq(A, r, rcond=1e-10)
+        e = r - A @ coef
+        if r.size - rank < 5:
+            continue
+        rss += float(e @ e)
+        dof += int(r.size - rank)
+    if dof == 0:
+        return float("nan")
+    return math.sqrt(rss / dof)

@@ -33,12 +33,14 @@ from rvcad.atomic import atomic_path
 from rvcad.errors import ERROR_TYPES, Case
 from rvdyn.options import MODEL_OPTIONS
 
-from rvcalib.dataset import PERIOD_DEG, RATIO
+from rvcad.params import Design
+
 from rvcalib.effects import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM
 from rvcalib.forward import merge_case, te_at
+from rvcalib.orders import check_periodic, period_deg
 
 MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg",
-                    "input_encoder_eccentricity_um", "input_encoder_phase_deg")
+                    "input_encoder_eccentricity_um", "input_encoder_phase_deg", "output_encoder_scale_ppm")
 
 
 def _write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
@@ -87,6 +89,10 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
         if eps:
             out.append({"name": f"{which}_encoder_eccentricity", "key": f"{which}_encoder_eccentricity",
                         "value": eps, "unit": "um", "angle_deg": float(meas.get(f"{which}_encoder_phase_deg", 0.0))})
+    s = float(meas.get("output_encoder_scale_ppm", 0.0))
+    if s:
+        out.append({"name": "output_encoder_scale_error", "key": "output_encoder_scale_error", "value": s,
+                    "unit": "ppm"})
     return out
 
 
@@ -94,7 +100,8 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
                      noise_arcsec: float = 0.15, input_noise_arcsec: float = 2.0, samples_per_rev: int = 240,
                      revolutions: float = 1.0, transient: dict[str, Any] | None = None, duplicates: int = 0,
                      seed: int = 0, answer_path: str | Path | None = None, speed_rpm: float | None = None,
-                     start_deg: float = 0.0) -> Path:
+                     start_deg: float = 0.0, design: dict[str, Any] | None = None,
+                     write_design: bool = True) -> Path:
     """Write a simulated measured dataset and its answer file.
 
     Parameters
@@ -107,19 +114,19 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     hidden : dict or None
         The truth the dataset does not declare: ``"errors"`` (case JSON errors, any instance),
         ``"model"`` (rvdyn model options), ``"measurement"`` (``output_encoder_eccentricity_um``,
-        ``output_encoder_phase_deg``, ``input_encoder_eccentricity_um``, ``input_encoder_phase_deg``)
-        and ``"harmonics"`` (list of ``{"order", "amplitude_arcsec", "phase_deg"}``, outside the
-        library).
+        ``output_encoder_phase_deg``, ``input_encoder_eccentricity_um``, ``input_encoder_phase_deg``,
+        ``output_encoder_scale_ppm``: the output reading is ``theta_out (1 + s)``)
+        and ``"harmonics"`` (list of ``{"order", "amplitude_arcsec", "phase_deg", "per_Nm"}``, outside
+        the library; with ``"per_Nm": true`` the amplitude is per N m of the run's load).
     noise_arcsec : float
         Output encoder noise (standard deviation), arcsec.
     input_noise_arcsec : float
-        Input encoder noise, arcsec (enters the TE divided by 121).
+        Input encoder noise, arcsec (enters the TE divided by the ratio).
     samples_per_rev : int
-        Samples per output revolution (any count >= 40; the rig's sampling, not a model grid).
+        Samples per output revolution (any count >= 8; the rig's sampling, not a model grid).
     start_deg : float
-        Input angle of the first sample, deg. With 0 and a ``samples_per_rev`` that is a multiple
-        of 40 the samples sit on a model grid; any other start puts them off every grid, as on a
-        real rig.
+        Input angle of the first sample, deg. Any start other than 0 puts the samples off every
+        screening grid, as on a real rig.
     revolutions : float
         Output revolutions recorded per run (>= 1).
     transient : dict or None
@@ -132,6 +139,12 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         Where the answer goes (default ``<out_dir>.answer.json`` beside the folder).
     speed_rpm : float or None
         Written to runs.csv if given (informative).
+    design : dict or None
+        The reducer (the ``design`` object of a case JSON; default the paper's). Every run is solved
+        with it, and its ratio converts the encoder angles.
+    write_design : bool
+        Write the design into the dataset folder as ``design.json`` (only for a non-default design),
+        as a bench that knows its reducer would.
 
     Returns
     -------
@@ -153,10 +166,13 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     rng = np.random.default_rng(seed)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    des = Design.from_dict(design)
+    check_periodic(des)
+    ratio = float(des.ratio)
     N = int(samples_per_rev)
-    if N < 40:
-        raise ValueError(f"samples_per_rev {samples_per_rev} must be >= 40")
-    step = PERIOD_DEG / N
+    if N < 8:
+        raise ValueError(f"samples_per_rev {samples_per_rev} must be >= 8")
+    step = period_deg(des) / N
     tr = dict(transient or {})
     tr_runs = tr.get("runs", "all")
     declared_keys = sorted({k for r in runs for k in (r.get("declared") or {})})
@@ -170,6 +186,8 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         load = float(r.get("load_Nm", 20.0))
         decl = dict(r.get("declared") or {})
         base: dict[str, Any] = {"errors": dict(decl), "load_Nm": load, "direction": d}
+        if design:
+            base["design"] = des.to_dict()
         if "temperature_C" in r:
             base["model"] = {"temperature_C": float(r["temperature_C"])}
         errs = []
@@ -184,10 +202,10 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         k = np.arange(M)
         th_in = float(start_deg) + d * k * step
         te = te_at(truth, th_in)  # exact at every sample
-        th_out = th_in / RATIO + te / 3600.0
+        th_out = th_in / ratio + te / 3600.0
         for h in hidden.get("harmonics") or []:
-            te_h = float(h["amplitude_arcsec"]) * np.cos(int(h["order"]) * np.radians(th_out)
-                                                          + math.radians(float(h.get("phase_deg", 0.0))))
+            amp = float(h["amplitude_arcsec"]) * (load if h.get("per_Nm") else 1.0)
+            te_h = amp * np.cos(int(h["order"]) * np.radians(th_out) + math.radians(float(h.get("phase_deg", 0.0))))
             th_out = th_out + te_h / 3600.0
         if has_tr:
             th_out = th_out + float(tr.get("amplitude_arcsec", 20.0)) * np.exp(
@@ -198,6 +216,7 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         pi_ = math.radians(float(meas.get("input_encoder_phase_deg", 0.0)))
         out_read = th_out + np.degrees(eo * 1e-3 / OUTPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_out) + po))
         in_read = th_in + np.degrees(ei * 1e-3 / INPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_in) + pi_))
+        out_read = out_read * (1.0 + 1e-6 * float(meas.get("output_encoder_scale_ppm", 0.0)))
         out_read = out_read + rng.normal(0.0, noise_arcsec, M) / 3600.0
         in_read = in_read + rng.normal(0.0, input_noise_arcsec, M) / 3600.0
         t = k * 0.01
@@ -219,13 +238,18 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         rdf["temperature_C"] = rdf["temperature_C"].fillna(20.0)
     _write_csv_atomic(rdf, out / "runs.csv")
     _write_csv_atomic(sdf, out / "samples.csv")
-    te_noise = math.sqrt(noise_arcsec ** 2 + (input_noise_arcsec / RATIO) ** 2)
+    if design and write_design and des != Design():
+        with atomic_path(out / "design.json") as tmp:
+            with open(tmp, "w", encoding="utf-8") as fh:
+                json.dump(des.to_dict(), fh, indent=2)
+    te_noise = math.sqrt(noise_arcsec ** 2 + (input_noise_arcsec / ratio) ** 2)
     answer = {"dataset": str(out), "hidden": hidden, "expected_effects": expected_effects(hidden),
               "noise_te_arcsec": te_noise, "noise_output_arcsec": noise_arcsec,
               "noise_input_arcsec": input_noise_arcsec, "samples_per_rev": N,
               "start_deg": float(start_deg), "revolutions": revolutions,
               "transient": tr or None, "duplicates": int(duplicates), "seed": seed,
-              "encoder_radii_mm": {"output": OUTPUT_ENCODER_RADIUS_MM, "input": INPUT_ENCODER_RADIUS_MM}}
+              "encoder_radii_mm": {"output": OUTPUT_ENCODER_RADIUS_MM, "input": INPUT_ENCODER_RADIUS_MM},
+              "design": des.to_dict(), "ratio": ratio}
     ap = Path(answer_path) if answer_path is not None else out.parent / f"{out.name}.answer.json"
     ap.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(ap) as tmp:

@@ -9,9 +9,14 @@ import pandas as pd
 import pytest
 
 from rvcalib.cli import main
-from rvcalib.dataset import PERIOD_DEG, RATIO, noise_estimate, read_dataset
+from rvcad.params import Design
+from rvcalib.dataset import noise_estimate, read_dataset
 from rvcalib.effects import OUTPUT_ENCODER_RADIUS_MM, build_library
-from rvcalib.forward import coarse_stride, merge_case
+from rvcalib.forward import merge_case
+from rvcalib.orders import key_orders, min_screen_grid, orders_that_matter, period_deg, screen_grid
+
+RATIO = Design().ratio
+PERIOD_DEG = period_deg(Design())
 
 
 def write(folder: Path, runs: pd.DataFrame, samples: pd.DataFrame) -> Path:
@@ -156,15 +161,38 @@ def test_cli_bad_input_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "runs.csv" in err and "load_Nm" in err
     assert main([str(tmp_path / "missing"), "--out", str(tmp_path / "out")]) == 2
-    assert main([str(d), "--out", str(tmp_path / "out"), "--steps", "100"]) == 2
-    assert "--steps" in capsys.readouterr().err
+    capsys.readouterr()
+    ok = write(tmp_path / "ok", *good(tmp_path))
+    for opt, bad in (("--steps", "0"), ("--steps", "2000000"), ("--screen-points", "120"), ("--max-terms", "0")):
+        assert main([str(ok), "--out", str(tmp_path / "out"), opt, bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert opt.lstrip("-").replace("-", "_") in err.replace("-", "_") and len(err.splitlines()) == 1
+    assert not (tmp_path / "out").exists()
 
 
-def test_noise_estimate_and_coarse_stride():
+def test_noise_estimate():
     rng = np.random.default_rng(3)
     x = np.sin(np.linspace(0, 6, 2000)) + rng.normal(0, 0.2, 2000)
     assert abs(noise_estimate(x) - 0.2) < 0.02
-    assert coarse_stride(240) == 2 and coarse_stride(360) == 3 and coarse_stride(120) == 1
+
+
+@pytest.mark.parametrize("design, ratio, grid", [({}, 121, 280), ({"z_sun": 18, "z_planet": 36}, 81, 200),
+                                                 ({"z_pins": 30, "z_disc": 29}, 91, 210)])
+def test_orders_and_screening_grid_come_from_the_design(design, ratio, grid):
+    """The orders that matter (1, Zc, Zp, doubles, input orders N-1..N+1) and the smallest screening
+    grid that resolves them: a multiple of Zp above twice the highest order (N + 2)."""
+    d = Design.from_dict(design)
+    assert round(d.ratio, 9) == ratio and period_deg(d) == pytest.approx(ratio * 360.0)
+    zp, zc = d.z_pins, d.z_disc
+    assert orders_that_matter(d) == sorted({1, zc, zp, 2 * zc, 2 * zp, ratio - 1, ratio, ratio + 1})
+    assert {0, 1, 2, 3, ratio + 2} <= set(key_orders(d))
+    assert min_screen_grid(d) == grid and grid % zp == 0 and grid // 2 > ratio + 1
+    for steps in (200, 360, 1000, 14400):
+        m, note = screen_grid(d, steps)
+        assert m % zp == 0 and m // 2 > ratio + 1   # every request ends on a grid that resolves the orders
+        assert (note == "") == (m == steps)
+    with pytest.raises(ValueError, match="screen_points 120 cannot resolve"):
+        screen_grid(d, screen_points=120)
 
 
 def test_merge_case_and_library():

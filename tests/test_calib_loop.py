@@ -16,15 +16,18 @@ import time
 import numpy as np
 import pytest
 
-from rvcalib.cli import auto_steps, main
-from rvcalib.dataset import PERIOD_DEG, read_dataset
+from rvcad.params import Design
+from rvcalib.cli import main
+from rvcalib.dataset import read_dataset
 from rvcalib.forward import grid_angles_deg, grid_te, te_at
+from rvcalib.orders import period_deg
 from rvcalib.identify import calibrate
 from rvcalib.simulate import simulate_dataset
 
 RUNS = [{"run": "1", "load_Nm": 10.0, "direction": 1}, {"run": "2", "load_Nm": 10.0, "direction": -1},
         {"run": "3", "load_Nm": 30.0, "direction": 1}]
 STEPS = 240
+PERIOD_DEG = period_deg(Design())
 _RESULTS: dict = {}
 
 
@@ -33,7 +36,7 @@ def workdir(tmp_path_factory):
     return tmp_path_factory.mktemp("calib")
 
 
-def run_scenario(workdir, name: str, hidden: dict, runs=None, samples_per_rev: int = STEPS, steps: int = STEPS,
+def run_scenario(workdir, name: str, hidden: dict, runs=None, samples_per_rev: int = STEPS, steps: int | None = None,
                  **sim):
     """Simulate, read and calibrate once per scenario (memoised)."""
     if name in _RESULTS:
@@ -47,7 +50,7 @@ def run_scenario(workdir, name: str, hidden: dict, runs=None, samples_per_rev: i
     print(f"\n[{name}] {res.verdict} ({secs:.1f} s; rms {res.rms_before:.4g} -> {res.rms_after:.4g}, "
           f"noise {ans['noise_te_arcsec']:.4g})")
     for e in res.effects:
-        print(f"[{name}]   {e.name} = {e.value:.5g} {e.unit} [{e.ci_low:.5g}, {e.ci_high:.5g}] alt {e.alternatives}")
+        print(f"[{name}]   {e.name} = {e.value:.5g} {e.unit} [{e.ci_low:.5g}, {e.ci_high:.5g}] alt {e.alternative_names}")
     _RESULTS[name] = (res, ans, ds)
     return _RESULTS[name]
 
@@ -55,7 +58,7 @@ def run_scenario(workdir, name: str, hidden: dict, runs=None, samples_per_rev: i
 def check_found(res, ans, expected: list[dict]):
     assert len(res.effects) == len(expected), [e.name for e in res.effects]
     for exp in expected:
-        hits = [e for e in res.effects if e.name == exp["name"] or exp["name"] in e.alternatives]
+        hits = [e for e in res.effects if e.name == exp["name"] or exp["name"] in e.alternative_names]
         assert hits, f"{exp['name']} not found among {[e.name for e in res.effects]}"
         e = hits[0]
         assert e.key == exp["key"]
@@ -75,7 +78,7 @@ def test_table4_error_single_pin_with_transient_and_duplicates(workdir):
     assert ds.runs[0].dropped["transient"] > 0 and sum(r.dropped["duplicates"] for r in ds.runs) == 4
     check_found(res, ans, ans["expected_effects"])
     e = res.effects[0]
-    assert e.name == "pin_pitch[pin=7]" and "pin_pitch[pin=27]" in e.alternatives
+    assert e.name == "pin_pitch[pin=7]" and "pin_pitch[pin=27]" in e.alternative_names
 
 
 def test_off_grid_readings_two_revolutions(workdir):
@@ -84,18 +87,9 @@ def test_off_grid_readings_two_revolutions(workdir):
     solved at the readings; interpolating the 360-point grid instead left 1.0 arcsec RMS here (the
     single-pin TE has kinks and crank-order content), and a 1440-point grid still 0.18 arcsec."""
     res, ans, ds = run_scenario(workdir, "offgrid", {"errors": {"pin_pitch": {"value": 0.02, "pin": 12}}},
-                                samples_per_rev=500, steps=auto_steps_for(workdir / "offgrid-probe"),
-                                start_deg=0.37, revolutions=2.0)
+                                samples_per_rev=500, start_deg=0.37, revolutions=2.0)
     assert all(r.n == 1000 for r in ds.runs)
     check_found(res, ans, ans["expected_effects"])
-
-
-def auto_steps_for(folder) -> int:
-    """rv-calibrate's automatic model grid for a 500-samples-per-revolution dataset."""
-    simulate_dataset(folder, RUNS[:1], {}, samples_per_rev=500, seed=1, start_deg=0.37)
-    steps = auto_steps(read_dataset(folder))
-    assert steps == 360
-    return steps
 
 
 def test_load_dependent_effect(workdir):
@@ -173,6 +167,10 @@ def test_misdeclared_error(workdir):
     res, ans, _ = run_scenario(workdir, "misdeclared", {"errors": {"cam_eccentricity": 4.0}}, runs=declared_runs())
     check_found(res, ans, ans["expected_effects"])
     assert "correction to the declared value" in res.effects[0].meaning
+    e = res.effects[0]   # the correction comes with the declared value and the implied total
+    assert e.declared_value == 5.0 and abs(e.implied_total - 9.0) <= 0.1 * 9.0
+    d = e.to_dict()
+    assert d["declared_value"] == 5.0 and d["implied_total"] == e.implied_total
 
 
 def test_cli_json_and_report(workdir, capsys):
@@ -201,7 +199,7 @@ def test_te_at_equals_the_grid_at_its_nodes_in_any_order_and_revolution(directio
     1e-9 rad = 2e-4 arcsec), whatever the order of the angles and the revolution they are in."""
     case = {"errors": {"pin_pitch": {"pin": 12, "value": 0.02}}, "load_Nm": 10.0, "direction": direction}
     g = grid_te(case, 360)
-    x = grid_angles_deg(360)
+    x = grid_angles_deg(360, PERIOD_DEG)
     idx = np.random.default_rng(0).permutation(360)[:120]
     assert np.max(np.abs(te_at(case, x[idx] + 3 * PERIOD_DEG) - g[idx])) < 1e-3
     assert np.max(np.abs(te_at(case, x) - g)) < 1e-3
@@ -223,20 +221,24 @@ def test_ramp_fit_separates_a_trend_from_periodic_orders():
     assert abs(ramp - 10.0) < 4 * 0.143 and t > 20
 
 
-def test_encoder_scale_error_is_flagged_as_a_ramp_not_hidden(workdir):
-    """An output encoder scale error of 2e-5 (a TE ramp of 26 arcsec over each revolution) is in no
-    library; the verdict must say the residual ramps, and the status must not be 'explained'."""
+def test_a_drift_in_time_is_a_drift_term_not_a_scale_error(workdir):
+    """A drift of the TE in time (+12 arcsec over every record of one revolution, whatever the
+    direction) is the measurement family's drift term: an output encoder scale error ramps with the
+    reading, so it has the opposite sign in a reverse run and cannot take it."""
     import pandas as pd
 
-    d = workdir / "gain"
+    d = workdir / "drift-time"
     simulate_dataset(d, RUNS, {}, samples_per_rev=STEPS, seed=11)
     s = pd.read_csv(d / "samples.csv", dtype={"run": str})
-    s["output_deg"] *= 1 + 2e-5
+    for rid, g in s.groupby("run"):
+        t = g["time_s"].to_numpy()
+        s.loc[g.index, "output_deg"] += 12.0 * (t - t[0]) / (t[-1] - t[0]) / 3600.0
     s.to_csv(d / "samples.csv", index=False, float_format="%.10f")
-    res = calibrate(read_dataset(d), steps=STEPS)
-    assert res.status == "unexplained"
-    assert "ramps over the record" in res.verdict and "encoder scale error" in res.verdict
-    assert all(abs(r.ramp_arcsec - 25.8) < 1.0 for r in res.after.runs)
+    res = calibrate(read_dataset(d))
+    assert [e.name for e in res.effects] == ["drift_arcsec_per_rev"], [e.name for e in res.effects]
+    # the record spans (n - 1)/n of a revolution: 12 arcsec over it is 12 n/(n - 1) per revolution
+    assert res.effects[0].value == pytest.approx(12.0 * STEPS / (STEPS - 1), rel=0.05)
+    assert res.unexplained == [] and "ramps over the record" not in res.verdict
 
 
 def test_a_drift_over_two_revolutions_is_not_dropped_as_a_transient(tmp_path):

@@ -1,0 +1,205 @@
+"""Fitting: nonlinear refits through the full reducer model (one candidate on its screening grid at
+the current state; all effects jointly at every reading, empirical terms projected out) and the
+confidence intervals of the reported effects.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy import optimize, stats
+
+from rvcad.errors import ERROR_TYPES
+
+from rvcalib.effects import Effect
+from rvcalib.forward import ModelEvaluationError
+from rvcalib.lsq import chord_fit, fd_jac, projector
+from rvcalib.residual import lag1_autocorr
+from rvcalib.results import EmpiricalTerm, FittedEffect
+from rvcalib.screening import Screening
+
+
+class Fitting(Screening):
+    """The fitting stage of the loop (methods on the loop's model and screening)."""
+
+    def refine_coarse(self, e: Effect, p0: np.ndarray, rc_raw: list[np.ndarray],
+                      Ec: np.ndarray | None, ms: int | None = None) -> tuple[float, np.ndarray]:
+        """Fit one candidate's parameters through the nonlinear model at the current state on its
+        screening grid (or an ``ms``-point grid; the other parameters fixed). Returns (explained
+        fraction, parameters)."""
+        ms = self._ms(e) if ms is None else int(ms)
+        sub = self.m // ms
+        r_sub = [r[::sub] for r in rc_raw]
+        r0, Pg, rss0 = self._group(ms, np.concatenate(rc_raw), Ec)
+        if rss0 <= 0:
+            return 0.0, p0
+        cur = self._pairs()
+        if e.family == "measurement":
+            A = self.meas_coarse(e, ms)
+            A = np.column_stack([Pg(A[:, k]) for k in range(A.shape[1])])
+            c, *_ = np.linalg.lstsq(A, r0, rcond=None)
+            res = r0 - A @ c
+            return 1.0 - float(res @ res) / rss0, c
+        base = self.predict_grid(cur, ms)
+        scale = e.scale
+        lo = np.array(e.lower) / scale
+        hi = np.array(e.upper) / scale
+
+        def fun(xs: np.ndarray) -> np.ndarray:
+            pr = self.predict_grid(cur + [(e, xs * scale)], ms)
+            return Pg(np.concatenate([r - (q - b) for r, q, b in zip(r_sub, pr, base)]))
+
+        x0 = np.clip(np.asarray(p0, dtype=float) / scale, lo, hi)
+        if e.n_params == 1 and abs(x0[0]) < 1e-3:
+            x0 = np.clip(np.array([0.1]), lo, hi)
+        for _ in range(4):
+            try:
+                fun(x0)
+                break
+            except ModelEvaluationError:
+                x0 = x0 * 0.5
+        else:
+            return 0.0, p0
+        got = chord_fit(fun, x0, lo, hi, max_iter=3, h=0.02, xtol=1e-3)
+        if got is None:
+            return 0.0, p0
+        x, r, _, _ = got
+        return 1.0 - float(r @ r) / rss0, x * scale
+
+    def fit_full(self, effects: list[Effect], p0: list[np.ndarray], terms: list[EmpiricalTerm],
+                 max_nfev: int = 20) -> tuple[list[np.ndarray], float, np.ndarray, Any, np.ndarray]:
+        """Joint nonlinear fit of all effects' parameters on every sample (empirical terms projected out).
+
+        Returns
+        -------
+        params : list of ndarray
+        rss : float
+        x : ndarray
+            Scaled parameter vector.
+        fun : callable
+            The residual function of the scaled vector (for the Jacobian).
+        jac : ndarray
+            Jacobian of ``fun`` at the solution (scaled parameters).
+        """
+        sizes = [e.n_params for e in effects]
+        scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects]) if effects else np.zeros(0)
+        lo = np.concatenate([np.array(e.lower) for e in effects]) / scales if effects else np.zeros(0)
+        hi = np.concatenate([np.array(e.upper) for e in effects]) / scales if effects else np.zeros(0)
+        P = projector(self._emp_matrix(terms))
+
+        def unpack(xs: np.ndarray) -> list[tuple[Effect, np.ndarray]]:
+            out, i = [], 0
+            for e, k in zip(effects, sizes):
+                out.append((e, xs[i:i + k] * e.scale))
+                i += k
+            return out
+
+        def fun(xs: np.ndarray) -> np.ndarray:
+            pred = self.predict(unpack(xs))
+            return P(np.concatenate([y - p for y, p in zip(self.y, pred)]))
+
+        if not effects:
+            r = fun(np.zeros(0))
+            return [], float(r @ r), np.zeros(0), fun, np.zeros((r.size, 0))
+        x0 = np.clip(np.concatenate([np.asarray(p, dtype=float) for p in p0]) / scales, lo, hi)
+        got = chord_fit(fun, x0, lo, hi)
+        if got is not None:
+            x, r, J, nfev = got
+            self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord", "nfev": nfev})
+            return [p for _, p in unpack(x)], float(r @ r), x, fun, J
+        sol = optimize.least_squares(fun, x0, jac=lambda x: fd_jac(fun, x, lo, hi, h=0.01), bounds=(lo, hi),
+                                     method="trf", x_scale=1.0, max_nfev=max_nfev, xtol=1e-5, ftol=1e-7)
+        self.fit_stats.append({"effects": [e.name for e in effects], "method": "trf", "nfev": int(sol.nfev),
+                               "njev": int(sol.njev or 0), "status": int(sol.status)})
+        params = [p for _, p in unpack(sol.x)]
+        return params, float(2.0 * sol.cost), sol.x, fun, sol.jac
+
+    def _declared_total(self, e: Effect, p: np.ndarray) -> tuple[float | None, float | None]:
+        """For a correction to a declared error (the runs declare the default instance of ``e.key``,
+        the same value in every run): (declared value, implied total); else (None, None). A
+        two-component error's declared part lies along 0 deg of its frame."""
+        if e.family != "table4":
+            return None, None
+        vals = {r.declared.get(e.key) for r in self.runs}
+        if len(vals) != 1 or None in vals:
+            return None, None
+        defaults = {k: v for k, v in ERROR_TYPES[e.key].defaults.items()}
+        if any(defaults.get(k, v) != v for k, v in e.instance):
+            return None, None
+        dv = float(vals.pop())
+        if e.polar:
+            return dv, float(math.hypot(dv + float(p[0]), float(p[1])))
+        return dv, dv + float(p[0])
+
+    def intervals(self) -> list[FittedEffect]:
+        """The reported effects: each active effect's size with its 95 % confidence interval from the
+        Jacobian (forward differences) of the joint fit on all samples and the residual variance,
+        widened by ``sqrt((1 + rho) / (1 - rho))`` for a lag-1 residual autocorrelation ``rho > 0``."""
+        effects = [a.effect for a in self.active]
+        n_emp = sum(t.n_cols for t in self.empirical)
+        fitted: list[FittedEffect] = []
+        if effects:
+            scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
+            lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
+            hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
+            P = projector(self._emp_matrix(self.empirical))
+            sizes = [e.n_params for e in effects]
+
+            def fun(xs):
+                out, i = [], 0
+                for e, k in zip(effects, sizes):
+                    out.append((e, xs[i:i + k] * e.scale))
+                    i += k
+                pred = self.predict(out)
+                return P(np.concatenate([y - p for y, p in zip(self.y, pred)]))
+
+            x = np.concatenate([a.p for a in self.active]) / scales
+            r = fun(x)
+            J = fd_jac(fun, x, lo, hi, h=0.01, f0=r)
+            p_tot = x.size + n_emp
+            dof = max(1, self.n - p_tot)
+            s2 = float(r @ r) / dof
+            try:
+                cov_s = s2 * np.linalg.pinv(J.T @ J)
+            except np.linalg.LinAlgError:
+                cov_s = np.full((x.size, x.size), np.nan)
+            cov = cov_s * np.outer(scales, scales)
+            sd = np.sqrt(np.clip(np.diag(cov_s), 1e-300, None))
+            self._corr = cov_s / np.outer(sd, sd)
+            self._param_index, j0 = [], 0
+            for e in effects:
+                self._param_index.append(list(range(j0, j0 + e.n_params)))
+                j0 += e.n_params
+            rho = max(0.0, lag1_autocorr(r))
+            infl = math.sqrt((1 + rho) / (1 - rho)) if rho < 0.99 else 10.0
+            tq = float(stats.t.ppf(0.975, dof))
+            i = 0
+            for a in self.active:
+                e, k = a.effect, a.effect.n_params
+                C = cov[i:i + k, i:i + k]
+                a.cov = C
+                i += k
+                val = e.value(a.p)
+                if e.polar:
+                    mag, ang = e.magnitude_angle(a.p)
+                    g = a.p / mag if mag > 0 else np.array([1.0, 0.0])
+                    se = float(math.sqrt(max(g @ C @ g, 0.0)))
+                    params = {"x": float(a.p[0]), "y": float(a.p[1])}
+                    angle: float | None = ang
+                else:
+                    se = float(math.sqrt(max(C[0, 0], 0.0)))
+                    params = {"value": float(a.p[0])}
+                    angle = None
+                half = tq * se * infl
+                declared, total = self._declared_total(e, a.p)
+                fitted.append(FittedEffect(
+                    e.name, e.key, e.family, e.unit, e.meaning, float(val), float(val - half), float(val + half),
+                    angle, se, params, a.iteration, float(a.info.get("explained_fraction", float("nan"))),
+                    float(a.info.get("F", float("nan"))), float(a.info.get("p_value", float("nan"))),
+                    float(a.info.get("delta_bic", float("nan"))), list(a.info.get("alternatives", [])),
+                    declared, total))
+            if rho > 0.2:
+                self.notes.append(f"the final residual is autocorrelated (lag-1 {rho:.2f}): the confidence intervals "
+                                  f"are widened by {infl:.2f}")
+        return fitted

@@ -1,0 +1,185 @@
+"""The loop's model of a dataset: run conditions (runs that share a declared case are solved once),
+the effects and empirical terms in the model, and the model TE at every reading
+(:func:`rvcalib.forward.te_at`) or on a screening grid (:func:`rvcalib.forward.grid_te`)."""
+from __future__ import annotations
+
+import json
+from typing import Callable
+
+import numpy as np
+
+from rvcalib.dataset import MeasuredDataset
+from rvcalib.effects import Effect, Library, build_library
+from rvcalib.forward import grid_te, merge_case, te_at
+from rvcalib.orders import screen_grid
+from rvcalib.results import Active, EmpiricalTerm
+
+
+class LoopModel:
+    """The loop's model of one dataset: run conditions, the current effects and empirical terms, and
+    the model TE at the readings and on the screening grids (see :mod:`rvcalib.identify`).
+
+    Parameters
+    ----------
+    dataset : MeasuredDataset
+    steps : int or None
+        Requested screening grid, points per output revolution (see
+        :func:`rvcalib.orders.screen_grid`: used when it resolves the orders that matter of the
+        dataset's reducer and is not larger than needed; otherwise the smallest grid that does,
+        with a note). None: that smallest grid.
+    alpha : float
+        Family-wise significance level of the F tests (Bonferroni over the hypotheses screened).
+    max_terms : int
+        Largest number of effects plus empirical terms added.
+    top_k : int
+        Candidates validated through the nonlinear model per iteration.
+    library : Library or None
+        Candidates (default :func:`rvcalib.effects.build_library`).
+    log : callable or None
+        Called with progress strings.
+    screen_points : int or None
+        An explicit screening grid (refused unless it resolves the orders that matter).
+    time_budget_s : float or None
+        Stop adding terms once this many seconds have passed (the result says so).
+    """
+
+    def __init__(self, dataset: MeasuredDataset, steps: int | None = None, alpha: float = 0.01,
+                 max_terms: int = 6, top_k: int = 4, library: Library | None = None,
+                 log: Callable[[str], None] | None = None, screen_points: int | None = None,
+                 time_budget_s: float | None = None) -> None:
+        if not 0 < alpha < 1:
+            raise ValueError(f"alpha {alpha!r} must lie in (0, 1)")
+        if isinstance(max_terms, bool) or not isinstance(max_terms, (int, np.integer)) or max_terms < 1:
+            raise ValueError(f"max_terms {max_terms!r} must be an integer >= 1")
+        if time_budget_s is not None and not (np.isfinite(time_budget_s) and time_budget_s > 0):
+            raise ValueError(f"time_budget_s {time_budget_s!r} must be a positive number of seconds")
+        self.time_budget_s = None if time_budget_s is None else float(time_budget_s)
+        self.ds = dataset
+        self.design = dataset.design
+        self.ratio = float(dataset.ratio)
+        self.period = float(dataset.period_deg)
+        steps = int(steps) if isinstance(steps, np.integer) else steps
+        screen_points = int(screen_points) if isinstance(screen_points, np.integer) else screen_points
+        self.m, grid_note = screen_grid(self.design, steps, screen_points)
+        self.steps = self.m
+        self.alpha = float(alpha)
+        self.max_terms = int(max_terms)
+        self.top_k = int(top_k)
+        self.lib = library if library is not None else build_library(dataset)
+        self.log = log or (lambda s: None)
+        self.runs = dataset.runs
+        self.base = [r.case_dict() for r in self.runs]
+        for b in self.base:
+            b.pop("name", None)
+        # conditions: runs that share a declared case are solved once
+        keys: dict[str, int] = {}
+        self.cond_of: list[int] = []
+        self.cond_base: list[dict] = []
+        for b in self.base:
+            k = json.dumps(b, sort_keys=True)
+            if k not in keys:
+                keys[k] = len(self.cond_base)
+                self.cond_base.append(b)
+            self.cond_of.append(keys[k])
+        self._cond_runs = [[i for i, c in enumerate(self.cond_of) if c == cc] for cc in range(len(self.cond_base))]
+        self.y = [r.te_arcsec for r in self.runs]
+        self.n = int(sum(v.size for v in self.y))
+        self.nc = self.m * len(self.runs)
+        gdeg = np.arange(self.m) * (self.period / self.m)
+        self.coarse_in_deg = gdeg
+        self.coarse_out_deg = gdeg / self.ratio
+        self.active: list[Active] = []
+        self.empirical: list[EmpiricalTerm] = []
+        self.emp_coef = np.zeros(0)
+        self.sig: dict[str, list[list[np.ndarray] | None]] = {}
+        self.notes: list[str] = list(self.lib.notes) + ([grid_note] if grid_note else [])
+        self._emp_info: dict[EmpiricalTerm, tuple[int, float]] = {}
+        self.fit_stats: list[dict] = []
+
+    # ------------------------------------------------------------------ model
+    def _case(self, i_cond: int, active: list[tuple[Effect, np.ndarray]]) -> dict:
+        errs: list[tuple[str, dict]] = []
+        model: dict[str, float] = {}
+        for e, p in active:
+            errs.extend(e.error_items(p))
+            model.update(e.model_options(p))
+        return merge_case(self.cond_base[i_cond], errs, model)
+
+    def _phys_grid(self, active: list[tuple[Effect, np.ndarray]], steps: int) -> list[np.ndarray]:
+        """Model TE on the grid for each condition."""
+        phys = [(e, p) for e, p in active if e.family != "measurement"]
+        return [grid_te(self._case(c, phys), steps) for c in range(len(self.cond_base))]
+
+    def _meas(self, active, input_deg: np.ndarray, output_deg: np.ndarray) -> np.ndarray:
+        out = np.zeros(np.asarray(input_deg).size)
+        for e, p in active:
+            if e.family == "measurement":
+                out = out + e.reading_arcsec(input_deg, output_deg, p)
+        return out
+
+    def predict(self, active: list[tuple[Effect, np.ndarray]]) -> list[np.ndarray]:
+        """Model TE (physics + measurement effects) at every sample of every run, arcsec.
+
+        The physics is solved exactly at the readings (:func:`rvcalib.forward.te_at`, one solve per
+        run condition over the union of its runs' readings), not interpolated from the model grid:
+        the TE has kinks and crank-order content that no practical grid resolves.
+        """
+        phys = [(e, p) for e, p in active if e.family != "measurement"]
+        out: list[np.ndarray] = [np.empty(0)] * len(self.runs)
+        for c, members in enumerate(self._cond_runs):
+            x = np.concatenate([self.runs[i].input_deg for i in members])
+            te = te_at(self._case(c, phys), x)
+            j = 0
+            for i in members:
+                r = self.runs[i]
+                out[i] = te[j:j + r.input_deg.size] + self._meas(active, r.input_deg, r.output_deg)
+                j += r.input_deg.size
+        return out
+
+    def predict_grid(self, active, ms: int | None = None) -> list[np.ndarray]:
+        """Model TE at the points of an ``ms``-point grid (default the coarse grid) for every run,
+        solved on that grid (``ms`` divides the coarse grid)."""
+        ms = self.m if ms is None else int(ms)
+        g = self._phys_grid(active, ms)
+        sub = self.m // ms
+        meas = self._meas(active, self.coarse_in_deg[::sub], self.coarse_out_deg[::sub])
+        return [g[self.cond_of[i]] + meas for i in range(len(self.runs))]
+
+    def _sub_idx(self, ms: int) -> np.ndarray:
+        """Indices of an ``ms``-point grid's points in the concatenated coarse vector."""
+        sub = self.m // ms
+        return np.concatenate([i * self.m + np.arange(0, self.m, sub) for i in range(len(self.runs))])
+
+    def _emp_matrix(self, terms: list[EmpiricalTerm], coarse: bool = False) -> np.ndarray | None:
+        if not terms:
+            return None
+        blocks = []
+        for r in self.runs:
+            th = np.radians(self.coarse_out_deg) if coarse else np.radians(r.input_deg / self.ratio)
+            blocks.append(np.column_stack([t.columns(th, r.direction, r.load_Nm) for t in terms]))
+        return np.vstack(blocks)
+
+    def _pairs(self, active: list[Active] | None = None) -> list[tuple[Effect, np.ndarray]]:
+        return [(a.effect, a.p) for a in (self.active if active is None else active)]
+
+    def full_residual(self, active_pairs, terms: list[EmpiricalTerm]) -> tuple[np.ndarray, np.ndarray]:
+        """Concatenated residual after projecting out the empirical terms, and their coefficients."""
+        pred = self.predict(active_pairs)
+        r = np.concatenate([y - p for y, p in zip(self.y, pred)])
+        E = self._emp_matrix(terms)
+        if E is None:
+            return r, np.zeros(0)
+        coef, *_ = np.linalg.lstsq(E, r, rcond=None)
+        return r - E @ coef, coef
+
+    def split(self, v: np.ndarray) -> list[np.ndarray]:
+        """Split a concatenated per-sample vector into runs."""
+        out, i = [], 0
+        for y in self.y:
+            out.append(v[i:i + y.size])
+            i += y.size
+        return out
+
+    def _p_cur(self) -> int:
+        """Parameters in the model now (effects' components and empirical columns)."""
+        return sum(a.effect.n_params for a in self.active) + sum(t.n_cols for t in self.empirical)
