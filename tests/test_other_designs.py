@@ -6,8 +6,6 @@ disc lies on the exact profile within the tolerance. The study on these designs 
 tests/test_stackup_reducer.py, the loop in tests/test_calib_design.py."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
@@ -18,6 +16,7 @@ from rvcad.geometry import ReducerGeometry
 from rvdyn.contacts import ContactLaw
 from rvdyn.solver import ARCSEC_PER_RAD
 from rvdyn.te import run_te
+from closed_forms import pin_levers
 from test_rvcad_helpers import stl_chords, stl_vertices
 
 DESIGNS = {"ratio81": ({"z_sun": 18, "z_planet": 36}, 81.0),
@@ -36,20 +35,6 @@ def test_ideal_parts_zero_te_and_exact_ratio(name: str) -> None:
         assert r.stats["ratio"] == pytest.approx(ratio, rel=1e-6)
 
 
-def _largest_lever(g: ReducerGeometry, theta_in: np.ndarray) -> np.ndarray:
-    """Largest closed-form pin lever lam_i = (i Z1/Z2) e (n_i . u'(psi + k pi)) at the ideal pose, mm
-    (derivation: tests/test_rvdyn_physics.py and docs/physics.md)."""
-    d = g.design
-    to, ps = g.ideal_state(theta_in)
-    _, nrm, _, _ = g.pin_gaps(to, ps)
-    lam = np.empty(nrm.shape[:-1])
-    for k in range(d.n_discs):
-        phi = ps[:, 0] + k * math.pi - to
-        up = np.stack([-np.sin(phi), np.cos(phi)], -1)
-        lam[:, k] = d.ratio * d.z_sun / d.z_planet * d.eccentricity_mm * np.einsum("nzi,ni->nz", nrm[:, k], up)
-    return lam.max(axis=(1, 2))
-
-
 @pytest.mark.parametrize("name", DESIGNS)
 def test_pin_radius_clearance_closed_form(name: str) -> None:
     design, _ = DESIGNS[name]
@@ -57,7 +42,7 @@ def test_pin_radius_clearance_closed_form(name: str) -> None:
     case = Case.from_dict({"design": design, "errors": {"pin_radius": -dr_um}})
     g = ReducerGeometry(case)
     r = run_te(case, "analytic", STEPS, load_Nm=0.0, geom=g)
-    lam_max = _largest_lever(g, np.radians(r.table["input_deg"].to_numpy()))
+    lam_max = pin_levers(g, np.radians(r.table["input_deg"].to_numpy())).max(axis=(1, 2))
     expect = -dr_um * 1e-3 / lam_max * ARCSEC_PER_RAD
     # The paper's design agrees to 0.2 % (tests/test_rvdyn_physics.py); the 30-pin design to 0.39 %,
     # the same at dr = 5, 2.5 and 1.25 um (so not a second-order term of dr): an open 0.4 % gap of the

@@ -14,6 +14,8 @@ from rvdyn.contacts import AnalyticContacts, ContactLaw
 from rvdyn.solver import ARCSEC_PER_RAD, InterferenceError, QuasiStaticSolver
 from rvdyn.te import backlash, run_te
 
+from closed_forms import pin_levers
+
 STEPS = 144
 
 
@@ -42,32 +44,13 @@ def test_ideal_parts_under_load_wind_up_scales_with_contact_law() -> None:
     assert minus.stats["mean"] == pytest.approx(-r1.stats["mean"], rel=1e-3)
 
 
-def _lever_arms(geom: ReducerGeometry, theta_in: np.ndarray) -> np.ndarray:
-    """Closed-form lever lam_i = (i Z1/Z2) e (n_i . u'(psi + k pi)) of every pin at the ideal pose, mm.
-
-    With the input held and stage I rigid, turning the output by dtheta turns the crank by
-    (1 + Z1/Z2) dtheta; subtracting the conjugate motion (dpsi = -Zc dtheta, no gap change)
-    leaves a pure crank turn of (i Z1/Z2) dtheta, which moves each disc by e u'(psi + k pi) per
-    radian, so the gap of pin i changes by -lam_i dtheta.
-    """
-    d = geom.design
-    to, ps = geom.ideal_state(theta_in)
-    _, nrm, _, _ = geom.pin_gaps(to, ps)  # normals in the profile frames (= fixed frame rotated by theta_out)
-    lam = np.empty(nrm.shape[:-1])
-    for k in range(d.n_discs):
-        phi = ps[:, 0] + k * math.pi + to  # direction of u' expressed in the disc frame: psi + k pi + pi/2 - theta
-        up = np.stack([-np.sin(phi - to - to), np.cos(phi - to - to)], -1)  # u'(psi + k pi - theta_out)
-        lam[:, k] = d.ratio * d.z_sun / d.z_planet * d.eccentricity_mm * np.einsum("nzi,ni->nz", nrm[:, k], up)
-    return lam
-
-
 def test_pin_radius_reduction_clearance_to_angle_and_backlash() -> None:
     dr_um = 5.0
     case = Case.from_dict({"errors": {"pin_radius": -dr_um}})
     g = ReducerGeometry(case)
     r = run_te(case, "analytic", STEPS, load_Nm=0.0, geom=g)
     th = np.radians(r.table["input_deg"].to_numpy())
-    lam_max = _lever_arms(g, th).max(axis=(1, 2))
+    lam_max = pin_levers(g, th).max(axis=(1, 2))
     expect = -dr_um * 1e-3 / lam_max * ARCSEC_PER_RAD
     assert r.table["te_arcsec"].to_numpy() == pytest.approx(expect, rel=2e-3)
     # the largest lever is close to e * i * Z1/Z2 = 52.43 mm (the pin whose normal lines up with u')

@@ -17,6 +17,8 @@ from rvcad.geometry import ReducerGeometry
 from rvcad.params import Design
 from rvdyn.solver import ARCSEC_PER_RAD
 from rvdyn.te import input_angles
+
+from closed_forms import pin_levers
 from rvstudy import cli
 from rvstudy.capability import allocation, capability, clopper_pearson, sobol_from_design
 from rvstudy.features import case_dict, draw, features
@@ -30,16 +32,7 @@ def _lever_max(design: Design, steps: int) -> np.ndarray:
     """Largest closed-form pin lever (i Z1/Z2) e (n_i . u'(psi + k pi - theta_out)) at each step, mm
     (docs/physics.md section 6)."""
     g = ReducerGeometry(Case.from_dict({"design": design.to_dict()}))
-    th = input_angles(g.ratio, steps, 1.0, 1)
-    to, ps = g.ideal_state(th)
-    _, nrm, _, _ = g.pin_gaps(to, ps)
-    lam = np.empty(nrm.shape[:-1])
-    for k in range(design.n_discs):
-        a = ps[:, 0] + k * math.pi - to
-        up = np.stack([-np.sin(a), np.cos(a)], -1)
-        lam[:, k] = design.ratio * design.z_sun / design.z_planet * design.eccentricity_mm * np.einsum(
-            "nzi,ni->nz", nrm[:, k], up)
-    return lam.max(axis=(1, 2))
+    return pin_levers(g, input_angles(g.ratio, steps, 1.0, 1)).max(axis=(1, 2))
 
 
 @pytest.fixture(scope="module")
