@@ -1,0 +1,81 @@
+"""Benchmark of one Monte Carlo draw case of the full solver (analytic contacts, one revolution).
+
+Run: ``python benchmarks/bench_mc_draw.py [--case study|pins] [--steps 360] [--repeat 2] [--profile]``.
+``study`` (default): one draw of the default stack-up study (``rvstudy.features``, as ``run_full_mc``).
+``pins``: pin-wise ``pin_radius``, ``pin_pitch`` and ``pin_circle_diameter`` lists of Zp normal draws
+(sigma = paper value / 3, seed 1) and ``disc_phase`` 0.03 deg. Prints seconds per draw case (best of --repeat,
+one core), the TE peak-to-peak, and the time spent in ``CycloidProfile.signed_distance``.
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import os
+import pstats
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
+
+import numpy as np  # noqa: E402
+
+from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
+from rvcad.params import Design  # noqa: E402
+from rvdyn.te import run_te  # noqa: E402
+
+
+def draw_case(seed: int = 1) -> Case:
+    """One stack-up-like draw: pin-wise errors at sigma = paper value / 3, disc phase 0.03 deg."""
+    zp = Design().z_pins
+    rng = np.random.default_rng(seed)
+    errs = {k: [float(v) for v in rng.normal(0.0, ERROR_TYPES[k].paper_value / 3.0, zp)]
+            for k in ("pin_radius", "pin_pitch", "pin_circle_diameter")}
+    errs["disc_phase"] = 0.03
+    return Case.from_dict({"name": "mc-draw", "errors": errs})
+
+
+def study_case(seed: int = 1) -> Case:
+    """One draw of the default stack-up study (every default tolerance, as ``run_full_mc`` builds it)."""
+    from rvstudy.features import draw, features, make_draw_case
+    from rvstudy.study import StudyConfig
+    cfg = StudyConfig()
+    design = Design()
+    feats = features(cfg.tolerances, design)
+    X = draw(cfg.tolerances, feats, 1, np.random.default_rng([seed, 2]))
+    return make_draw_case(feats, X.iloc[0], design, "mc-study-draw", cfg.load_Nm)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--steps", type=int, default=360)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--profile", action="store_true", help="print the top cProfile entries")
+    ap.add_argument("--case", choices=["pins", "study"], default="study",
+                    help="pins: pin-wise lists + disc phase; study: one draw of the default stack-up study")
+    a = ap.parse_args()
+    case = draw_case() if a.case == "pins" else study_case()
+    best = cpu = np.inf
+    for _ in range(a.repeat):
+        t, c = time.perf_counter(), time.process_time()
+        r = run_te(case, "analytic", a.steps)
+        best = min(best, time.perf_counter() - t)
+        cpu = min(cpu, time.process_time() - c)
+    print(f"MC draw case, analytic, {a.steps} steps: {best:.3f} s wall, {cpu:.3f} s CPU (best of {a.repeat})  "
+          f"pp {r.stats['pp']:.6f} arcsec  mean {r.stats['mean']:.6f} arcsec")
+    pr = cProfile.Profile()
+    pr.enable()
+    run_te(case, "analytic", a.steps)
+    pr.disable()
+    st = pstats.Stats(pr)
+    for (fn, _line, name), v in st.stats.items():
+        if name in ("signed_distance", "foot_point") and fn.endswith("profile.py"):
+            print(f"  {name}: {v[1]} calls, {v[3]:.3f} s cumulative (under cProfile)")
+    if a.profile:
+        st.sort_stats("cumulative").print_stats(25)
+
+
+if __name__ == "__main__":
+    main()
