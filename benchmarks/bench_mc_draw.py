@@ -1,7 +1,8 @@
 """Benchmark of one Monte Carlo draw case of the full solver (analytic contacts, one revolution).
 
 Run: ``python benchmarks/bench_mc_draw.py [--case study|pins] [--steps 360] [--repeat 2] [--profile]``.
-``study`` (default): one draw of the default stack-up study (``rvstudy.features``, as ``run_full_mc``).
+``study`` (default): one draw of the default stack-up study (``rvstudy.features``), solved as
+``rvstudy.stackup.responses_of`` does: the TE run (360 steps) and the four play/rigidity runs.
 ``pins``: pin-wise ``pin_radius``, ``pin_pitch`` and ``pin_circle_diameter`` lists of Zp normal draws
 (sigma = paper value / 3, seed 1) and ``disc_phase`` 0.03 deg. Prints seconds per draw case (best of --repeat,
 one core), the TE peak-to-peak, and the time spent in ``CycloidProfile.signed_distance``.
@@ -37,15 +38,21 @@ def draw_case(seed: int = 1) -> Case:
     return Case.from_dict({"name": "mc-draw", "errors": errs})
 
 
-def study_case(seed: int = 1) -> Case:
-    """One draw of the default stack-up study (every default tolerance, as ``run_full_mc`` builds it)."""
+def study_cases(seed: int = 1) -> list[tuple[Case, int]]:
+    """One draw of the default stack-up study as ``run_full_mc`` solves it: (case, steps) of the TE run at
+    the study load and the four play/rigidity runs (+-3 % and +-100 % rated, play positions)."""
     from rvstudy.features import draw, features, make_draw_case
+    from rvstudy.stackup import PLAY_LOAD_FRACTION, play_positions
     from rvstudy.study import StudyConfig
     cfg = StudyConfig()
     design = Design()
     feats = features(cfg.tolerances, design)
     X = draw(cfg.tolerances, feats, 1, np.random.default_rng([seed, 2]))
-    return make_draw_case(feats, X.iloc[0], design, "mc-study-draw", cfg.load_Nm)
+    out = [(make_draw_case(feats, X.iloc[0], design, "mc-te", cfg.load_Nm), cfg.steps)]
+    for frac, d in ((PLAY_LOAD_FRACTION, 1), (PLAY_LOAD_FRACTION, -1), (1.0, 1), (1.0, -1)):
+        out.append((make_draw_case(feats, X.iloc[0], design, "mc-play", frac * cfg.rated_Nm, d),
+                    play_positions(design)))
+    return out
 
 
 def main() -> None:
@@ -56,22 +63,29 @@ def main() -> None:
     ap.add_argument("--case", choices=["pins", "study"], default="study",
                     help="pins: pin-wise lists + disc phase; study: one draw of the default stack-up study")
     a = ap.parse_args()
-    case = draw_case() if a.case == "pins" else study_case()
+    runs = [(draw_case(), a.steps)] if a.case == "pins" else study_cases()
+
+    def solve_all() -> list:
+        return [run_te(c, "analytic", n) for c, n in runs]
+
     best = cpu = np.inf
     for _ in range(a.repeat):
         t, c = time.perf_counter(), time.process_time()
-        r = run_te(case, "analytic", a.steps)
+        rs = solve_all()
         best = min(best, time.perf_counter() - t)
         cpu = min(cpu, time.process_time() - c)
-    print(f"MC draw case, analytic, {a.steps} steps: {best:.3f} s wall, {cpu:.3f} s CPU (best of {a.repeat})  "
-          f"pp {r.stats['pp']:.6f} arcsec  mean {r.stats['mean']:.6f} arcsec")
+    print(f"MC draw ({a.case}: {len(runs)} analytic solves, steps {[n for _, n in runs]}): {best:.3f} s wall, "
+          f"{cpu:.3f} s CPU (best of {a.repeat})")
+    for (c, n), r in zip(runs, rs):
+        print(f"  {c.name} load {c.load_Nm:g} N m dir {c.direction:+d}: pp {r.stats['pp']:.6f} arcsec  "
+              f"mean {r.stats['mean']:.6f} arcsec")
     pr = cProfile.Profile()
     pr.enable()
-    run_te(case, "analytic", a.steps)
+    solve_all()
     pr.disable()
     st = pstats.Stats(pr)
     for (fn, _line, name), v in st.stats.items():
-        if name in ("signed_distance", "foot_point") and fn.endswith("profile.py"):
+        if name in ("signed_distance", "foot_point", "solve") and fn.endswith(("profile.py", "solver.py")):
             print(f"  {name}: {v[1]} calls, {v[3]:.3f} s cumulative (under cProfile)")
     if a.profile:
         st.sort_stats("cumulative").print_stats(25)
