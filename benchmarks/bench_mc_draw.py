@@ -3,6 +3,8 @@
 Run: ``python benchmarks/bench_mc_draw.py [--case study|pins] [--steps 360] [--repeat 2] [--profile]``.
 ``study`` (default): one draw of the default stack-up study (``rvstudy.features``), solved as
 ``rvstudy.stackup.responses_of`` does: the TE run (360 steps) and the four play/rigidity runs.
+``equidistant``: the ``pins`` errors on a disc cut with a 0.1 mm equidistant modification (every pin far
+off the profile, the worst case for the global foot search).
 ``pins``: pin-wise ``pin_radius``, ``pin_pitch`` and ``pin_circle_diameter`` lists of Zp normal draws
 (sigma = paper value / 3, seed 1) and ``disc_phase`` 0.03 deg. Prints seconds per draw case (best of --repeat,
 one core), the TE peak-to-peak, and the time spent in ``CycloidProfile.signed_distance``.
@@ -28,14 +30,18 @@ from rvcad.params import Design  # noqa: E402
 from rvdyn.te import run_te  # noqa: E402
 
 
-def draw_case(seed: int = 1) -> Case:
+def draw_errors(seed: int = 1) -> dict:
     """One stack-up-like draw: pin-wise errors at sigma = paper value / 3, disc phase 0.03 deg."""
     zp = Design().z_pins
     rng = np.random.default_rng(seed)
     errs = {k: [float(v) for v in rng.normal(0.0, ERROR_TYPES[k].paper_value / 3.0, zp)]
             for k in ("pin_radius", "pin_pitch", "pin_circle_diameter")}
     errs["disc_phase"] = 0.03
-    return Case.from_dict({"name": "mc-draw", "errors": errs})
+    return errs
+
+
+def draw_case(seed: int = 1) -> Case:
+    return Case.from_dict({"name": "mc-draw", "errors": draw_errors(seed)})
 
 
 def study_cases(seed: int = 1) -> list[tuple[Case, int]]:
@@ -60,10 +66,18 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=360)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--profile", action="store_true", help="print the top cProfile entries")
-    ap.add_argument("--case", choices=["pins", "study"], default="study",
-                    help="pins: pin-wise lists + disc phase; study: one draw of the default stack-up study")
+    ap.add_argument("--case", choices=["pins", "study", "equidistant"], default="study",
+                    help="pins: pin-wise lists + disc phase; study: one draw of the default stack-up study; "
+                         "equidistant: the pins-case errors on a disc with a 0.1 mm equidistant modification "
+                         "(every pin stands ~0.1 mm off the profile: the global foot search on every point)")
     a = ap.parse_args()
-    runs = [(draw_case(), a.steps)] if a.case == "pins" else study_cases()
+    if a.case == "pins":
+        runs = [(draw_case(), a.steps)]
+    elif a.case == "equidistant":
+        runs = [(Case.from_dict({"name": "mc-equidistant", "design": {"profile_equidistant_mm": 0.1},
+                                 "errors": draw_errors()}), a.steps)]
+    else:
+        runs = study_cases()
 
     def solve_all() -> list:
         return [run_te(c, "analytic", n) for c, n in runs]
