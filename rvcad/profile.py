@@ -365,20 +365,41 @@ class CycloidProfile:
             start = np.empty_like(tf)
             # q on the grid t + g by the angle-addition formulas: the trig of the 129 offsets once, of
             # each foot once, products on the grid (q agrees with :meth:`q` to rounding, ~1e-14 mm, so
-            # the nearest grid point, hence the Newton start, is the same but at exact ties, where
+            # the nearest grid point, hence the Newton start, is the same but at rounding-level ties, where
             # either start leads to an equally near foot)
             Rcg, Rsg = R * np.cos(grid), R * np.sin(grid)
             ecg, esg = e * np.cos(Z * grid), e * np.sin(Z * grid)
             a2f = Z * tf + self.cam_phase
             cf1, sf1, cf2, sf2 = np.cos(tf), np.sin(tf), np.cos(a2f), np.sin(a2f)
-            for c0 in range(0, len(pf), 4096):  # bounded memory: 4096 x 129 grid points at a time
-                sl = slice(c0, c0 + 4096)
+            chunk = 1024  # 1024 x 129 grid points at a time, in place (cache-sized work arrays)
+            gx, gy, tmp = (np.empty((min(chunk, len(pf)), grid.size)) for _ in range(3))
+            for c0 in range(0, len(pf), chunk):
+                sl = slice(c0, c0 + chunk)
+                m = len(tf[sl])
+                x, y, w = gx[:m], gy[:m], tmp[:m]
                 c1g, s1g = cf1[sl, None], sf1[sl, None]
                 c2g, s2g = cf2[sl, None], sf2[sl, None]
-                gx = c1g * Rcg - s1g * Rsg - c2g * ecg + s2g * esg - pf[sl, 0, None]
-                gy = s1g * Rcg + c1g * Rsg - s2g * ecg - c2g * esg - pf[sl, 1, None]
-                j = np.argmin(gx * gx + gy * gy, axis=1)
-                start[sl] = tf[sl] + grid[j]
+                # x = R cos(t+g) - e cos(Z(t+g)+phi_c) - px, y likewise (evaluated left to right)
+                np.multiply(c1g, Rcg, out=x)
+                np.multiply(s1g, Rsg, out=w)
+                x -= w
+                np.multiply(c2g, ecg, out=w)
+                x -= w
+                np.multiply(s2g, esg, out=w)
+                x += w
+                x -= pf[sl, 0, None]
+                np.multiply(s1g, Rcg, out=y)
+                np.multiply(c1g, Rsg, out=w)
+                y += w
+                np.multiply(s2g, ecg, out=w)
+                y -= w
+                np.multiply(c2g, esg, out=w)
+                y -= w
+                y -= pf[sl, 1, None]
+                x *= x
+                y *= y
+                x += y
+                start[sl] = tf[sl] + grid[np.argmin(x, axis=1)]
             t2 = self.foot_point(pf, start)
             d_old = np.linalg.norm(pf - qt[far], axis=-1)
             d_new = np.linalg.norm(pf - self.q(t2), axis=-1)
