@@ -1,0 +1,109 @@
+"""Benchmark of one Monte Carlo draw case of the full solver (analytic contacts, one revolution).
+
+Run: ``python benchmarks/bench_mc_draw.py [--case study|pins] [--steps 360] [--repeat 2] [--profile]``.
+``study`` (default): one draw of the default stack-up study (``rvstudy.features``), solved as
+``rvstudy.stackup.responses_of`` does: the TE run (360 steps) and the four play/rigidity runs.
+``equidistant``: the ``pins`` errors on a disc cut with a 0.1 mm equidistant modification (every pin far
+off the profile, the worst case for the global foot search).
+``pins``: pin-wise ``pin_radius``, ``pin_pitch`` and ``pin_circle_diameter`` lists of Zp normal draws
+(sigma = paper value / 3, seed 1) and ``disc_phase`` 0.03 deg. Prints seconds per draw case (best of --repeat,
+one core), the TE peak-to-peak, and the time spent in ``CycloidProfile.signed_distance``.
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import os
+import pstats
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
+
+import numpy as np  # noqa: E402
+
+from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
+from rvcad.params import Design  # noqa: E402
+from rvdyn.te import run_te  # noqa: E402
+
+
+def draw_errors(seed: int = 1) -> dict:
+    """One stack-up-like draw: pin-wise errors at sigma = paper value / 3, disc phase 0.03 deg."""
+    zp = Design().z_pins
+    rng = np.random.default_rng(seed)
+    errs = {k: [float(v) for v in rng.normal(0.0, ERROR_TYPES[k].paper_value / 3.0, zp)]
+            for k in ("pin_radius", "pin_pitch", "pin_circle_diameter")}
+    errs["disc_phase"] = 0.03
+    return errs
+
+
+def draw_case(seed: int = 1) -> Case:
+    return Case.from_dict({"name": "mc-draw", "errors": draw_errors(seed)})
+
+
+def study_cases(seed: int = 1) -> list[tuple[Case, int]]:
+    """One draw of the default stack-up study as ``run_full_mc`` solves it: (case, steps) of the TE run at
+    the study load and the four play/rigidity runs (+-3 % and +-100 % rated, play positions)."""
+    from rvstudy.features import draw, features, make_draw_case
+    from rvstudy.stackup import PLAY_LOAD_FRACTION, play_positions
+    from rvstudy.study import StudyConfig
+    cfg = StudyConfig()
+    design = Design()
+    feats = features(cfg.tolerances, design)
+    X = draw(cfg.tolerances, feats, 1, np.random.default_rng([seed, 2]))
+    out = [(make_draw_case(feats, X.iloc[0], design, "mc-te", cfg.load_Nm), cfg.steps)]
+    for frac, d in ((PLAY_LOAD_FRACTION, 1), (PLAY_LOAD_FRACTION, -1), (1.0, 1), (1.0, -1)):
+        out.append((make_draw_case(feats, X.iloc[0], design, "mc-play", frac * cfg.rated_Nm, d),
+                    play_positions(design)))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--steps", type=int, default=360)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--profile", action="store_true", help="print the top cProfile entries")
+    ap.add_argument("--case", choices=["pins", "study", "equidistant"], default="study",
+                    help="pins: pin-wise lists + disc phase; study: one draw of the default stack-up study; "
+                         "equidistant: the pins-case errors on a disc with a 0.1 mm equidistant modification "
+                         "(every pin stands ~0.1 mm off the profile: the global foot search on every point)")
+    a = ap.parse_args()
+    if a.case == "pins":
+        runs = [(draw_case(), a.steps)]
+    elif a.case == "equidistant":
+        runs = [(Case.from_dict({"name": "mc-equidistant", "design": {"profile_equidistant_mm": 0.1},
+                                 "errors": draw_errors()}), a.steps)]
+    else:
+        runs = study_cases()
+
+    def solve_all() -> list:
+        return [run_te(c, "analytic", n) for c, n in runs]
+
+    best = cpu = np.inf
+    for _ in range(a.repeat):
+        t, c = time.perf_counter(), time.process_time()
+        rs = solve_all()
+        best = min(best, time.perf_counter() - t)
+        cpu = min(cpu, time.process_time() - c)
+    print(f"MC draw ({a.case}: {len(runs)} analytic solves, steps {[n for _, n in runs]}): {best:.3f} s wall, "
+          f"{cpu:.3f} s CPU (best of {a.repeat})")
+    for (c, n), r in zip(runs, rs):
+        print(f"  {c.name} load {c.load_Nm:g} N m dir {c.direction:+d}: pp {r.stats['pp']:.6f} arcsec  "
+              f"mean {r.stats['mean']:.6f} arcsec")
+    pr = cProfile.Profile()
+    pr.enable()
+    solve_all()
+    pr.disable()
+    st = pstats.Stats(pr)
+    for (fn, _line, name), v in st.stats.items():
+        if name in ("signed_distance", "foot_point", "solve") and fn.endswith(("profile.py", "solver.py")):
+            print(f"  {name}: {v[1]} calls, {v[3]:.3f} s cumulative (under cProfile)")
+    if a.profile:
+        st.sort_stats("cumulative").print_stats(25)
+
+
+if __name__ == "__main__":
+    main()
