@@ -326,15 +326,20 @@ def steps_option(value: Any, name: str = "--steps", lo: int = 2) -> int:
                           f"{BYTES_PER_STEP / 1000:g} kB per step")
 
 
+def _folders_above(p: Path, name: str) -> None:
+    """Refuse a path that lies under an existing file (its parents must be folders where they exist)."""
+    for parent in p.parents:
+        if parent.exists() and not parent.is_dir():
+            reject(name, str(p), "a path whose folders are folders", f"lies under the file {str(parent)!r}",
+                   OptionError)
+
+
 def output_file(path: str | Path, name: str = "--out") -> Path:
     """An output file path: not an existing folder, and its parent not an existing file."""
     p = Path(path)
     if p.is_dir():
         reject(name, str(p), "a file path (the folder is not overwritten)", "is an existing folder, not a file", OptionError)
-    for parent in p.parents:
-        if parent.exists() and not parent.is_dir():
-            reject(name, str(p), "a path whose folders are folders", f"lies under the file {str(parent)!r}",
-                   OptionError)
+    _folders_above(p, name)
     return p
 
 
@@ -343,10 +348,7 @@ def output_dir(path: str | Path, name: str = "--out") -> Path:
     p = Path(path)
     if p.exists() and not p.is_dir():
         reject(name, str(p), "a folder (created if missing)", "is an existing file, not a folder", OptionError)
-    for parent in p.parents:
-        if parent.exists() and not parent.is_dir():
-            reject(name, str(p), "a path whose folders are folders", f"lies under the file {str(parent)!r}",
-                   OptionError)
+    _folders_above(p, name)
     return p
 
 

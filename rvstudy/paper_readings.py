@@ -43,7 +43,7 @@ import pandas as pd
 
 import rvpaper as paper
 from rvdyn.contacts import ContactLaw
-from rvdyn.runner import Runner as CachedRunner
+from rvdyn.runner import Runner
 from rvstudy.screen import ARCSEC_PER_ARCMIN, make_case
 
 __all__ = ["PATTERNS", "STATISTICS", "LAWS", "READINGS_STEPS", "DEFAULT_READING", "ReadingsResult",
@@ -185,7 +185,7 @@ def run_readings(fs: Any, executor: Any, cache: Any, steps: int = READINGS_STEPS
     runs : list of int or None
         Table 6 run numbers to use (default all 27; tests use a few).
     **runner_kw
-        Passed to :class:`CachedRunner` (e.g. ``solve_fn``).
+        Passed to :class:`Runner` (e.g. ``solve_fn``).
 
     Returns
     -------
@@ -208,7 +208,7 @@ def run_readings(fs: Any, executor: Any, cache: Any, steps: int = READINGS_STEPS
     counters = {"computed": 0, "reused": 0, "failed": 0}
     for law_name in laws:
         law = impact_law if law_name == "impact" else ContactLaw(kind=law_name)
-        runner = CachedRunner(executor, cache, solver, int(steps), law, progress=progress, **runner_kw)
+        runner = Runner(executor, cache, solver, int(steps), law, progress=progress, **runner_kw)
         for label, pattern in patterns.items():
             fsp = dataclasses.replace(fs, patterns={**fs.patterns, "EA": pattern})
             cases = [make_case(fsp.case_errors({fs.errors[f]: float(v) for f, v in zip(fs.names, row)}),

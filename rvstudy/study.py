@@ -51,8 +51,7 @@ from rvstudy.screen import (
 from rvdyn.te import SOLVERS
 import rvpaper as paper
 from rvdyn.cache import CaseCache
-from rvdyn.runner import Executor, make_executor
-from rvdyn.runner import Runner as CachedRunner
+from rvdyn.runner import Executor, Runner, make_executor
 from rvstudy.paper_readings import READINGS_STEPS, run_readings
 from rvstudy.montecarlo import Tolerance, default_tolerances
 from rvstudy.stackup import MC_RESPONSES, play_positions, run_full_mc
@@ -579,10 +578,10 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
     kw = {} if solve_fn is None else {"solve_fn": solve_fn}
     law = ContactLaw(cfg.K, cfg.n)
 
-    made: list[CachedRunner] = []
+    made: list[Runner] = []
 
-    def make_runner(solver: str, steps: int, law: ContactLaw = law) -> CachedRunner:
-        made.append(CachedRunner(ex, cache, solver, steps, law, progress=cfg.progress, **kw))
+    def make_runner(solver: str, steps: int, law: ContactLaw = law) -> Runner:
+        made.append(Runner(ex, cache, solver, steps, law, progress=cfg.progress, **kw))
         return made[-1]
 
     runner = make_runner(cfg.solver, cfg.steps)
@@ -651,7 +650,7 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
     return res
 
 
-def _merged_counters(runners: list[CachedRunner]) -> dict[str, Any]:
+def _merged_counters(runners: list[Runner]) -> dict[str, Any]:
     """The counters of every runner of the run added up (solve-time statistics over all computed cases)."""
     out = {k: sum(getattr(r, k) for r in runners) for k in ("computed", "reused", "failed")}
     s = np.array([x for r in runners for x in r.solve_seconds], dtype=float)
@@ -662,7 +661,7 @@ def _merged_counters(runners: list[CachedRunner]) -> dict[str, Any]:
     return out
 
 
-def _validation(cfg: StudyConfig, fs: FactorSet, runner: CachedRunner, res: StudyResult,
+def _validation(cfg: StudyConfig, fs: FactorSet, runner: Runner, res: StudyResult,
                 base: dict[str, Any] | None = None) -> pd.DataFrame:
     """Random cases uniform in the coded box [-1, 1]^k (seed ``[seed, 1]``), simulated and predicted."""
     rng = np.random.default_rng([cfg.seed, 1])
