@@ -205,6 +205,45 @@ def test_te_at_equals_the_grid_at_its_nodes_in_any_order_and_revolution(directio
     assert np.max(np.abs(te_at(case, x) - g)) < 1e-3
 
 
+
+def test_forward_model_runs_on_the_rvdyn_runner_it_is_given(tmp_path):
+    """rvcalib's forward model is rvdyn's runner: another runner (here with a disk cache) gives the same
+    numbers as the default one, a batch gives what one-by-one calls give, and a case rvdyn cannot
+    evaluate is a ModelEvaluationError (in its slot of a batch) naming the cause."""
+    from rvcalib import forward
+    from rvdyn.runner import Runner
+
+    cases = [{"errors": {"pin_pitch": {"pin": 3, "value": 0.02}}, "load_Nm": 10.0, "direction": d} for d in (1, -1)]
+    one = [forward.grid_te(c, 80) for c in cases]
+    x = grid_angles_deg(80, PERIOD_DEG)[::-7] + PERIOD_DEG
+    at = forward.te_at(cases[1], x)
+    disk = Runner(cache=tmp_path / "cache", memory_bytes=forward.CACHE_BYTES)
+    prev = forward.use_runner(disk)
+    try:
+        many = forward.grid_te_many(cases + [{"errors": {"no_such_error": 1.0}}], 80)
+        for a, b in zip(one, many):
+            np.testing.assert_array_equal(a, b)
+        assert isinstance(many[2], forward.ModelEvaluationError) and "no_such_error" in str(many[2])
+        np.testing.assert_array_equal(forward.te_at_many([cases[1]], [x])[0], at)
+        assert forward.cache_stats()["solves"] == 3 and len(disk.cache.entries()) == 3
+        forward.clear_cache()
+        assert forward.cache_stats()["bytes"] == 0
+        np.testing.assert_array_equal(forward.grid_te(cases[0], 80), one[0])  # now from the disk
+        assert disk.cache.hits == 1 and disk.computed == 3
+    finally:
+        assert forward.use_runner(prev) is disk
+    failing = Runner(solve_fn=lambda p: {"key": p["key"], "status": "failed", "stats": {"seconds": 0.0},
+                                         "te_arcsec": [], "error": "InterferenceError: pins overlap"})
+    forward.use_runner(failing)
+    try:
+        with pytest.raises(forward.ModelEvaluationError, match="could not evaluate the case: InterferenceError"):
+            forward.grid_te(cases[0], 80)
+    finally:
+        forward.use_runner(prev)
+    with pytest.raises(TypeError, match="rvdyn.runner.Runner"):
+        forward.use_runner("serial")
+
+
 def test_ramp_fit_separates_a_trend_from_periodic_orders():
     """One revolution: a ramp is a sawtooth; orders 1..10 beside it do not absorb it, and a periodic
     signal of those orders shows no ramp."""
