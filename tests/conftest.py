@@ -1,4 +1,6 @@
-"""Shared test fixtures: the paper's tables as the package ships them (no folder outside the clone)."""
+"""Shared test fixtures: the paper's tables as the package ships them (no folder outside the clone), the
+shared study runs, and the grouping of the tests for two worker processes (``pytest -n 2 --dist loadgroup``,
+pytest-xdist; see :func:`pytest_collection_modifyitems`)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,6 +8,53 @@ from pathlib import Path
 import pytest
 
 import rvpaper
+
+# ---------------------------------------------------------------------------------------------- test groups
+#: Session fixtures that solve many cases: every module using one runs on the same worker, so each is made once.
+SHARED_SESSION_FIXTURES = ("small_study", "doe_reference")
+#: Modules that solve the same screening (the loop's run conditions on the paper's reducer) share a worker,
+#: so rvcalib's forward runner solves it once (its in-memory cache).
+SHARED_MODULES = (("test_calib_loop", "test_calib_failure_modes"),)
+#: Groups handed out first, the longest first (longest-first keeps both workers busy to the end); the rest
+#: follow in collection order. Names are modules or the merged groups (``study``, ``calib``).
+HEAVY_FIRST = ("calib", "study", "test_stackup_mc", "test_rvcad_export", "test_stackup_reducer", "test_calib_design",
+               "test_paper_readings", "test_stackup_failures")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "xdist_group(name): tests run on one pytest-xdist worker (--dist loadgroup)")
+
+
+def _group_names(items: list[pytest.Item]) -> dict[str, str]:
+    """Module name -> group: the module itself, ``calib`` for :data:`SHARED_MODULES`, ``study`` for the
+    modules using a :data:`SHARED_SESSION_FIXTURES` fixture."""
+    group = {}
+    for it in items:
+        mod = it.path.stem
+        if any(f in it.fixturenames for f in SHARED_SESSION_FIXTURES):
+            group[mod] = "study"
+        else:
+            group.setdefault(mod, mod)
+    for i, mods in enumerate(SHARED_MODULES):
+        for m in mods:
+            if group.get(m) == m:
+                group[m] = "calib" if i == 0 else f"shared{i}"
+    return group
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the marks
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark every test with its group (``xdist_group``, used by ``--dist loadgroup``) and order the tests
+    by group, :data:`HEAVY_FIRST` first; within a group the collection order is kept. Without xdist the
+    marks do nothing and only the order changes (no test depends on another's order)."""
+    group = _group_names(items)
+    first = {g: i for i, g in enumerate(HEAVY_FIRST)}
+    seen: dict[str, int] = {}
+    for it in items:
+        g = group[it.path.stem]
+        seen.setdefault(g, len(seen))
+        it.add_marker(pytest.mark.xdist_group(g))
+    items.sort(key=lambda it: (first.get(group[it.path.stem], len(first)), seen[group[it.path.stem]]))
 
 
 @pytest.fixture(scope="session")
