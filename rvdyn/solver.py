@@ -31,7 +31,7 @@ import numpy as np
 
 from rvcad.geometry import ReducerGeometry
 from rvcad.tolerances import TOL, Tolerances
-from rvdyn.contacts import ContactLaw
+from rvdyn.contacts import AnalyticContacts, ContactLaw
 from rvdyn.options import model_choice, model_value, parse_model
 from rvdyn.physical import PhysicsMixin
 
@@ -46,6 +46,9 @@ MAX_ELASTIC_PENETRATION_MM = 0.1
 
 #: Largest change of a state coordinate (mm) in one outer iteration (trust region of the linearised gaps).
 OUTER_TRUST_MM = 0.01
+
+#: Step (mm of scaled state) of the central differences of the kinematic Jacobians.
+FD_STEP_MM = 1e-6
 
 
 class InterferenceError(ValueError):
@@ -156,26 +159,49 @@ class QuasiStaticSolver(PhysicsMixin):
             ang = ang + turn
         return cen, ang
 
-    def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _stacked(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The states x and their central-difference neighbours in one array.
+
+        Rows ``[0, N)`` are x; block ``1 + 2 i`` holds x + h e_i and block ``2 + 2 i`` holds x - h e_i for each
+        kinematic coordinate i (output and cranks), h = 1e-6 mm. One evaluation of the (row-wise) kinematics on
+        the stacked array gives the same numbers as one call per neighbour, without the per-call overhead.
+        Returns the input angles (tiled) and the states ((1 + 2 (1 + nc)) N, ndof)."""
+        N = x.shape[0]
+        nk = 1 + self.nc
+        X = np.empty(((1 + 2 * nk) * N, self.ndof))
+        X[:N] = x
+        for i in range(nk):
+            xp = X[(1 + 2 * i) * N:(2 + 2 * i) * N]
+            xm = X[(2 + 2 * i) * N:(3 + 2 * i) * N]
+            xp[:] = x
+            xm[:] = x
+            xp[:, i] += FD_STEP_MM
+            xm[:, i] -= FD_STEP_MM
+        return np.tile(th_in, 1 + 2 * nk), X
+
+    def _central(self, v: np.ndarray, N: int) -> np.ndarray:
+        """Central differences of a stacked evaluation v ((1 + 2 nk) N, ...) -> (N, ..., nk)."""
+        nk = 1 + self.nc
+        parts = [(v[(1 + 2 * i) * N:(2 + 2 * i) * N] - v[(2 + 2 * i) * N:(3 + 2 * i) * N]) / (2 * FD_STEP_MM)
+                 for i in range(nk)]
+        return np.stack(parts, axis=-1)
+
+    def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray, stacked=None) -> tuple[np.ndarray, np.ndarray]:
         """Pin gaps (N, nd, Zp) mm and Jacobians (N, nd, Zp, ndof) mm/mm.
 
-        Disc poses are differentiated by central differences (cheap: N x nd values); the pins
-        follow by the chain rule: p = R(-phi)(P - c), dp = -R(-phi) dc + dphi (p_y, -p_x), and
-        the gap's gradient is the outward normal n: dg = n . dp.
+        Disc poses are differentiated by central differences (cheap: N x nd values, all neighbours in
+        one stacked evaluation, :meth:`_stacked`); the pins follow by the chain rule: p = R(-phi)(P - c),
+        dp = -R(-phi) dc + dphi (p_y, -p_x), and the gap's gradient is the outward normal n: dg = n . dp.
         """
         N = x.shape[0]
-        cen, ang = self._poses(th_in, x)
-        h = 1e-6
+        nk = 1 + self.nc
+        TH, X = self._stacked(th_in, x) if stacked is None else stacked
+        cen_all, ang_all = self._poses(TH, X)
+        cen, ang = cen_all[:N], ang_all[:N]
         dcen = np.zeros(cen.shape + (self.ndof,))
         dang = np.zeros(ang.shape + (self.ndof,))
-        for i in range(1 + self.nc):
-            xp, xm = x.copy(), x.copy()
-            xp[:, i] += h
-            xm[:, i] -= h
-            cp, ap = self._poses(th_in, xp)
-            cm, am = self._poses(th_in, xm)
-            dcen[..., i] = (cp - cm) / (2 * h)
-            dang[..., i] = (ap - am) / (2 * h)
+        dcen[..., :nk] = self._central(cen_all, N)
+        dang[..., :nk] = self._central(ang_all, N)
         if self.float_discs:
             for k in range(self.nd):
                 b = 1 + self.nc + 3 * k
@@ -192,27 +218,40 @@ class QuasiStaticSolver(PhysicsMixin):
         gaps = np.empty((N, self.nd, self.zp))
         nx = np.empty_like(gaps)
         ny = np.empty_like(gaps)
-        Cs = np.empty((N, self.nd, self.zp))
-        Rs = np.empty((N, self.nd, self.zp))
+        feet = []
         for k in range(self.nd):
             pts = np.stack([px[:, k].ravel(), py[:, k].ravel()], axis=1)
-            dist, nrm = self.contacts.disc_distance(k, pts, t0[:, k].ravel())
+            tk = t0[:, k].ravel()
+            dist, nrm = self.contacts.disc_distance(k, pts, tk)
             gaps[:, k] = dist.reshape(N, self.zp) - self.geom.pin_radii[None]
             nx[:, k] = nrm[:, 0].reshape(N, self.zp)
             ny[:, k] = nrm[:, 1].reshape(N, self.zp)
-            r_pin = np.broadcast_to(self.geom.pin_radii[None], (N, self.zp)).ravel()
-            Ck, Rk = self._line_C(k, pts, t0[:, k].ravel(), r_pin)
-            Cs[:, k] = Ck.reshape(N, self.zp)
-            Rs[:, k] = Rk.reshape(N, self.zp)
+            foot = getattr(self.contacts, "foot_parameters", lambda _k: None)(k)
+            feet.append((pts, tk, None if foot is None else foot.copy()))
         mx = nx * c - ny * s
         my = nx * s + ny * c
-        self._C_last = Cs.reshape(N, -1)
-        self._R_last = Rs.reshape(N, -1)
+        # the Johnson constants and relative radii of the pin contacts, computed when asked for (the
+        # physical law at every linearisation; the impact law only for the pressures at the solution)
+        self._feet_last = feet
+        self._C_last = self._R_last = None
         self._nrm_last = np.stack([mx, my], axis=-1)                            # fixed frame, (N, nd, Zp, 2)
         lever = nx * py - ny * px
         jac = (-(mx[..., None] * dcen[:, :, None, 0, :] + my[..., None] * dcen[:, :, None, 1, :])
                + lever[..., None] * dang[:, :, None, :])
         return gaps, jac
+
+    def _line_last(self) -> tuple[np.ndarray, np.ndarray]:
+        """Johnson constants C and relative radii R (N, nd Zp) of the pin contacts of the last linearisation."""
+        if self._C_last is None:
+            Cs, Rs = [], []
+            for k, (pts, tk, foot) in enumerate(self._feet_last):
+                r_pin = np.broadcast_to(self.geom.pin_radii[None], (len(tk) // self.zp, self.zp)).ravel()
+                Ck, Rk = self._line_C(k, pts, tk, r_pin, foot)
+                Cs.append(Ck.reshape(-1, self.zp))
+                Rs.append(Rk.reshape(-1, self.zp))
+            self._C_last = np.stack(Cs, axis=1).reshape(len(Cs[0]), -1)
+            self._R_last = np.stack(Rs, axis=1).reshape(len(Rs[0]), -1)
+        return self._C_last, self._R_last
 
     def _stage1(self, th_in: np.ndarray, x: np.ndarray, direction: int, provider: bool) -> np.ndarray:
         to, ps, _, _ = self._unpack(th_in, x)
@@ -220,29 +259,37 @@ class QuasiStaticSolver(PhysicsMixin):
             return self.contacts.stage1_gaps(th_in, to, ps, direction)
         return self.geom.stage1_gaps(th_in, to, ps, direction)
 
-    def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction) -> tuple[np.ndarray, np.ndarray]:
         """Gaps (N, M) mm and their Jacobians (N, M, ndof) mm/mm at the states x.
 
         Columns: the 2 x Zp pin gaps, then the stage I flank gaps of each planet, loaded flank
         (``direction``) first, coast flank (``-direction``, open by the stage I backlash) second.
+        ``direction`` is +1, -1 or an (N,) array of them (one per state).
         The stage I Jacobians are central differences of the closed-form involute gap (the
         kinematic derivative; the provider only supplies the gap value).
         """
         N = x.shape[0]
-        h = 1e-6
-        gaps, jac = self._pin_gaps(th_in, x)
-        g1_parts, j1_parts = [], []
-        for flank in (direction, -direction):
-            g1_parts.append(self._stage1(th_in, x, flank, provider=True))
+        nk = 1 + self.nc
+        dirs = np.broadcast_to(np.asarray(direction), (N,))
+        stacked = self._stacked(th_in, x)
+        gaps, jac = self._pin_gaps(th_in, x, stacked)
+        TH, X = stacked
+        to, ps, _, _ = self._unpack(TH, X)
+        analytic = isinstance(self.contacts, AnalyticContacts)
+        val, der = {}, {}
+        for flank in (1, -1):
+            if not (np.any(dirs == flank) or np.any(dirs == -flank)):
+                continue
+            g_all = self.geom.stage1_gaps(TH, to, ps, flank)
+            # the provider's gap value (the analytic provider's is the closed form just evaluated)
+            val[flank] = g_all[:N] if analytic else self.contacts.stage1_gaps(th_in, to[:N], ps[:N], flank)
             j1 = np.zeros((N, self.nc, self.ndof))
-            for i in range(1 + self.nc):
-                xp, xm = x.copy(), x.copy()
-                xp[:, i] += h
-                xm[:, i] -= h
-                j1[..., i] = (self._stage1(th_in, xp, flank, False) - self._stage1(th_in, xm, flank, False)) / (2 * h)
-            j1_parts.append(j1)
-        g1 = np.concatenate(g1_parts, axis=1)
-        j1 = np.concatenate(j1_parts, axis=1)
+            j1[..., :nk] = self._central(g_all, N)
+            der[flank] = j1
+        up = (dirs == 1)[:, None]
+        g1 = np.concatenate([np.where(up, val[1], val[-1]), np.where(up, val[-1], val[1])], axis=1)
+        j1 = np.concatenate([np.where(up[..., None], der[1], der[-1]), np.where(up[..., None], der[-1], der[1])],
+                            axis=1)
         G = np.concatenate([gaps.reshape(N, -1), g1], axis=1)
         J = np.concatenate([jac.reshape(N, -1, self.ndof), j1], axis=1)
         return G, J
@@ -423,7 +470,7 @@ class QuasiStaticSolver(PhysicsMixin):
                 xs[:] = prev
             for it in range(self.tol.solver_max_iter):
                 G, J = self._linearise(th[sl], xs, direction)
-                step_law = self._step_law(law, self._C_last)
+                step_law = self._step_law(law, self._line_last()[0] if law.physical else None)
                 mu = mu_all[sl]
                 dx = self._inner(th[sl], xs, G, J, b, step_law, mu)
                 mu_all[sl] = np.minimum(mu, 1e-2)
@@ -446,8 +493,7 @@ class QuasiStaticSolver(PhysicsMixin):
                     G_all[sl] = G + _jdot(J, dx)
                     nrm_all[sl] = self._nrm_last
                     J_all[sl] = J
-                    C_all[sl] = self._C_last
-                    R_all[sl] = self._R_last
+                    C_all[sl], R_all[sl] = self._line_last()
                     break
             else:
                 self._check_penetration(th[sl], xs, direction, law, load_Nm=load_Nm)  # an overlap is the usual cause
