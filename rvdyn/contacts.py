@@ -194,6 +194,14 @@ class AnalyticContacts:
         self._last_t[k] = t
         return d, n
 
+    def keep_rows(self, keep: np.ndarray, per_row: int) -> None:
+        """Keep the warm starts of the solver rows ``keep`` only ((R,) bool over the rows of the last call,
+        ``per_row`` points each): a batch whose converged solves leave it starts the rest as before."""
+        keep = np.asarray(keep, dtype=bool)
+        for k, t in list(self._last_t.items()):
+            if t.size == keep.size * per_row:
+                self._last_t[k] = t.reshape(keep.size, per_row)[keep].ravel()
+
     def foot_parameters(self, k: int) -> np.ndarray | None:
         """Foot parameters (rad) of disc k's last ``disc_distance`` call, or None."""
         return self._last_t.get(k)

@@ -352,26 +352,27 @@ class QuasiStaticSolver(PhysicsMixin):
             return ContactLaw(self.law.K, self.law.n, rigid=True, kind=self.law.kind)
         return self.law
 
-    def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200) -> np.ndarray:
+    def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200,
+               floor_k: np.ndarray | None = None) -> np.ndarray:
         """Minimise the linearised potential around x0; returns the step (N, ndof).
 
-        ``mu`` (N,) is the Levenberg-Marquardt damping, updated in place so that the next outer
-        iteration starts from where this one ended.
+        ``b`` is the load vector (ndof,) or one per state (N, ndof). ``mu`` (N,) is the Levenberg-Marquardt
+        damping, updated in place so that the next outer iteration starts from where this one ended.
+        ``floor_k`` (N,): the law's typical working stiffness per state (default ``law.floor_stiffness()``;
+        the physical law's depends on the contacts of its own solve).
         """
         N, M, D = J.shape
+        B = np.broadcast_to(b, (N, D))
         step = np.zeros((N, D))
         # damping floor: about a quarter of the contacts at 1 um of penetration (typical working stiffness)
-        floor = law.floor_stiffness() * max(1.0, M / 4.0) * np.ones(D)
+        fk = np.full(N, law.floor_stiffness()) if floor_k is None else floor_k
+        floor = (fk * max(1.0, M / 4.0))[:, None]
         eye = np.eye(D)
 
         arms = self._hole_arms(th_in, x0)
-
-        def energy(s):
-            delta = -(G + _jdot(J, s))
-            return law.energy(delta).sum(axis=1) + s @ b + self._bearing(x0 + s, arms, derivs=False)[0]
-
-        E0 = energy(step)
+        E0 = energy_sub(self, x0, G, J, B, law, step, arms)
         Jnorm = np.linalg.norm(J, axis=2)
+        bnorm = np.linalg.norm(B, axis=1)
         tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
         active = np.ones(N, dtype=bool)
         for _ in range(max_iter):
@@ -382,13 +383,13 @@ class QuasiStaticSolver(PhysicsMixin):
             delta = -(G[idx] + _jdot(J[idx], s))
             f, k = law.force_stiffness(delta, idx)
             Ji = J[idx]
-            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + b[None]
+            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[idx]
             H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
             if arms is not None:
                 _, gb, Hb = self._bearing(x0[idx] + s, arms[idx])
                 grad = grad + gb
                 H = H + Hb
-            diag = np.einsum("ndd->nd", H) + floor[None]
+            diag = np.einsum("ndd->nd", H) + floor[idx]
             A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
             dstep = -np.linalg.solve(A, grad[:, :, None])[:, :, 0]
             # backtracking on the (convex) potential: take the first step length that lowers it
@@ -401,7 +402,7 @@ class QuasiStaticSolver(PhysicsMixin):
                 if w.size == 0:
                     break
                 cand = s[w] + alpha * dstep[w]
-                Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], b, law, cand,
+                Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], B[idx[w]], law, cand,
                                 None if arms is None else arms[idx[w]], rows=idx[w])
                 upd = Ec < best_E[w]
                 best_E[w[upd]] = Ec[upd]
@@ -414,11 +415,21 @@ class QuasiStaticSolver(PhysicsMixin):
             E0[idx] = best_E
             mu[idx] = np.where(accepted_full, np.maximum(mu[idx] / 10.0, 1e-12), np.minimum(mu[idx] * 10.0, 1e12))
             # stationarity of the potential relative to the forces in play, plus a settled step
-            scale = np.linalg.norm(b) + np.einsum("nm,nm->n", np.abs(f), Jnorm[idx])
+            scale = bnorm[idx] + np.einsum("nm,nm->n", np.abs(f), Jnorm[idx])
             done = (moved < tol_mm) & (np.linalg.norm(grad, axis=1) <= 1e-7 * scale)
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False
         return step
+
+    def _check_solve_args(self, theta_in, direction, load_Nm) -> np.ndarray:
+        if direction not in (1, -1):
+            raise ValueError(f"direction {direction!r} must be +1 or -1")
+        if not (math.isfinite(load_Nm) and load_Nm >= 0):
+            raise ValueError(f"load_Nm {load_Nm} must be a finite number >= 0")
+        th = np.atleast_1d(np.asarray(theta_in, dtype=float))
+        if not np.all(np.isfinite(th)):
+            raise ValueError("theta_in contains NaN or inf")
+        return th
 
     def solve(self, theta_in: np.ndarray, direction: int = 1, load_Nm: float = 20.0,
               chunk: int | None = None, x_init: np.ndarray | None = None) -> Solution:
@@ -438,29 +449,15 @@ class QuasiStaticSolver(PhysicsMixin):
         x_init : (N, ndof) or None
             Start states (scaled coordinates); default the ideal kinematics.
         """
-        if direction not in (1, -1):
-            raise ValueError(f"direction {direction!r} must be +1 or -1")
-        if not (math.isfinite(load_Nm) and load_Nm >= 0):
-            raise ValueError(f"load_Nm {load_Nm} must be a finite number >= 0")
-        th = np.atleast_1d(np.asarray(theta_in, dtype=float))
-        if not np.all(np.isfinite(th)):
-            raise ValueError("theta_in contains NaN or inf")
+        th = self._check_solve_args(theta_in, direction, load_Nm)
         N = th.size
         law = self._law(load_Nm)
-        T = self._load_Nmm(load_Nm)
-        b = np.zeros(self.ndof)
-        b[0] = direction * T / self.Rp
+        B = np.zeros((N, self.ndof))
+        B[:, 0] = direction * self._load_Nmm(load_Nm) / self.Rp
+        dirs = np.full(N, direction)
         x = np.zeros((N, self.ndof)) if x_init is None else np.array(x_init, dtype=float)
         chunk = N if chunk is None else max(1, int(chunk))
-        tol_mm = self.tol.solver_angle_rad * self.Rp
-        G_all = np.empty((N, self.nd * self.zp + 2 * self.nc))
-        C_all = np.empty((N, self.nd * self.zp))
-        R_all = np.empty((N, self.nd * self.zp))
-        nrm_all = np.empty((N, self.nd, self.zp, 2))
-        J_all = np.empty((N, self.nd * self.zp + 2 * self.nc, self.ndof))
-        trust = np.full(N, OUTER_TRUST_MM)
-        last_dx = np.zeros((N, self.ndof))
-        mu_all = np.ones(N)
+        out = self._outputs(N)
         iters = 0
         prev: np.ndarray | None = None
         for s0 in range(0, N, chunk):
@@ -468,43 +465,136 @@ class QuasiStaticSolver(PhysicsMixin):
             xs = x[sl]
             if x_init is None and prev is not None:
                 xs[:] = prev
-            for it in range(self.tol.solver_max_iter):
-                G, J = self._linearise(th[sl], xs, direction)
-                step_law = self._step_law(law, self._line_last()[0] if law.physical else None)
-                mu = mu_all[sl]
-                dx = self._inner(th[sl], xs, G, J, b, step_law, mu)
-                mu_all[sl] = np.minimum(mu, 1e-2)
-                # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
-                # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
-                # OUTER_TRUST_MM); a step that reverses the previous one (a contact flipping between
-                # two linearisations) halves that state's trust radius for good
-                if it > 0:
-                    flip = np.einsum("nd,nd->n", dx, last_dx[sl]) < 0
-                    trust[sl] = np.where(flip, 0.5 * trust[sl], trust[sl])
-                big = np.abs(dx).max(axis=1)
-                dx = dx * np.minimum(1.0, trust[sl] / np.maximum(big, 1e-300))[:, None]
-                last_dx[sl] = dx
-                xs += dx
-                iters = max(iters, it + 1)
-                change = np.abs(dx).max()
+            used = self._outer(th[sl], xs, dirs[sl], B[sl], law, [(0, sl.stop - s0)], out, s0, load_Nm)
+            iters = max(iters, used[0])
+            prev = xs[-1].copy()
+        return self._finish_rows(th, x, direction, load_Nm, law, iters, out, slice(0, N))
+
+    def solve_many(self, theta_in: list, directions: list, loads_Nm: list) -> list[Solution]:
+        """Equilibria of several solves of this case in one batch: solve i has the input angles
+        ``theta_in[i]`` (rad, in the order of motion), direction ``directions[i]`` and load ``loads_Nm[i]``
+        (N m, > 0: the batch shares the contact law, and load 0 is the rigid limit's).
+
+        The states of all solves are linearised and minimised together (one provider call and one inner
+        solve per outer iteration for the whole batch); each solve stops on its own convergence test, so
+        each result equals :meth:`solve` of that solve alone within the solver tolerance (the foot-point
+        searches of a batch share their iteration count, which moves the results by rounding only).
+        """
+        if not (len(theta_in) == len(directions) == len(loads_Nm)) or len(theta_in) == 0:
+            raise ValueError(f"theta_in, directions and loads_Nm must be equally long, non-empty lists; got "
+                             f"{len(theta_in)}, {len(directions)}, {len(loads_Nm)}")
+        ths, bounds = [], []
+        for th, d, L in zip(theta_in, directions, loads_Nm):
+            t = self._check_solve_args(th, d, L)
+            if not L > 0:
+                raise ValueError(f"load_Nm {L!r} must be > 0 in a batch (solve load 0, the rigid limit, with solve())")
+            bounds.append((sum(len(a) for a in ths), sum(len(a) for a in ths) + t.size))
+            ths.append(t)
+        th = np.concatenate(ths)
+        N = th.size
+        B = np.zeros((N, self.ndof))
+        dirs = np.empty(N, dtype=int)
+        for (a, b), d, L in zip(bounds, directions, loads_Nm):
+            B[a:b, 0] = d * self._load_Nmm(L) / self.Rp
+            dirs[a:b] = d
+        law = self._law(loads_Nm[0])
+        x = np.zeros((N, self.ndof))
+        out = self._outputs(N)
+        used = self._outer(th, x, dirs, B, law, bounds, out, 0, max(loads_Nm))
+        return [self._finish_rows(th[a:b], x[a:b], d, L, law, it, out, slice(a, b))
+                for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used)]
+
+    def _outputs(self, N: int) -> dict[str, np.ndarray]:
+        """Arrays of the converged linearisation (gaps, normals, Jacobians, Johnson constants, radii)."""
+        M = self.nd * self.zp + 2 * self.nc
+        return {"G": np.empty((N, M)), "nrm": np.empty((N, self.nd, self.zp, 2)), "J": np.empty((N, M, self.ndof)),
+                "C": np.empty((N, self.nd * self.zp)), "R": np.empty((N, self.nd * self.zp))}
+
+    def _outer(self, th, x, dirs, B, law, bounds: list[tuple[int, int]], out: dict, offset: int,
+               load_Nm: float) -> list[int]:
+        """Outer iterations of the solves whose rows are ``bounds`` (row ranges of th and x, solved together,
+        each to its own convergence test); x is updated in place, the converged linearisation is written to
+        ``out`` at row ``offset + row``. Returns the outer iterations each solve used."""
+        N = th.size
+        tol_mm = self.tol.solver_angle_rad * self.Rp
+        trust = np.full(N, OUTER_TRUST_MM)
+        last_dx = np.zeros((N, self.ndof))
+        mu_all = np.ones(N)
+        used = [0] * len(bounds)
+        active = list(range(len(bounds)))
+        prev_rows = None
+        dx = np.zeros((0, self.ndof))
+        for it in range(self.tol.solver_max_iter):
+            if not active:
+                break
+            if len(active) == len(bounds) and len(bounds) == 1:
+                rows = slice(bounds[0][0], bounds[0][1])
+                n_rows = bounds[0][1] - bounds[0][0]
+            else:
+                rows = np.concatenate([np.arange(*bounds[g]) for g in active])
+                n_rows = rows.size
+            if prev_rows is not None and n_rows != prev_rows.size and hasattr(self.contacts, "keep_rows"):
+                self.contacts.keep_rows(np.isin(prev_rows, rows), self.zp)      # warm starts of the rows left
+            prev_rows = np.arange(N)[rows]
+            locs, pos = [], 0
+            for g in active:
+                n = bounds[g][1] - bounds[g][0]
+                locs.append(slice(pos, pos + n))
+                pos += n
+            xs = x[rows]
+            G, J = self._linearise(th[rows], xs, dirs[rows] if len(bounds) > 1 else dirs[0])
+            C = self._line_last()[0] if law.physical else None
+            step_law = self._step_law(law, C)
+            floor_k = None
+            if C is not None and len(bounds) > 1:
+                floor_k = np.empty(n_rows)
+                for lc in locs:
+                    floor_k[lc] = self._step_law(law, C[lc]).floor_stiffness()
+            mu = mu_all[rows]
+            dx = self._inner(th[rows], xs, G, J, B[rows], step_law, mu, floor_k=floor_k)
+            mu_all[rows] = np.minimum(mu, 1e-2)
+            # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
+            # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
+            # OUTER_TRUST_MM); a step that reverses the previous one (a contact flipping between
+            # two linearisations) halves that state's trust radius for good
+            if it > 0:
+                flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
+                trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
+            big = np.abs(dx).max(axis=1)
+            dx = dx * np.minimum(1.0, trust[rows] / np.maximum(big, 1e-300))[:, None]
+            last_dx[rows] = dx
+            xs += dx
+            x[rows] = xs
+            still = []
+            for g, lc in zip(active, locs):
+                used[g] = it + 1
+                change = np.abs(dx[lc]).max()
                 if change < tol_mm or (it >= self.tol.solver_max_iter // 3 and change < 10 * tol_mm):
                     # the step is below the tolerance: the linearised gaps at the new state are exact
                     # to O(dx^2 / rho), far below 1e-12 mm
-                    G_all[sl] = G + _jdot(J, dx)
-                    nrm_all[sl] = self._nrm_last
-                    J_all[sl] = J
-                    C_all[sl], R_all[sl] = self._line_last()
-                    break
-            else:
-                self._check_penetration(th[sl], xs, direction, law, load_Nm=load_Nm)  # an overlap is the usual cause
+                    o = slice(offset + bounds[g][0], offset + bounds[g][1])
+                    out["G"][o] = G[lc] + _jdot(J[lc], dx[lc])
+                    out["nrm"][o] = self._nrm_last[lc]
+                    out["J"][o] = J[lc]
+                    Cl, Rl = self._line_last()
+                    out["C"][o], out["R"][o] = Cl[lc], Rl[lc]
+                else:
+                    still.append((g, lc))
+            if still and it + 1 == self.tol.solver_max_iter:
+                g, lc = still[0]
+                a, b = bounds[g]
+                self._check_penetration(th[a:b], x[a:b], dirs[a], law, load_Nm=load_Nm)  # an overlap is the usual cause
                 raise RuntimeError(
                     f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
-                    f"(last change {np.abs(dx).max():.3e} mm)")
-            x[sl] = xs
-            prev = xs[-1].copy()
-        self._R_all = R_all
-        self._J_all = J_all
-        return self._finish(th, x, direction, load_Nm, self._step_law(law, C_all), iters, G_all, nrm_all)
+                    f"(last change {np.abs(dx[lc]).max():.3e} mm)")
+            active = [g for g, _ in still]
+        return used
+
+    def _finish_rows(self, th, x, direction, load_Nm, law, iters, out: dict, rows: slice) -> Solution:
+        self._R_all = out["R"][rows]
+        self._J_all = out["J"][rows]
+        return self._finish(th, x, direction, load_Nm, self._step_law(law, out["C"][rows]), iters, out["G"][rows],
+                            out["nrm"][rows])
 
     def _check_penetration(self, th, x, direction, law, G: np.ndarray | None = None,
                            load_Nm: float = 0.0) -> np.ndarray:
@@ -585,7 +675,9 @@ def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 def energy_sub(solver: QuasiStaticSolver, x0, G, J, b, law: ContactLaw, s: np.ndarray,
                arms: np.ndarray | None = None, rows=None) -> np.ndarray:
-    """Linearised potential of the states x0 + s (N,), N mm (``arms``: hole arms at x0, floating discs;
-    ``rows``: the steps of the law's per-step constants)."""
+    """Linearised potential of the states x0 + s (N,), N mm (``b``: load vector (ndof,) or one per state
+    (N, ndof); ``arms``: hole arms at x0, floating discs; ``rows``: the steps of the law's per-step constants)."""
     delta = -(G + _jdot(J, s))
-    return law.energy(delta, rows).sum(axis=1) + s @ b + solver._bearing(x0 + s, arms, derivs=False)[0]
+    work = s @ b if b.ndim == 1 else np.einsum("nd,nd->n", s, b)
+    E = law.energy(delta, rows).sum(axis=1) + work
+    return E if arms is None else E + solver._bearing(x0 + s, arms, derivs=False)[0]
