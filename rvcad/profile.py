@@ -287,7 +287,7 @@ class CycloidProfile:
         return self.boundary(t)
 
     # ------------------------------------------------------------------ distances
-    def foot_point(self, p: np.ndarray, t0: np.ndarray) -> np.ndarray:
+    def foot_point(self, p: np.ndarray, t0: np.ndarray, per_point: bool = False) -> np.ndarray:
         """Parameter of the closest point of q to each p (vectorised Newton from t0).
 
         Parameters
@@ -295,6 +295,9 @@ class CycloidProfile:
         p : (K, 2) array, mm
         t0 : (K,) array, rad
             Starting parameters (the ideal-motion parameter of the pin is a good one).
+        per_point : bool
+            False: every point iterates until all have converged (the reproducible default). True: each
+            point stops at its own convergence (fewer evaluations; the feet differ by rounding, ~1e-15 rad).
 
         Returns
         -------
@@ -303,6 +306,8 @@ class CycloidProfile:
         point moves less than ``Tolerances.foot_point_mm``.
         """
         p = np.asarray(p, dtype=float)
+        if per_point:
+            return self._foot_point_per_point(p, t0)
         px, py = p[..., 0], p[..., 1]
         t = np.array(t0, dtype=float, copy=True)
         R, e, Z, ph = self.pin_circle_radius, self.eccentricity, self.z_pins, self.cam_phase
@@ -328,7 +333,45 @@ class CycloidProfile:
                 break
         return t
 
-    def signed_distance(self, p: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _foot_point_per_point(self, p: np.ndarray, t0: np.ndarray) -> np.ndarray:
+        """:meth:`foot_point` with each point stopping at its own convergence (the same Newton step)."""
+        t = np.array(t0, dtype=float, copy=True).reshape(-1)
+        P = p.reshape(-1, 2)
+        R, e, Z, ph = self.pin_circle_radius, self.eccentricity, self.z_pins, self.cam_phase
+        max_step = 0.25 * math.pi / self.z_lobes
+        eZ, eZ2 = e * Z, e * Z * Z
+        act = None                                   # indices still iterating (None: all)
+        tt, px, py = t, P[:, 0], P[:, 1]
+        for _ in range(self.tol.foot_point_max_iter):
+            c1, s1 = np.cos(tt), np.sin(tt)
+            a2 = Z * tt + ph
+            c2, s2 = np.cos(a2), np.sin(a2)
+            dx = R * c1 - e * c2 - px
+            dy = R * s1 - e * s2 - py
+            d1x = -R * s1 + eZ * s2
+            d1y = R * c1 - eZ * c2
+            d2x = -R * c1 + eZ2 * c2
+            d2y = -R * s1 + eZ2 * s2
+            sp2 = d1x * d1x + d1y * d1y
+            f = dx * d1x + dy * d1y
+            fp = sp2 + dx * d2x + dy * d2y
+            fp = np.where(fp > 0, fp, sp2)
+            step = np.clip(f / fp, -max_step, max_step)
+            tt = tt - step
+            more = np.abs(step) * np.sqrt(sp2) >= self.tol.foot_point_mm
+            if act is None:
+                t = tt
+                act = np.nonzero(more)[0]
+            else:
+                t[act] = tt
+                act = act[more]
+            if act.size == 0:
+                break
+            tt, px, py = t[act], P[act, 0], P[act, 1]
+        return t.reshape(np.shape(t0))
+
+    def signed_distance(self, p: np.ndarray, t0: np.ndarray,
+                        per_point: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Signed distance of points to the pin-centre curve q (positive outside the disc).
 
         Returns
@@ -338,7 +381,7 @@ class CycloidProfile:
         n : (K, 2) outward unit normals at the foot points
         """
         p = np.asarray(p, dtype=float)
-        t = self.foot_point(p, t0)
+        t = self.foot_point(p, t0, per_point)
         # q(t) and the normal from one evaluation of the four trig terms (the same operations in the
         # same order as :meth:`q` and :meth:`normal`, so bit-identical to them, at half the trig cost)
         R, e, Z = self.pin_circle_radius, self.eccentricity, self.z_pins
@@ -400,7 +443,7 @@ class CycloidProfile:
                 y *= y
                 x += y
                 start[sl] = tf[sl] + grid[np.argmin(x, axis=1)]
-            t2 = self.foot_point(pf, start)
+            t2 = self.foot_point(pf, start, per_point)
             d_old = np.linalg.norm(pf - qt[far], axis=-1)
             d_new = np.linalg.norm(pf - self.q(t2), axis=-1)
             better = d_new < d_old - 1e-12
@@ -411,13 +454,15 @@ class CycloidProfile:
                 sd[idx] = np.einsum("...i,...i->...", p[idx] - self.q(t[idx]), n[idx])
         return sd, t, n
 
-    def boundary_distance(self, p: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def boundary_distance(self, p: np.ndarray, t0: np.ndarray,
+                          per_point: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Signed distance of points to the disc boundary (positive outside), mm.
 
         Exact wherever the foot point lies on the untrimmed part of the envelope (all pin
         contacts of a working disc): distance to the equidistant = distance to q + rp.
+        ``per_point``: see :meth:`foot_point`.
         """
-        sd, t, n = self.signed_distance(p, t0)
+        sd, t, n = self.signed_distance(p, t0, per_point)
         return sd + self.pin_radius, t, n
 
 

@@ -174,8 +174,11 @@ class AnalyticContacts:
 
     name = "analytic"
 
-    def __init__(self, geom: ReducerGeometry) -> None:
+    def __init__(self, geom: ReducerGeometry, per_point: bool = False) -> None:
         self.geom = geom
+        #: foot-point searches stop point by point (:meth:`rvcad.profile.CycloidProfile.foot_point`): the
+        #: batch solver's setting; False keeps the reproducible shared iteration count of the single solves
+        self.per_point = per_point
         self._last_t: dict[int, np.ndarray] = {}
 
     def disc_distance(self, k: int, p: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -190,7 +193,7 @@ class AnalyticContacts:
         if last is not None and last.shape == start.shape:
             near = np.abs(last - start) < 0.25 * np.pi / prof.z_lobes
             start = np.where(near, last, start)
-        d, t, n = prof.boundary_distance(p, start)
+        d, t, n = prof.boundary_distance(p, start, self.per_point)
         self._last_t[k] = t
         return d, n
 

@@ -379,11 +379,13 @@ class QuasiStaticSolver(PhysicsMixin):
             idx = np.nonzero(active)[0]
             if idx.size == 0:
                 break
-            s = step[idx]
-            delta = -(G[idx] + _jdot(J[idx], s))
+            every = idx.size == N                     # all states still iterating: views, no copies
+            sel = slice(None) if every else idx
+            s = step[sel]
+            Gi, Ji = G[sel], J[sel]
+            delta = -(Gi + _jdot(Ji, s))
             f, k = law.force_stiffness(delta, idx)
-            Ji = J[idx]
-            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[idx]
+            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[sel]
             H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
             if arms is not None:
                 _, gb, Hb = self._bearing(x0[idx] + s, arms[idx])
@@ -401,9 +403,14 @@ class QuasiStaticSolver(PhysicsMixin):
                 w = np.nonzero(pending)[0]
                 if w.size == 0:
                     break
-                cand = s[w] + alpha * dstep[w]
-                Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], B[idx[w]], law, cand,
-                                None if arms is None else arms[idx[w]], rows=idx[w])
+                if w.size == idx.size:
+                    cand = s + alpha * dstep
+                    Ec = energy_sub(self, x0[sel], Gi, Ji, B[sel], law, cand, None if arms is None else arms[sel],
+                                    rows=idx)
+                else:
+                    cand = s[w] + alpha * dstep[w]
+                    Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], B[idx[w]], law, cand,
+                                    None if arms is None else arms[idx[w]], rows=idx[w])
                 upd = Ec < best_E[w]
                 best_E[w[upd]] = Ec[upd]
                 best_s[w[upd]] = cand[upd]

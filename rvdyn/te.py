@@ -230,7 +230,7 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     if solver != "analytic":
         return [run_te(case, solver, n, revolutions, L, d, law, geom=g) for n, (L, d) in zip(counts, pairs)]
     t0 = time.perf_counter()
-    s = QuasiStaticSolver(g, make_contacts(g, solver), law)
+    s = QuasiStaticSolver(g, AnalyticContacts(g, per_point=True), law)
     sols = s.solve_many(ths, [d for _, d in pairs], [L for L, _ in pairs])
     secs = (time.perf_counter() - t0) / len(pairs)
     return [_te_result(case, solver, s, sol, n, revolutions, d, L, secs)
