@@ -244,18 +244,25 @@ class QuasiStaticSolver(PhysicsMixin):
                + lever[..., None] * dang[:, :, None, :])
         return gaps, jac
 
-    def _line_last(self) -> tuple[np.ndarray, np.ndarray]:
-        """Johnson constants C and relative radii R (N, nd Zp) of the pin contacts of the last linearisation."""
-        if self._C_last is None:
-            Cs, Rs = [], []
-            for k, (pts, tk, foot) in enumerate(self._feet_last):
-                r_pin = np.broadcast_to(self.geom.pin_radii[None], (len(tk) // self.zp, self.zp)).ravel()
-                Ck, Rk = self._line_C(k, pts, tk, r_pin, foot)
-                Cs.append(Ck.reshape(-1, self.zp))
-                Rs.append(Rk.reshape(-1, self.zp))
-            self._C_last = np.stack(Cs, axis=1).reshape(len(Cs[0]), -1)
-            self._R_last = np.stack(Rs, axis=1).reshape(len(Rs[0]), -1)
-        return self._C_last, self._R_last
+    def _line_last(self, rows: slice | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Johnson constants C and relative radii R (N, nd Zp) of the pin contacts of the last linearisation
+        (``rows``: of those rows only; row by row, so the same numbers as the rows of the whole)."""
+        if self._C_last is not None:
+            return (self._C_last, self._R_last) if rows is None else (self._C_last[rows], self._R_last[rows])
+        Cs, Rs = [], []
+        for k, (pts, tk, foot) in enumerate(self._feet_last):
+            if rows is not None:
+                sub = slice(rows.start * self.zp, rows.stop * self.zp)
+                pts, tk, foot = pts[sub], tk[sub], None if foot is None else foot[sub]
+            r_pin = np.broadcast_to(self.geom.pin_radii[None], (len(tk) // self.zp, self.zp)).ravel()
+            Ck, Rk = self._line_C(k, pts, tk, r_pin, foot)
+            Cs.append(Ck.reshape(-1, self.zp))
+            Rs.append(Rk.reshape(-1, self.zp))
+        C = np.stack(Cs, axis=1).reshape(len(Cs[0]), -1)
+        R = np.stack(Rs, axis=1).reshape(len(Rs[0]), -1)
+        if rows is None:
+            self._C_last, self._R_last = C, R
+        return C, R
 
     def _stage1(self, th_in: np.ndarray, x: np.ndarray, direction: int, provider: bool) -> np.ndarray:
         to, ps, _, _ = self._unpack(th_in, x)
@@ -375,7 +382,7 @@ class QuasiStaticSolver(PhysicsMixin):
 
         arms = self._hole_arms(th_in, x0)
         E0 = energy_sub(self, x0, G, J, B, law, step, arms)
-        Jnorm = np.linalg.norm(J, axis=2)
+        Jnorm = _row_norm(J)
         bnorm = np.linalg.norm(B, axis=1)
         tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
         active = np.ones(N, dtype=bool)
@@ -613,8 +620,7 @@ class QuasiStaticSolver(PhysicsMixin):
                     out["G"][o] = G[lc] + _jdot(J[lc], dx[lc])
                     out["nrm"][o] = self._nrm_last[lc]
                     out["J"][o] = J[lc]
-                    Cl, Rl = self._line_last()
-                    out["C"][o], out["R"][o] = Cl[lc], Rl[lc]
+                    out["C"][o], out["R"][o] = self._line_last(lc)
                 else:
                     still.append((g, lc))
             if still and it + 1 == self.tol.solver_max_iter:
@@ -704,6 +710,15 @@ class QuasiStaticSolver(PhysicsMixin):
             iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings,
             pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F,
             n_pin_contacts=(delta[:, :n1] > (1e-12 if not law.rigid else 0.0)).sum(axis=1))
+
+def _row_norm(J: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last axis; for 3 columns written out (the same sum, in the same order, as
+    ``np.linalg.norm(J, axis=-1)``, without its temporaries)."""
+    if J.shape[-1] != 3:
+        return np.linalg.norm(J, axis=-1)
+    a, b, c = J[..., 0], J[..., 1], J[..., 2]
+    return np.sqrt(a * a + b * b + c * c)
+
 
 def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Batched J @ s: (N, M, D) x (N, D) -> (N, M)."""
