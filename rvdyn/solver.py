@@ -483,13 +483,13 @@ class QuasiStaticSolver(PhysicsMixin):
             xs = x[sl]
             if x_init is None and prev is not None:
                 xs[:] = prev
-            used = self._outer(th[sl], xs, dirs[sl], B[sl], law, [(0, sl.stop - s0)], out, s0, load_Nm)
+            used = self._outer(th[sl], xs, dirs[sl], B[sl], law, [(0, sl.stop - s0)], out, s0, [load_Nm])
             iters = max(iters, used[0])
             prev = xs[-1].copy()
         return self._finish_rows(th, x, direction, load_Nm, law, iters, out, slice(0, N))
 
     def solve_many(self, theta_in: list, directions: list, loads_Nm: list,
-                   expand_trust: bool = True) -> list[Solution]:
+                   expand_trust: bool = True, errors: str = "raise") -> list:
         """Equilibria of several solves of this case in one batch: solve i has the input angles
         ``theta_in[i]`` (rad, in the order of motion), direction ``directions[i]`` and load ``loads_Nm[i]``
         (N m, > 0: the batch shares the contact law, and load 0 is the rigid limit's).
@@ -506,7 +506,13 @@ class QuasiStaticSolver(PhysicsMixin):
         States far from their equilibrium (the start, the ideal kinematics, is often 0.04 mm away) then take
         two or three outer iterations to get there instead of four or five. The equilibrium is the same to the
         solver tolerance. False: the fixed radius of :meth:`solve` (a batch of one solve is then that solve).
+
+        ``errors``: ``"raise"`` (default) raises the first solve's error (an InterferenceError, or a
+        RuntimeError when it does not converge); ``"return"`` puts the error in that solve's place and
+        returns the other solutions.
         """
+        if errors not in ("raise", "return"):
+            raise ValueError(f"errors {errors!r} must be 'raise' or 'return'")
         if not (len(theta_in) == len(directions) == len(loads_Nm)) or len(theta_in) == 0:
             raise ValueError(f"theta_in, directions and loads_Nm must be equally long, non-empty lists; got "
                              f"{len(theta_in)}, {len(directions)}, {len(loads_Nm)}")
@@ -527,9 +533,20 @@ class QuasiStaticSolver(PhysicsMixin):
         law = self._law(loads_Nm[0])
         x = np.zeros((N, self.ndof))
         out = self._outputs(N)
-        used = self._outer(th, x, dirs, B, law, bounds, out, 0, max(loads_Nm), expand=expand_trust)
-        return [self._finish_rows(th[a:b], x[a:b], d, L, law, it, out, slice(a, b))
-                for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used)]
+        used = self._outer(th, x, dirs, B, law, bounds, out, 0, list(loads_Nm), expand=expand_trust,
+                           collect=errors == "return")
+        res: list = []
+        for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used):
+            if isinstance(it, Exception):
+                res.append(it)
+                continue
+            try:
+                res.append(self._finish_rows(th[a:b], x[a:b], d, L, law, it, out, slice(a, b)))
+            except InterferenceError as err:
+                if errors == "raise":
+                    raise
+                res.append(err)
+        return res
 
     def _outputs(self, N: int) -> dict[str, np.ndarray]:
         """Arrays of the converged linearisation (gaps, normals, Jacobians, Johnson constants, radii)."""
@@ -538,11 +555,13 @@ class QuasiStaticSolver(PhysicsMixin):
                 "C": np.empty((N, self.nd * self.zp)), "R": np.empty((N, self.nd * self.zp))}
 
     def _outer(self, th, x, dirs, B, law, bounds: list[tuple[int, int]], out: dict, offset: int,
-               load_Nm: float, expand: bool = False) -> list[int]:
+               loads: list[float], expand: bool = False, collect: bool = False) -> list:
         """Outer iterations of the solves whose rows are ``bounds`` (row ranges of th and x, solved together,
-        each to its own convergence test); x is updated in place, the converged linearisation is written to
-        ``out`` at row ``offset + row``. ``expand``: grow the trust radius of states whose cut step the
-        linearisation predicted well (see :meth:`solve_many`). Returns the outer iterations each solve used."""
+        each to its own convergence test; ``loads`` N m, for the messages); x is updated in place, the converged
+        linearisation is written to ``out`` at row ``offset + row``. ``expand``: grow the trust radius of states
+        whose cut step the linearisation predicted well (see :meth:`solve_many`). Returns the outer iterations
+        each solve used; a solve that does not converge raises its error (:meth:`_unconverged`), or with
+        ``collect`` has the error in its place."""
         N = th.size
         tol_mm = self.tol.solver_angle_rad * self.Rp
         trust = np.full(N, OUTER_TRUST_MM)
@@ -624,14 +643,23 @@ class QuasiStaticSolver(PhysicsMixin):
                 else:
                     still.append((g, lc))
             if still and it + 1 == self.tol.solver_max_iter:
-                g, lc = still[0]
-                a, b = bounds[g]
-                self._check_penetration(th[a:b], x[a:b], dirs[a], law, load_Nm=load_Nm)  # an overlap is the usual cause
-                raise RuntimeError(
-                    f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
-                    f"(last change {np.abs(dx[lc]).max():.3e} mm)")
+                for g, lc in still:
+                    a, b = bounds[g]
+                    used[g] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[g], float(np.abs(dx[lc]).max()))
+                    if not collect:
+                        raise used[g]
             active = [g for g, _ in still]
         return used
+
+    def _unconverged(self, th, x, direction, law, load_Nm: float, change: float) -> Exception:
+        """The error of a solve that did not converge: the interference that is the usual cause (an
+        InterferenceError, see :meth:`_check_penetration`), else a RuntimeError."""
+        try:
+            self._check_penetration(th, x, direction, law, load_Nm=load_Nm)
+        except InterferenceError as err:
+            return err
+        return RuntimeError(f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
+                            f"(last change {change:.3e} mm)")
 
     def _finish_rows(self, th, x, direction, load_Nm, law, iters, out: dict, rows: slice) -> Solution:
         self._R_all = out["R"][rows]
