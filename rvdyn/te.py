@@ -179,10 +179,13 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     ``run_te_many(case, "analytic", 37, loads=[(5.01, 1), (5.01, -1), (167.0, 1), (167.0, -1)])`` returns
     one :class:`TEResult` per pair, in the order of ``loads``; result i equals
     ``run_te(case, solver, steps_i, revolutions, load_i, direction_i, law)`` within the solver tolerance
-    (``Tolerances.solver_angle_rad``; the batch moves the results by the rounding of the shared foot-point
-    searches only, measured below 1e-4 arcsec). The analytic provider linearises and minimises all the solves'
-    states together (one call per outer iteration instead of one per solve), which is what makes it faster
-    than separate calls; the fcl provider solves them one after the other (``run_te``).
+    (``Tolerances.solver_angle_rad``, 1e-9 rad = 2e-4 arcsec; measured: up to 1e-5 arcsec with the impact
+    law, 4e-5 with the physical law, the solver's noise floor). The analytic provider linearises and
+    minimises all the solves' states together (one provider call and one inner solve per outer iteration
+    for the batch), stops each foot-point search point by point and grows the trust radius of states far
+    from their equilibrium (:meth:`rvdyn.solver.QuasiStaticSolver.solve_many`); the five solves of a Monte
+    Carlo draw (``steps=[360, 37, 37, 37, 37]``) take about a third of the time of five ``run_te`` calls.
+    The fcl provider solves the pairs one after the other (``run_te``).
 
     Parameters
     ----------
