@@ -163,10 +163,9 @@ class LinearisationMixin:
         to, ps, _, _ = self._unpack(TH, X)
         analytic = isinstance(self.contacts, AnalyticContacts)
         val, der = {}, {}
+        both = self.geom.stage1_gaps_both(TH, to, ps)
         for flank in (1, -1):
-            if not (np.any(dirs == flank) or np.any(dirs == -flank)):
-                continue
-            g_all = self.geom.stage1_gaps(TH, to, ps, flank)
+            g_all = both[flank]
             # the provider's gap value (the analytic provider's is the closed form just evaluated)
             val[flank] = g_all[:N] if analytic else self.contacts.stage1_gaps(th_in, to[:N], ps[:N], flank)
             j1 = np.zeros((N, self.nc, self.ndof))
