@@ -65,8 +65,9 @@ class LinearisationMixin:
                  for i in range(nk)]
         return np.stack(parts, axis=-1)
 
-    def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray, stacked=None) -> tuple[np.ndarray, np.ndarray]:
-        """Pin gaps (N, nd, Zp) mm and Jacobians (N, nd, Zp, ndof) mm/mm.
+    def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray, stacked=None,
+                  jac: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Pin gaps (N, nd, Zp) mm and Jacobians (N, nd, Zp, ndof) mm/mm (written into ``jac`` if given).
 
         Disc poses are differentiated by central differences (cheap: N x nd values, all neighbours in
         one stacked evaluation, :meth:`_stacked`); the pins follow by the chain rule: p = R(-phi)(P - c),
@@ -115,8 +116,13 @@ class LinearisationMixin:
         self._C_last = self._R_last = None
         self._nrm_last = np.stack([mx, my], axis=-1)                            # fixed frame, (N, nd, Zp, 2)
         lever = nx * py - ny * px
-        jac = (-(mx[..., None] * dcen[:, :, None, 0, :] + my[..., None] * dcen[:, :, None, 1, :])
-               + lever[..., None] * dang[:, :, None, :])
+        # -(mx dc_x + my dc_y) + lever dphi, evaluated in place (the same operations in the same order)
+        if jac is None:
+            jac = np.empty((N, self.nd, self.zp, self.ndof))
+        np.multiply(mx[..., None], dcen[:, :, None, 0, :], out=jac)
+        jac += my[..., None] * dcen[:, :, None, 1, :]
+        np.negative(jac, out=jac)
+        jac += lever[..., None] * dang[:, :, None, :]
         return gaps, jac
 
     def _line_last(self, rows: slice | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -158,15 +164,16 @@ class LinearisationMixin:
         nk = 1 + self.nc
         dirs = np.broadcast_to(np.asarray(direction), (N,))
         stacked = self._stacked(th_in, x)
-        gaps, jac = self._pin_gaps(th_in, x, stacked)
+        n1 = self.nd * self.zp
+        J = np.empty((N, n1 + 2 * self.nc, self.ndof))
+        gaps, _ = self._pin_gaps(th_in, x, stacked, J[:, :n1].reshape(N, self.nd, self.zp, self.ndof))
         TH, X = stacked
         to, ps, _, _ = self._unpack(TH, X)
         analytic = isinstance(self.contacts, AnalyticContacts)
         val, der = {}, {}
+        both = self.geom.stage1_gaps_both(TH, to, ps)
         for flank in (1, -1):
-            if not (np.any(dirs == flank) or np.any(dirs == -flank)):
-                continue
-            g_all = self.geom.stage1_gaps(TH, to, ps, flank)
+            g_all = both[flank]
             # the provider's gap value (the analytic provider's is the closed form just evaluated)
             val[flank] = g_all[:N] if analytic else self.contacts.stage1_gaps(th_in, to[:N], ps[:N], flank)
             j1 = np.zeros((N, self.nc, self.ndof))
@@ -177,7 +184,7 @@ class LinearisationMixin:
         j1 = np.concatenate([np.where(up[..., None], der[1], der[-1]), np.where(up[..., None], der[-1], der[1])],
                             axis=1)
         G = np.concatenate([gaps.reshape(N, -1), g1], axis=1)
-        J = np.concatenate([jac.reshape(N, -1, self.ndof), j1], axis=1)
+        J[:, n1:] = j1
         return G, J
 
     # ------------------------------------------------------------------ bearings
