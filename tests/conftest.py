@@ -9,6 +9,12 @@ import pytest
 
 import rvpaper
 
+@pytest.fixture(scope="session")
+def paper_data() -> Path:
+    """Folder of the paper's tables as CSV (package data of :mod:`rvpaper`)."""
+    return rvpaper.DATA_DIR
+
+
 # ---------------------------------------------------------------------------------------------- test groups
 #: Session fixtures that solve many cases: every module using one runs on the same worker, so each is made once.
 SHARED_SESSION_FIXTURES = ("small_study", "doe_reference")
