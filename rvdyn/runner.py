@@ -38,6 +38,9 @@ Nothing here holds a design constant: everything about the reducer comes from ea
 """
 from __future__ import annotations
 
+import dataclasses
+import functools
+import hashlib
 import math
 import sys
 import time
@@ -56,6 +59,23 @@ from rvdyn.te import SOLVERS, run_te
 SolveFn = Callable[[dict[str, Any]], dict[str, Any]]
 
 _STAT_KEYS = ("pp", "mean", "mean_abs", "rms", "ratio", "seconds")
+
+
+def _failed(key: str, exc: BaseException, secs: float) -> dict[str, Any]:
+    stats = {k: float("nan") for k in _STAT_KEYS}
+    stats["seconds"] = secs
+    return {"key": key, "status": "failed", "stats": stats, "te_arcsec": [], "error": f"{type(exc).__name__}: {exc}"}
+
+
+def _ok(key: str, r: Any, secs: float | None = None) -> dict[str, Any]:
+    stats = {k: float(r.stats[k]) for k in _STAT_KEYS}
+    if secs is not None:
+        stats["seconds"] = float(secs)
+    return {"key": key, "status": "ok", "stats": stats,
+            "te_arcsec": [float(x) for x in r.table["te_arcsec"].to_numpy()], "error": ""}
+
+
+_SOLVE_ERRORS = (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError)
 
 
 def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
@@ -83,17 +103,74 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     try:
         r = run_te(case, payload["solver"], int(payload["steps"]), float(payload["revolutions"]), law=law,
                    theta_in_deg=None if th is None else np.asarray(th, dtype=float))
-    except (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as exc:
-        if isinstance(exc, ImportError):  # pragma: no cover - ImportError is not a ValueError; kept explicit
-            raise
-        secs = time.perf_counter() - t0
-        stats = {k: float("nan") for k in _STAT_KEYS}
-        stats["seconds"] = secs
-        return {"key": payload["key"], "status": "failed", "stats": stats, "te_arcsec": [],
-                "error": f"{type(exc).__name__}: {exc}"}
-    stats = {k: float(r.stats[k]) for k in _STAT_KEYS}
-    return {"key": payload["key"], "status": "ok", "stats": stats,
-            "te_arcsec": [float(x) for x in r.table["te_arcsec"].to_numpy()], "error": ""}
+    except _SOLVE_ERRORS as exc:  # ImportError (missing software) is none of these and propagates
+        return _failed(payload["key"], exc, time.perf_counter() - t0)
+    return _ok(payload["key"], r)
+
+
+def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dict[str, Any]:
+    """Solve a group of job payloads whose cases differ only in load and direction (worker side).
+
+    The case is read and its geometry built once for the group; the jobs of one step count (same
+    ``steps``, ``revolutions`` and input angles) go to :func:`rvdyn.te.run_te_many` in one call when
+    this version of rvdyn has it, else to :func:`rvdyn.te.run_te` one after another on the shared
+    geometry (the same numbers as separate :func:`solve_job` calls: the geometry does not depend on
+    the load or the direction). A batched call that fails is repeated job by job, so a failed job
+    fails alone, as it would on its own.
+
+    Parameters
+    ----------
+    payload : dict
+        ``key`` (of the group) and ``jobs`` (list of :func:`solve_job` payloads; same solver and law).
+    solve_fn : callable or None
+        A worker function other than :func:`solve_job` (tests): then each job goes through it alone.
+
+    Returns
+    -------
+    dict
+        ``key`` (the group's) and ``results`` (one :func:`solve_job` result per job, in order).
+    """
+    jobs = payload["jobs"]
+    if solve_fn is not None and solve_fn is not solve_job:
+        return {"key": payload["key"], "results": [solve_fn(p) for p in jobs]}
+    import rvdyn.te as te
+    from rvcad.geometry import ReducerGeometry
+
+    results: list[dict[str, Any] | None] = [None] * len(jobs)
+    try:
+        case = Case.from_dict(jobs[0]["case"])
+        geom = ReducerGeometry(case)
+    except _SOLVE_ERRORS as exc:  # every job of the group shares the case: each fails as it would alone
+        return {"key": payload["key"], "results": [solve_job(p) for p in jobs]}
+    law = ContactLaw(**jobs[0]["law"])
+    runs: dict[tuple, list[int]] = {}
+    for i, p in enumerate(jobs):
+        th = p.get("theta_in_deg")
+        runs.setdefault((int(p["steps"]), float(p["revolutions"]), None if th is None else tuple(th)), []).append(i)
+    many = getattr(te, "run_te_many", None)
+    for (steps, revs, th), idx in runs.items():
+        loads = [(float(jobs[i]["case"].get("load_Nm", 20.0)), int(jobs[i]["case"].get("direction", 1))) for i in idx]
+        theta = None if th is None else np.asarray(th, dtype=float)
+        if many is not None and len(idx) > 1 and theta is None and revs == 1.0:
+            t0 = time.perf_counter()
+            try:
+                rs = many(case, payload["solver"], steps, loads=loads, law=law, geom=geom)
+            except _SOLVE_ERRORS:
+                rs = None  # solved job by job below: a failing load fails alone
+            if rs is not None:
+                secs = (time.perf_counter() - t0) / len(idx)
+                for i, r in zip(idx, rs):
+                    results[i] = _ok(jobs[i]["key"], r, secs)
+                continue
+        for i, (load, d) in zip(idx, loads):
+            t0 = time.perf_counter()
+            try:
+                r = te.run_te(case, payload["solver"], steps, revs, load, d, law, geom=geom, theta_in_deg=theta)
+            except _SOLVE_ERRORS as exc:
+                results[i] = _failed(jobs[i]["key"], exc, time.perf_counter() - t0)
+                continue
+            results[i] = _ok(jobs[i]["key"], r)
+    return {"key": payload["key"], "results": results}
 
 
 class Executor(Protocol):
@@ -264,6 +341,11 @@ class DaskExecutor:
         return f"Dask scheduler {self.address} ({self.workers} worker threads)"
 
 
+def _solve_task(payload: dict[str, Any], solve_fn: SolveFn = solve_job) -> dict[str, Any]:
+    """Worker function of a batch with groups: a group payload (``jobs``) or a single job payload."""
+    return solve_group(payload, solve_fn) if "jobs" in payload else solve_fn(payload)
+
+
 def make_executor(workers: int = 1, scheduler: str | None = None, timeout_s: float = 20.0) -> Executor:
     """Executor from options: Dask if ``scheduler`` (an address) is given, else serial (1) or a local pool (N)."""
     if scheduler:
@@ -369,7 +451,8 @@ class Runner:
         return [Job(c, self.solver, s, self.revolutions, self.law, t) for c, s, t in zip(cases, st, th)]
 
     def __call__(self, cases: Sequence[Case], desc: str = "cases", *, steps: int | Sequence[int] | None = None,
-                 theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None) -> list[dict[str, Any]]:
+                 theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None,
+                 group: Sequence[Any] | None = None) -> list[dict[str, Any]]:
         """Solve a batch of cases.
 
         Parameters
@@ -382,6 +465,11 @@ class Runner:
         theta_in_deg : sequence of (array or None), or None
             Per case, explicit input angles (deg, order of motion) that replace steps and revolutions,
             or None for that case.
+        group : sequence or None
+            Per case, a label (any hashable) or None: the uncached cases of one label are solved in one
+            worker task (:func:`solve_group`: one case read and geometry built, the jobs of one step
+            count batched); they must differ only in load and direction (ValueError otherwise). Each
+            case keeps its own cache entry, so grouped and single solves share the cache.
 
         Returns
         -------
@@ -405,19 +493,26 @@ class Runner:
             else:
                 results[k] = {**hit, "cached": True}
         self.reused += len(results)
-        payloads = [unique[k].to_payload() for k in todo]
+        tasks = self._tasks(todo, keys, group, len(jobs))
+        payloads = [unique[t[0]].to_payload() if len(t) == 1 else self._group_payload([unique[k] for k in t])
+                    for t in tasks]
+        fn = self.solve_fn if all(len(t) == 1 for t in tasks) else functools.partial(_solve_task,
+                                                                                     solve_fn=self.solve_fn)
         bar = tqdm(total=len(unique), initial=len(results), desc=desc, unit="case", file=sys.stderr,
                    disable=not self.progress, dynamic_ncols=True)
         try:
-            for i, res in self.executor.run(self.solve_fn, payloads):
-                k = todo[i]
-                if res.get("key") != k:
-                    raise RuntimeError(f"worker returned the result of {res.get('key')!r} for {k!r}")
-                self.cache.put(k, res)
-                results[k] = {**res, "cached": False}
-                self.computed += 1
-                self.solve_seconds.append(float(res["stats"].get("seconds", math.nan)))
-                bar.update(1)
+            for i, res in self.executor.run(fn, payloads):
+                got = res["results"] if "results" in res else [res]
+                if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
+                    raise RuntimeError(f"worker returned the result of {res.get('key')!r} for {payloads[i]['key']!r}")
+                for k, r in zip(tasks[i], got):
+                    if r.get("key") != k:
+                        raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
+                    self.cache.put(k, r)
+                    results[k] = {**r, "cached": False}
+                    self.computed += 1
+                    self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
+                bar.update(len(got))
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0
@@ -429,6 +524,43 @@ class Runner:
             out.append(r)
         self.failed += sum(1 for k in unique if results[k].get("status") == "failed")
         return out
+
+    @staticmethod
+    def _tasks(todo: list[str], keys: list[str], group: Sequence[Any] | None, n: int) -> list[list[str]]:
+        """The uncached keys as worker tasks: one key each, or the keys of one group label together."""
+        if group is None:
+            return [[k] for k in todo]
+        if len(group) != n:
+            raise ValueError(f"group has {len(group)} entries for {n} cases")
+        label: dict[str, Any] = {}
+        for k, g in zip(keys, group):
+            label.setdefault(k, g)
+        tasks: list[list[str]] = []
+        where: dict[Any, int] = {}
+        for k in todo:
+            g = label[k]
+            if g is None:
+                tasks.append([k])
+            elif g in where:
+                tasks[where[g]].append(k)
+            else:
+                where[g] = len(tasks)
+                tasks.append([k])
+        return tasks
+
+    @staticmethod
+    def _group_payload(jobs: list[Job]) -> dict[str, Any]:
+        """The payload of a :func:`solve_group` task; ValueError if the cases differ in more than load and
+        direction or the jobs in solver or law."""
+        ref = dataclasses.replace(jobs[0].case, name="", load_Nm=0.0, direction=1).key()
+        for j in jobs[1:]:
+            if (dataclasses.replace(j.case, name="", load_Nm=0.0, direction=1).key() != ref
+                    or j.solver != jobs[0].solver or j.law != jobs[0].law):
+                raise ValueError(f"group of cases {jobs[0].case.name!r} and {j.case.name!r}: the cases of one group "
+                                 "must differ only in load and direction (same design, errors, model, solver, law)")
+        ps = [j.to_payload() for j in jobs]
+        key = "group-" + hashlib.sha256("".join(p["key"] for p in ps).encode()).hexdigest()[:32]
+        return {"key": key, "solver": jobs[0].solver, "jobs": ps}
 
     def counters(self) -> dict[str, Any]:
         """``computed, reused, failed``, mean/median solve seconds of computed cases, wall seconds."""
