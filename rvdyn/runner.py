@@ -38,11 +38,11 @@ Nothing here holds a design constant: everything about the reducer comes from ea
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import hashlib
 import math
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -128,8 +128,16 @@ def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dic
     Returns
     -------
     dict
-        ``key`` (the group's) and ``results`` (one :func:`solve_job` result per job, in order).
+        ``key`` (the group's), ``results`` (one :func:`solve_job` result per job, in order) and
+        ``task_seconds`` (wall time of the task in the worker, s).
     """
+    t_task = time.perf_counter()
+    out = _solve_group(payload, solve_fn)
+    out["task_seconds"] = time.perf_counter() - t_task
+    return out
+
+
+def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str, Any]:
     jobs = payload["jobs"]
     if solve_fn is not None and solve_fn is not solve_job:
         return {"key": payload["key"], "results": [solve_fn(p) for p in jobs]}
@@ -140,7 +148,7 @@ def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dic
     try:
         case = Case.from_dict(jobs[0]["case"])
         geom = ReducerGeometry(case)
-    except _SOLVE_ERRORS as exc:  # every job of the group shares the case: each fails as it would alone
+    except _SOLVE_ERRORS:  # every job of the group shares the case: each fails as it would alone
         return {"key": payload["key"], "results": [solve_job(p) for p in jobs]}
     law = ContactLaw(**jobs[0]["law"])
     runs: dict[tuple, list[int]] = {}
@@ -239,8 +247,13 @@ class LocalPoolExecutor:
             raise ValueError(f"workers {workers!r} must be an integer >= 1")
         self.workers = workers
         self._pool: ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
 
     def _get(self) -> ProcessPoolExecutor:
+        with self._lock:  # threads of one study share the pool (one pool, made once)
+            return self._make()
+
+    def _make(self) -> ProcessPoolExecutor:
         if self._pool is None:
             import multiprocessing as mp
             import os
@@ -341,6 +354,14 @@ class DaskExecutor:
         return f"Dask scheduler {self.address} ({self.workers} worker threads)"
 
 
+def _payload(job: Job, key: str) -> dict[str, Any]:
+    """:meth:`rvdyn.cache.Job.to_payload` with its key already computed (the key is the costly part)."""
+    d = {"case": job.case.to_dict(), **job.settings(), "key": key}
+    if job.theta_in_deg is not None:
+        d["theta_in_deg"] = [float(x) for x in job.theta_in_deg]
+    return d
+
+
 def _solve_task(payload: dict[str, Any], solve_fn: SolveFn = solve_job) -> dict[str, Any]:
     """Worker function of a batch with groups: a group payload (``jobs``) or a single job payload."""
     return solve_group(payload, solve_fn) if "jobs" in payload else solve_fn(payload)
@@ -397,6 +418,8 @@ class Runner:
         Solver wall time of every computed case, s.
     wall_seconds : float
         Wall time spent in calls, s.
+    worker_seconds : float
+        Wall time the workers spent on this runner's tasks (solves, case reading, geometry), s.
     """
 
     def __init__(self, executor: Executor | int | str | None = None, cache: CaseCache | str | Path | None = None,
@@ -424,6 +447,9 @@ class Runner:
         self.computed = self.reused = self.failed = 0
         self.solve_seconds: list[float] = []
         self.wall_seconds = 0.0
+        self.worker_seconds = 0.0
+        self._memo: dict[str, dict[str, Any]] = {}
+        self._counted: set[str] = set()
 
     def jobs(self, cases: Sequence[Case], steps: int | Sequence[int] | None = None,
              theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None) -> list[Job]:
@@ -452,7 +478,7 @@ class Runner:
 
     def __call__(self, cases: Sequence[Case], desc: str = "cases", *, steps: int | Sequence[int] | None = None,
                  theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None,
-                 group: Sequence[Any] | None = None) -> list[dict[str, Any]]:
+                 group: Sequence[Any] | None = None, keep: bool = False) -> list[dict[str, Any]]:
         """Solve a batch of cases.
 
         Parameters
@@ -470,6 +496,8 @@ class Runner:
             worker task (:func:`solve_group`: one case read and geometry built, the jobs of one step
             count batched); they must differ only in load and direction (ValueError otherwise). Each
             case keeps its own cache entry, so grouped and single solves share the cache.
+        keep : bool
+            Keep the results in memory for later calls (:meth:`prefetch`).
 
         Returns
         -------
@@ -486,15 +514,20 @@ class Runner:
             unique.setdefault(k, j)
         results: dict[str, dict[str, Any]] = {}
         todo: list[str] = []
+        n_memo = 0
         for k in unique:
+            if k in self._memo:  # solved (or taken from the cache) by this runner's prefetch: counted there
+                results[k] = self._memo[k]
+                n_memo += 1
+                continue
             hit = self.cache.get(k)
             if hit is None:
                 todo.append(k)
             else:
                 results[k] = {**hit, "cached": True}
-        self.reused += len(results)
+        self.reused += len(results) - n_memo
         tasks = self._tasks(todo, keys, group, len(jobs))
-        payloads = [unique[t[0]].to_payload() if len(t) == 1 else self._group_payload([unique[k] for k in t])
+        payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
                     for t in tasks]
         fn = self.solve_fn if all(len(t) == 1 for t in tasks) else functools.partial(_solve_task,
                                                                                      solve_fn=self.solve_fn)
@@ -503,6 +536,7 @@ class Runner:
         try:
             for i, res in self.executor.run(fn, payloads):
                 got = res["results"] if "results" in res else [res]
+                self.worker_seconds += float(res.get("task_seconds", res.get("stats", {}).get("seconds", 0.0)))
                 if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
                     raise RuntimeError(f"worker returned the result of {res.get('key')!r} for {payloads[i]['key']!r}")
                 for k, r in zip(tasks[i], got):
@@ -516,14 +550,25 @@ class Runner:
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0
+        if keep:
+            self._memo.update((k, results[k]) for k in unique if k not in self._memo)
+        self.failed += sum(1 for k in unique if results[k].get("status") == "failed" and k not in self._counted)
+        if keep:
+            self._counted.update(unique)
         out = []
         for k in keys:
             r = dict(results[k])
             te = r.get("te_arcsec")
             r["te_arcsec"] = np.asarray(te, dtype=float) if te else None
             out.append(r)
-        self.failed += sum(1 for k in unique if results[k].get("status") == "failed")
         return out
+
+    def prefetch(self, cases: Sequence[Case], desc: str = "cases", **kw: Any) -> None:
+        """Solve a batch now and keep its results in memory for later calls of this runner (the same
+        arguments as :meth:`__call__`): a later call takes them without solving, reading the cache or
+        counting them again. A study submits every case it will need at once (no worker waits between
+        its stages) and then reads them stage by stage."""
+        self(cases, desc, keep=True, **kw)
 
     @staticmethod
     def _tasks(todo: list[str], keys: list[str], group: Sequence[Any] | None, n: int) -> list[list[str]]:
@@ -549,18 +594,18 @@ class Runner:
         return tasks
 
     @staticmethod
-    def _group_payload(jobs: list[Job]) -> dict[str, Any]:
+    def _group_payload(jobs: list[Job], keys: list[str]) -> dict[str, Any]:
         """The payload of a :func:`solve_group` task; ValueError if the cases differ in more than load and
         direction or the jobs in solver or law."""
-        ref = dataclasses.replace(jobs[0].case, name="", load_Nm=0.0, direction=1).key()
+        a = jobs[0]
         for j in jobs[1:]:
-            if (dataclasses.replace(j.case, name="", load_Nm=0.0, direction=1).key() != ref
-                    or j.solver != jobs[0].solver or j.law != jobs[0].law):
-                raise ValueError(f"group of cases {jobs[0].case.name!r} and {j.case.name!r}: the cases of one group "
-                                 "must differ only in load and direction (same design, errors, model, solver, law)")
-        ps = [j.to_payload() for j in jobs]
-        key = "group-" + hashlib.sha256("".join(p["key"] for p in ps).encode()).hexdigest()[:32]
-        return {"key": key, "solver": jobs[0].solver, "jobs": ps}
+            c = j.case
+            if (c.raw_errors != a.case.raw_errors or c.design != a.case.design or c.model != a.case.model
+                    or j.solver != a.solver or j.law != a.law):
+                raise ValueError(f"group of cases {a.case.name!r} and {c.name!r}: the cases of one group must differ "
+                                 "only in load and direction (same design, errors, model, solver and law)")
+        key = "group-" + hashlib.sha256("".join(keys).encode()).hexdigest()[:32]
+        return {"key": key, "solver": a.solver, "jobs": [_payload(j, k) for j, k in zip(jobs, keys)]}
 
     def counters(self) -> dict[str, Any]:
         """``computed, reused, failed``, mean/median solve seconds of computed cases, wall seconds."""

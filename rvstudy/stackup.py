@@ -96,7 +96,7 @@ def factor_values(feats: list[Feature], X: pd.DataFrame, fs: Any) -> pd.DataFram
 
 
 def draw_cases(feats: list[Feature], X: pd.DataFrame, design: Design, prefix: str, load: float,
-               base_model: dict, notes: list[str]) -> list[Case | None]:
+               base_model: dict, notes: list[str], start: int = 0) -> list[Case | None]:
     """The validated case of each draw at the study load, direction +1 (None for a draw that is not a valid
     case: a note says why and the draw counts as failed)."""
     dd = design.to_dict()
@@ -104,9 +104,10 @@ def draw_cases(feats: list[Feature], X: pd.DataFrame, design: Design, prefix: st
     out: list[Case | None] = []
     for i in range(len(X)):
         try:
-            out.append(make_draw_case(feats, vals[i], design, f"{prefix}-{i + 1}", load, 1, base_model, dd))
+            out.append(make_draw_case(feats, vals[i], design, f"{prefix}-{start + i + 1}", load, 1, base_model, dd))
         except ValueError as exc:
-            notes.append(f"Monte Carlo draw {prefix}-{i + 1} is not a valid case (counted as a failed draw): {exc}")
+            notes.append(f"Monte Carlo draw {prefix}-{start + i + 1} is not a valid case (counted as a failed draw): "
+                         f"{exc}")
             out.append(None)
     return out
 
@@ -207,8 +208,72 @@ def responses_of(cases: list[Case | None], design: Design, cfg: Any, runner: Run
     })
 
 
+def designed_sample(X: pd.DataFrame, groups: dict[str, list[str]], n_s: int) -> pd.DataFrame:
+    """The designed draws of the contributors: for every tolerance group a block of A (the first ``n_s``
+    rows of ``X``) with that group's columns taken from B (the next ``n_s`` rows); empty if ``n_s < 2``."""
+    if n_s < 2 or not groups:
+        return pd.DataFrame(columns=X.columns)
+    A, B = X.iloc[:n_s].reset_index(drop=True), X.iloc[n_s:2 * n_s].reset_index(drop=True)
+    AB = []
+    for cols in groups.values():
+        m = A.copy()
+        m[cols] = B[cols].to_numpy()
+        AB.append(m)
+    return pd.concat(AB, ignore_index=True)
+
+
+def solve_full_mc(cfg: Any, design: Design, runners: dict[str, Runner], base_model: dict | None = None,
+                  background: Any = None) -> dict[str, Any]:
+    """Draw and solve every Monte Carlo case (the part of :func:`run_full_mc` that needs the workers).
+
+    Parameters
+    ----------
+    cfg, design, runners, base_model
+        As :func:`run_full_mc`.
+    background : concurrent.futures.Executor or None
+        A thread pool: the fcl check is then submitted at once, before the draws, and solved beside them.
+
+    Returns
+    -------
+    dict
+        ``feats, X, Xab, groups, n_s, cases, Y, Yab, check`` (fcl results of the check draws or None),
+        ``notes``, ``t0`` (start, ``time.perf_counter``), ``counts`` (the runners' counters before).
+    """
+    t0 = time.perf_counter()
+    done0 = {k: (getattr(r, "computed", 0), getattr(r, "reused", 0), getattr(r, "worker_seconds", 0.0))
+             for k, r in runners.items()}
+    notes: list[str] = []
+    tols = cfg.tolerances
+    base_model = dict(base_model or {})
+    feats = features(tols, design)
+    X = draw(tols, feats, cfg.mc_draws, np.random.default_rng([cfg.seed, 2]))
+    groups = {g: c for g, c in group_columns(feats).items() if tols[g].std > 0}
+    n_s = min(int(cfg.mc_sobol), len(X) // 2)
+    Xab = designed_sample(X, groups, n_s)
+    n_chk = min(int(cfg.mc_check), len(X)) if "check" in runners else 0
+    cases = draw_cases(feats, X.iloc[:n_chk], design, "mc", cfg.load_Nm, base_model, notes)
+    idx = [i for i in range(n_chk) if cases[i] is not None]
+
+    def check() -> list[dict[str, Any] | None]:
+        got = dict(zip(idx, runners["check"]([cases[i] for i in idx], f"MC check: fcl ({n_chk} draws)")
+                       if idx else []))
+        return [got.get(i) for i in range(n_chk)]
+
+    chk = background.submit(check) if background is not None and n_chk else None
+    cases = (cases + draw_cases(feats, X.iloc[n_chk:], design, "mc", cfg.load_Nm, base_model, notes, start=n_chk)
+             + draw_cases(feats, Xab, design, "sobol", cfg.load_Nm, base_model, notes))
+    # the independent and the designed draws in one batch (no wait between them)
+    Yall = responses_of(cases, design, cfg, runners["mc"], notes,
+                        f"MC: {len(X)} + {len(Xab)} designed draws x {1 + len(PLAY_RUNS)} solves")
+    checked = (chk.result() if chk is not None else check()) if n_chk else None
+    return {"feats": feats, "X": X, "Xab": Xab, "groups": groups, "n_s": n_s, "cases": cases,
+            "Y": Yall.iloc[:len(X)].reset_index(drop=True), "Yab": Yall.iloc[len(X):].reset_index(drop=True),
+            "check": checked, "notes": notes, "t0": t0, "counts": done0}
+
+
 def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], fits: dict[str, Any],
-                notes: list[str], base_model: dict | None = None, workers: int = 1) -> dict[str, Any]:
+                notes: list[str], base_model: dict | None = None, workers: int = 1,
+                solved: dict[str, Any] | None = None) -> dict[str, Any]:
     """The full-solver Monte Carlo of the study (see the module docstring).
 
     Parameters
@@ -226,39 +291,26 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
         Response -> FitBundle of the design stage (surface comparison), may be empty.
     notes : list
         Notes of the run (appended to).
+    workers : int
+        Workers of the executor (for the throughput figure).
+    solved : dict or None
+        The output of :func:`solve_full_mc` when the solves ran already (beside other stages); default:
+        solved here.
     """
-    t0 = time.perf_counter()
-    done0 = {k: (getattr(r, "computed", 0), getattr(r, "reused", 0)) for k, r in runners.items()}
+    sv = solved if solved is not None else solve_full_mc(cfg, design, runners, base_model)
+    notes.extend(sv["notes"])
+    t0, done0 = sv["t0"], sv["counts"]
     tols = cfg.tolerances
-    base_model = dict(base_model or {})
-    feats = features(tols, design)
-    X = draw(tols, feats, cfg.mc_draws, np.random.default_rng([cfg.seed, 2]))
+    feats, X, Xab, groups, n_s = sv["feats"], sv["X"], sv["Xab"], sv["groups"], sv["n_s"]
+    Y, Yab = sv["Y"], sv["Yab"]
+    n_design = len(Xab)
     specs = cfg.specs()
     out: dict[str, Any] = {"tolerances": tols, "n_features": len(feats), "specs": specs,
                            "play_positions": play_positions(design), "play_load_Nm": PLAY_LOAD_FRACTION * cfg.rated_Nm,
                            "features": pd.DataFrame([{"feature": f.name, "tolerance": f.tolerance,
                                                       "component": f.component} for f in feats])}
-    groups = {g: c for g, c in group_columns(feats).items() if tols[g].std > 0}
-    # designed sample for the contributors: A, B = first two blocks of the independent draws
-    n_s = min(int(cfg.mc_sobol), len(X) // 2)
+    out["sobol_n"] = n_s
     sob_rows = []
-    Xab = pd.DataFrame(columns=X.columns)
-    if n_s >= 2 and groups:
-        A, B = X.iloc[:n_s].reset_index(drop=True), X.iloc[n_s:2 * n_s].reset_index(drop=True)
-        AB = []
-        for g, cols in groups.items():
-            m = A.copy()
-            m[cols] = B[cols].to_numpy()
-            AB.append(m)
-        Xab = pd.concat(AB, ignore_index=True)
-    n_design = len(Xab)
-    # the independent and the designed draws in one batch (no wait between them)
-    cases = (draw_cases(feats, X, design, "mc", cfg.load_Nm, base_model, notes)
-             + draw_cases(feats, Xab, design, "sobol", cfg.load_Nm, base_model, notes))
-    Yall = responses_of(cases, design, cfg, runners["mc"], notes,
-                        f"MC: {len(X)} + {n_design} designed draws x {1 + len(PLAY_RUNS)} solves")
-    Y = Yall.iloc[:len(X)].reset_index(drop=True)
-    Yab = Yall.iloc[len(X):].reset_index(drop=True)
     if n_design:
         for resp in MC_RESPONSES:
             yA, yB = Y[resp].to_numpy()[:n_s], Y[resp].to_numpy()[n_s:2 * n_s]
@@ -267,7 +319,6 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
             s.insert(0, "response", resp)
             sob_rows.append(s)
     out["sobol"] = pd.concat(sob_rows, ignore_index=True) if sob_rows else pd.DataFrame()
-    out["sobol_n"] = n_s
     per: dict[str, Any] = {}
     alloc_rows = []
     for resp in MC_RESPONSES:
@@ -304,11 +355,9 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
                                         else None)}
     out["surface"] = surf
     # fcl on a check subsample of the independent draws
-    n_chk = min(int(cfg.mc_check), len(X))
-    if n_chk > 0 and "check" in runners:
-        idx = [i for i in range(n_chk) if cases[i] is not None]
-        got = dict(zip(idx, runners["check"]([cases[i] for i in idx], f"MC check: fcl ({n_chk} draws)") if idx else []))
-        chk = [got.get(i) for i in range(n_chk)]
+    if sv["check"] is not None:
+        chk = sv["check"]
+        n_chk = len(chk)
         cdf = pd.DataFrame({"draw": np.arange(1, n_chk + 1),
                             "te_pp_arcmin_analytic": Y["te_pp_arcmin"].to_numpy()[:n_chk],
                             "te_pp_arcmin_fcl": [_stat(r, "pp") for r in chk],
@@ -327,10 +376,15 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
     n_eval = len(X) + n_design
     computed = sum(getattr(r, "computed", 0) - done0[k][0] for k, r in runners.items() if k != "check")
     reused = sum(getattr(r, "reused", 0) - done0[k][1] for k, r in runners.items() if k != "check")
+    busy = sum(getattr(r, "worker_seconds", 0.0) - done0[k][2] for k, r in runners.items() if k != "check")
     out["timing"] = {"wall_s": wall, "full_solver_draws": n_eval, "independent_draws": len(X),
                      "analytic_solves_computed": computed, "analytic_solves_reused": reused,
                      "design_draws": n_design, "solves_per_draw": 1 + len(PLAY_RUNS), "workers": workers,
-                     "draws_per_s_per_worker": n_eval / wall / max(1, workers) if wall > 0 else float("nan")}
+                     "worker_s": busy, "draws_per_s_wall": n_eval / wall if wall > 0 else float("nan"),
+                     # worker time on the Monte Carlo tasks (case reading, geometry, the five solves): the rate
+                     # of one worker, also when the draws shared the workers with other stages
+                     "draws_per_s_per_worker": (n_eval / busy if busy > 0 else
+                                                n_eval / wall / max(1, workers) if wall > 0 else float("nan"))}
     return out
 
 
