@@ -111,12 +111,12 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
 def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dict[str, Any]:
     """Solve a group of job payloads whose cases differ only in load and direction (worker side).
 
-    The case is read and its geometry built once for the group; the jobs of one step count (same
-    ``steps``, ``revolutions`` and input angles) go to :func:`rvdyn.te.run_te_many` in one call when
-    this version of rvdyn has it, else to :func:`rvdyn.te.run_te` one after another on the shared
-    geometry (the same numbers as separate :func:`solve_job` calls: the geometry does not depend on
-    the load or the direction). A batched call that fails is repeated job by job, so a failed job
-    fails alone, as it would on its own.
+    The case is read and its geometry built once for the group; the jobs of equal ``revolutions`` and no
+    given input angles, all under a load > 0, go to :func:`rvdyn.te.run_te_many` in one call (the analytic
+    provider solves their states together; each result equals :func:`rvdyn.te.run_te`'s within the
+    solver tolerance), the others to :func:`rvdyn.te.run_te` one after another on the shared geometry
+    (the geometry does not depend on the load or the direction). A batched call that fails is repeated
+    job by job, so a failed job fails alone, as it would on its own.
 
     Parameters
     ----------
@@ -151,29 +151,28 @@ def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str,
     except _SOLVE_ERRORS:  # every job of the group shares the case: each fails as it would alone
         return {"key": payload["key"], "results": [solve_job(p) for p in jobs]}
     law = ContactLaw(**jobs[0]["law"])
-    runs: dict[tuple, list[int]] = {}
+    runs: dict[tuple, list[int]] = {}  # jobs that one run_te_many call can take: same revolutions, no given angles
     for i, p in enumerate(jobs):
         th = p.get("theta_in_deg")
-        runs.setdefault((int(p["steps"]), float(p["revolutions"]), None if th is None else tuple(th)), []).append(i)
-    many = getattr(te, "run_te_many", None)
-    for (steps, revs, th), idx in runs.items():
+        runs.setdefault((float(p["revolutions"]), None if th is None else tuple(th), i if th is not None else -1),
+                        []).append(i)
+    for (revs, th, _), idx in runs.items():
         loads = [(float(jobs[i]["case"].get("load_Nm", 20.0)), int(jobs[i]["case"].get("direction", 1))) for i in idx]
-        theta = None if th is None else np.asarray(th, dtype=float)
-        if many is not None and len(idx) > 1 and theta is None and revs == 1.0:
-            t0 = time.perf_counter()
+        steps = [int(jobs[i]["steps"]) for i in idx]
+        if len(idx) > 1 and th is None and all(load > 0 for load, _ in loads):
             try:
-                rs = many(case, payload["solver"], steps, loads=loads, law=law, geom=geom)
+                rs = te.run_te_many(case, payload["solver"], steps, loads=loads, revolutions=revs, law=law, geom=geom)
             except _SOLVE_ERRORS:
-                rs = None  # solved job by job below: a failing load fails alone
+                rs = None  # solved job by job below: a failing load fails alone, as on its own
             if rs is not None:
-                secs = (time.perf_counter() - t0) / len(idx)
                 for i, r in zip(idx, rs):
-                    results[i] = _ok(jobs[i]["key"], r, secs)
+                    results[i] = _ok(jobs[i]["key"], r)
                 continue
-        for i, (load, d) in zip(idx, loads):
+        theta = None if th is None else np.asarray(th, dtype=float)
+        for i, n, (load, d) in zip(idx, steps, loads):
             t0 = time.perf_counter()
             try:
-                r = te.run_te(case, payload["solver"], steps, revs, load, d, law, geom=geom, theta_in_deg=theta)
+                r = te.run_te(case, payload["solver"], n, revs, load, d, law, geom=geom, theta_in_deg=theta)
             except _SOLVE_ERRORS as exc:
                 results[i] = _failed(jobs[i]["key"], exc, time.perf_counter() - t0)
                 continue
