@@ -76,8 +76,8 @@ RESPONSE_LABEL = {"mean_abs_arcmin": "mean |TE| [arcmin]", "pp_arcmin": "TE peak
 DEFAULT_STEPS = 360
 DEFAULT_SEED = 20240
 #: Full-solver Monte Carlo draws, designed-sample block size, fcl check draws (defaults).
-DEFAULT_MC_DRAWS = 200
-DEFAULT_MC_SOBOL = 10
+DEFAULT_MC_DRAWS = 600
+DEFAULT_MC_SOBOL = 50
 DEFAULT_MC_CHECK = 8
 
 
