@@ -114,9 +114,9 @@ def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dic
     The case is read and its geometry built once for the group; the jobs of equal ``revolutions`` and no
     given input angles, all under a load > 0, go to :func:`rvdyn.te.run_te_many` in one call (the analytic
     provider solves their states together; each result equals :func:`rvdyn.te.run_te`'s within the
-    solver tolerance), the others to :func:`rvdyn.te.run_te` one after another on the shared geometry
-    (the geometry does not depend on the load or the direction). A batched call that fails is repeated
-    job by job, so a failed job fails alone, as it would on its own.
+    solver tolerance; a pair that cannot be solved fails alone with its error, the others stand), the
+    others to :func:`rvdyn.te.run_te` one after another on the shared geometry (the geometry does not
+    depend on the load or the direction).
 
     Parameters
     ----------
@@ -160,13 +160,17 @@ def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str,
         loads = [(float(jobs[i]["case"].get("load_Nm", 20.0)), int(jobs[i]["case"].get("direction", 1))) for i in idx]
         steps = [int(jobs[i]["steps"]) for i in idx]
         if len(idx) > 1 and th is None and all(load > 0 for load, _ in loads):
-            try:
-                rs = te.run_te_many(case, payload["solver"], steps, loads=loads, revolutions=revs, law=law, geom=geom)
+            t0 = time.perf_counter()
+            try:  # a pair that cannot be solved comes back as its error, the others as results
+                rs = te.run_te_many(case, payload["solver"], steps, loads=loads, revolutions=revs, law=law, geom=geom,
+                                    errors="return")
             except _SOLVE_ERRORS:
-                rs = None  # solved job by job below: a failing load fails alone, as on its own
+                rs = None  # solved job by job below
             if rs is not None:
+                secs = (time.perf_counter() - t0) / len(idx)
                 for i, r in zip(idx, rs):
-                    results[i] = _ok(jobs[i]["key"], r)
+                    k = jobs[i]["key"]
+                    results[i] = _failed(k, r, secs) if isinstance(r, BaseException) else _ok(k, r)
                 continue
         theta = None if th is None else np.asarray(th, dtype=float)
         for i, n, (load, d) in zip(idx, steps, loads):
