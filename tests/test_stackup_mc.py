@@ -137,6 +137,13 @@ def test_sobol_from_design_and_reweighted_allocation():
     assert s.loc["a", "first_order"] == pytest.approx(1 / 6, abs=0.04)
     assert s.loc["b", "first_order"] == pytest.approx(4 / 6, abs=0.05)
     assert s.loc["a", "total"] == pytest.approx(2 / 6, abs=0.04) and s.loc["b", "total"] == pytest.approx(5 / 6, abs=0.05)
+    # a response far from zero (mean 100, sigma 2.4): the centred first-order estimate stays as accurate
+    # (uncentred its standard error would be ~100/2.4 times larger: about 1 at n = 400)
+    m = 400
+    s = sobol_from_design(f(A[:m]) + 100, f(B[:m]) + 100, {g: f(mm[:m]) + 100 for g, mm in AB.items()},
+                          n_boot=50).set_index("tolerance")
+    assert s.loc["a", "first_order"] == pytest.approx(1 / 6, abs=0.15)
+    assert s.loc["b", "first_order"] == pytest.approx(4 / 6, abs=0.15)
     # re-weighting: |x| <= 1 with x ~ N(0, 1): tightening sigma to 0.8 gives P(|z| <= 1.25)
     X = pd.DataFrame({"x": rng.normal(0, 1, 20000)})
     al = allocation(X, {"pin_radius": ["x"]}, {"pin_radius": Tolerance("pin_radius", "normal", (1.0,))},
