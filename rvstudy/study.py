@@ -565,7 +565,8 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
             res.mc = run_full_mc(cfg, fs, design, mc_runners, res.fits, res.notes, workers=getattr(ex, "workers", 1),
                                  solved=solved)
             res.timings["mc"] = res.mc["timing"]["wall_s"]
-            res.timings["mc_wait_and_analysis"] = time.perf_counter() - t0
+            if bg is not None:  # the draws were solved beside the other stages
+                res.timings["mc_wait_and_analysis"] = time.perf_counter() - t0
     finally:
         if own:
             ex.close()
