@@ -12,6 +12,8 @@ or keep one :class:`Runner` (its cache, executor and counters) for several batch
         first = run(cases_a, "screen")
         second = run(cases_b, "design", steps=[720] * len(cases_b))        # per-case steps
         third = run(cases_c, "readings", theta_in_deg=[angles_c0, angles_c1])  # at given input angles
+        draws = run(cases_d, "draws", steps=[360, 37, 37], group=[0, 0, 0])   # one worker task (solve_group)
+        run.prefetch(cases_e, "ahead")   # solved now, read later by run(cases_e, ...) without counting twice
 
 Every call returns one result dict per case, in the order of the cases:
 
