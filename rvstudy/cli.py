@@ -33,7 +33,7 @@ from rvstudy.study import (
     run_study,
 )
 
-DEFAULT_SOLVER = "fcl"
+DEFAULT_SOLVER = "analytic"
 
 
 def build_parser() -> argparse.ArgumentParser:

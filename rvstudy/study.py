@@ -76,7 +76,7 @@ RESPONSE_LABEL = {"mean_abs_arcmin": "mean |TE| [arcmin]", "pp_arcmin": "TE peak
 DEFAULT_STEPS = 360
 DEFAULT_SEED = 20240
 #: Full-solver Monte Carlo draws, designed-sample block size, fcl check draws (defaults).
-DEFAULT_MC_DRAWS = 600
+DEFAULT_MC_DRAWS = 1500
 DEFAULT_MC_SOBOL = 50
 DEFAULT_MC_CHECK = 8
 
@@ -161,7 +161,7 @@ class StudyConfig:
     """
 
     out: Path = Path("rv-stackup-out")
-    solver: str = "fcl"
+    solver: str = "analytic"
     steps: int = DEFAULT_STEPS
     load_Nm: float = 20.0
     workers: int = 2
