@@ -1,5 +1,5 @@
-"""``rv-calibrate DATASET --out DIR [--reducer DESIGN.json] [--json] [--steps N]``: the closed loop on
-measured data.
+"""``rv-calibrate DATASET --out DIR [--reducer DESIGN.json] [--json] [--steps N] [--workers N] [--cache DIR]``:
+the closed loop on measured data.
 
 Reads the dataset folder (``runs.csv``, ``samples.csv``, optionally ``design.json``: the reducer
 measured; ``--reducer`` names it when the folder does not; see :mod:`rvcalib.dataset`), runs
@@ -8,6 +8,11 @@ prints a human summary, or with ``--json`` one JSON object (``reducer``, ``ratio
 ``rms_after_arcsec``, ``effects`` = list of ``{name, value, unit, ci_low, ci_high, ...}``,
 ``unexplained``, per-run figures under ``runs``). Bad input: a message naming the file and column
 on stderr, exit status 2.
+
+The model TE is solved by rvdyn's forward runner (:class:`rvdyn.runner.Runner`, see
+:mod:`rvcalib.forward`): ``--workers`` local processes solve each batch (the screening signatures,
+the run conditions of a prediction), ``--cache`` keeps every solve on disk for later runs (the same
+cache format as ``rv-stackup --cache``).
 """
 from __future__ import annotations
 
@@ -44,6 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "orders that matter (default: the smallest grid that does)")
     p.add_argument("--time-budget", type=float, default=None, metavar="SECONDS",
                    help="stop adding terms after this many seconds (the result says so; default: no budget)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="local worker processes solving the model's batches (default 1 = this process)")
+    p.add_argument("--cache", default=None, metavar="DIR",
+                   help="case cache folder kept for later runs (default: none; solves are kept in memory for this run)")
     p.add_argument("--verbose", action="store_true", help="progress messages on stderr")
     return p
 
@@ -86,6 +95,9 @@ def check_options(args: argparse.Namespace) -> None:
                      why=f"more than 2 points per period of the pin order {zp}")
     if args.time_budget is not None:
         v.option_real(args.time_budget, "--time-budget", 0.0, 86400.0, lo_open=True)
+    v.option_int(args.workers, "--workers", 1, v.MAX_WORKERS, why="local processes of about 160 MB each")
+    if args.cache is not None:
+        v.output_dir(args.cache, "--cache")
     v.output_dir(args.out)
 
 
@@ -132,6 +144,7 @@ def summary(res, paths: dict) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status (0 ok, 2 bad input)."""
     args = build_parser().parse_args(argv)
+    from rvcalib import forward
     from rvcalib.identify import calibrate
     from rvcalib.report import result_json, write_report
 
@@ -140,8 +153,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         ds = read_dataset(args.dataset, design=args.reducer)
         steps = args.steps
         log = (lambda s: print(f"rv-calibrate: {s}", file=sys.stderr, flush=True)) if args.verbose else None
-        res = calibrate(ds, steps=steps, alpha=args.alpha, max_terms=args.max_terms, log=log,
-                        screen_points=args.screen_points, time_budget_s=args.time_budget)
+        runner = None
+        if args.workers > 1 or args.cache is not None:
+            from rvdyn.runner import Runner
+
+            runner = Runner(executor=args.workers, cache=args.cache, memory_bytes=forward.CACHE_BYTES)
+        prev = forward.use_runner(runner) if runner is not None else None
+        try:
+            res = calibrate(ds, steps=steps, alpha=args.alpha, max_terms=args.max_terms, log=log,
+                            screen_points=args.screen_points, time_budget_s=args.time_budget)
+        finally:
+            if runner is not None:
+                forward.use_runner(prev)
+                runner.close()
         paths = write_report(res, args.out)
     except ValueError as exc:
         print(f"rv-calibrate: error: {v.one_line(exc)}", file=sys.stderr)

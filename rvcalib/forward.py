@@ -1,12 +1,20 @@
 """The forward model of a measured run: rvdyn TE at the readings, or on a uniform grid.
 
-The model TE is solved by :func:`rvdyn.te.run_te` (analytic contacts). TE is periodic in one output
-revolution (input N turns, N the ratio of the case's design; see :mod:`rvcalib.orders`), so angles
-are taken modulo it. Every design constant comes from the case (its ``design`` object). :func:`grid_te` solves a uniform grid of ``steps`` input angles over one output
-revolution (the screening and the coarse fits of :mod:`rvcalib.identify`); :func:`te_at` solves
-exactly at given angles (every reading of a run: interpolating a grid is not exact, see there). Solutions are cached by the case's content hash (which holds the
-load and the direction) and the angles, so identical conditions and repeated trial values are
-solved once per process; the cache is bounded by :data:`CACHE_BYTES`.
+The model TE is solved by rvdyn's one forward runner (:class:`rvdyn.runner.Runner`: analytic contacts,
+each case's own contact law). TE is periodic in one output revolution (input N turns, N the ratio of
+the case's design; see :mod:`rvcalib.orders`), so angles are taken modulo it. Every design constant
+comes from the case (its ``design`` object). :func:`grid_te` solves a uniform grid of ``steps`` input
+angles over one output revolution (the screening and the coarse fits of :mod:`rvcalib.identify`);
+:func:`te_at` solves exactly at given angles (every reading of a run: interpolating a grid is not
+exact, see there); :func:`te_at_many` and :func:`grid_te_many` solve a batch at once (in parallel when
+the runner has several workers).
+
+Solutions are cached by the runner under the job key (the case's content hash, which holds the
+design, the errors, the load and the direction, and the angles), so identical conditions and
+repeated trial values are solved once per process: the default runner (:func:`forward_runner`) keeps
+them in memory (:data:`CACHE_BYTES`, least recently used first out) and solves in this process.
+:func:`use_runner` puts another in its place, e.g. ``Runner(executor=2, cache="dir",
+memory_bytes=CACHE_BYTES)`` for a local pool and a disk cache shared with later runs.
 
 The measurement effects (encoder eccentricities) and empirical harmonic terms are not physics of
 the reducer; they are added to the model TE here as reading errors, see :mod:`rvcalib.effects`.
@@ -14,50 +22,59 @@ the reducer; they are added to the model TE here as reading errors, see :mod:`rv
 from __future__ import annotations
 
 import copy
-import hashlib
 import math
-import time
-from collections import OrderedDict
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from rvcad.errors import Case
-from rvdyn.te import run_te
+from rvdyn.runner import Runner
 
 from rvcalib.orders import period_deg
 
-#: Maximum number of cached solutions.
-CACHE_SIZE = 20000
-#: Maximum bytes of cached solutions (least recently used ones go first).
+#: Budget of the default runner's in-memory cache, bytes (least recently used solutions go first).
 CACHE_BYTES = 256 * 2 ** 20
 
-_CACHE: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
-_STATS = {"solves": 0, "hits": 0, "seconds": 0.0, "bytes": 0}
-
-
-def _store(key: tuple, value: np.ndarray) -> None:
-    value.setflags(write=False)
-    _CACHE[key] = value
-    _STATS["bytes"] += value.nbytes
-    while len(_CACHE) > CACHE_SIZE or (_STATS["bytes"] > CACHE_BYTES and len(_CACHE) > 1):
-        _, old = _CACHE.popitem(last=False)
-        _STATS["bytes"] -= old.nbytes
+_RUNNER: Runner | None = None
 
 
 class ModelEvaluationError(ValueError):
     """The reducer model cannot be evaluated at these parameters (interference, no convergence)."""
 
 
+def forward_runner() -> Runner:
+    """The runner of the forward model: the one set by :func:`use_runner`, else (made on first use) a
+    serial runner with an in-memory cache of :data:`CACHE_BYTES` and no disk cache."""
+    global _RUNNER
+    if _RUNNER is None:
+        _RUNNER = Runner(solver="analytic", memory_bytes=CACHE_BYTES)
+    return _RUNNER
+
+
+def use_runner(runner: Runner | None) -> Runner | None:
+    """Solve the forward model with ``runner`` from now on (None: back to the default); returns the
+    previous one (the caller closes runners it made)."""
+    global _RUNNER
+    if runner is not None and not isinstance(runner, Runner):
+        raise TypeError(f"runner must be an rvdyn.runner.Runner or None, not {type(runner).__name__}")
+    prev, _RUNNER = _RUNNER, runner
+    return prev
+
+
 def cache_stats() -> dict[str, float]:
-    """Solver calls, cache hits and solver seconds of this process."""
-    return dict(_STATS)
+    """Of the forward runner: unique solves (``solves``), results taken from its caches (``hits``),
+    solver seconds (``seconds``) and bytes held in memory (``bytes``)."""
+    r = forward_runner()
+    return {"solves": r.computed, "hits": r.reused, "seconds": r.counters()["solve_seconds_total"],
+            "bytes": r.memory.bytes if r.memory is not None else 0}
 
 
 def clear_cache() -> None:
-    """Forget all cached solutions."""
-    _CACHE.clear()
-    _STATS["bytes"] = 0
+    """Forget the solutions held in memory (a disk cache stays)."""
+    r = forward_runner()
+    if r.memory is not None:
+        r.memory.clear()
 
 
 def grid_angles_deg(steps: int, period: float) -> np.ndarray:
@@ -66,13 +83,16 @@ def grid_angles_deg(steps: int, period: float) -> np.ndarray:
     return np.arange(steps) * (float(period) / steps)
 
 
-def case_period_deg(case_dict: dict[str, Any]) -> float:
-    """Input angle of one output revolution of a case JSON's design, deg."""
+def _case(case_dict: dict[str, Any]) -> Case:
     try:
-        case = Case.from_dict(case_dict)
+        return Case.from_dict(case_dict)
     except ValueError as exc:
         raise ModelEvaluationError(str(exc)) from None
-    return period_deg(case.design)
+
+
+def case_period_deg(case_dict: dict[str, Any]) -> float:
+    """Input angle of one output revolution of a case JSON's design, deg."""
+    return period_deg(_case(case_dict).design)
 
 
 def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> np.ndarray:
@@ -96,6 +116,20 @@ def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> 
     return te_at(case_dict, grid_angles_deg(int(steps), case_period_deg(case_dict)), solver)
 
 
+def grid_te_many(case_dicts: Sequence[dict[str, Any]], steps: int | Sequence[int],
+                 solver: str = "analytic") -> list[np.ndarray | ModelEvaluationError]:
+    """:func:`grid_te` of many cases in one batch of the runner (one ``steps`` or one per case); a case
+    rvdyn cannot evaluate gives its :class:`ModelEvaluationError` in its place instead of raising."""
+    st = [int(steps)] * len(case_dicts) if isinstance(steps, (int, np.integer)) else [int(s) for s in steps]
+    angles: list[np.ndarray | None] = []
+    for d, s in zip(case_dicts, st):
+        try:
+            angles.append(grid_angles_deg(s, case_period_deg(d)))
+        except ModelEvaluationError:
+            angles.append(None)
+    return te_at_many(case_dicts, angles, solver)
+
+
 def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analytic") -> np.ndarray:
     """Model TE (arcsec) exactly at given input angles (deg, any revolution), in their order.
 
@@ -111,33 +145,47 @@ def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analy
     ModelEvaluationError
         If rvdyn refuses the case (interference beyond the contact law) or does not converge.
     """
-    try:
-        case = Case.from_dict(case_dict)
-    except ValueError as exc:
-        raise ModelEvaluationError(str(exc)) from None
-    period = period_deg(case.design)
-    x = np.mod(np.asarray(input_deg, dtype=float), period)
-    xr = np.round(x, 9)
-    u, inv = np.unique(xr, return_inverse=True)
-    u_run = u[::-1] if case.direction == -1 else u  # in the order of motion
-    key = (case.key(), "at", hashlib.blake2b(u.tobytes(), digest_size=16).hexdigest(), solver)
-    hit = _CACHE.get(key)
-    if hit is None:
-        t0 = time.perf_counter()
-        pts = u_run if u_run.size >= 2 else np.append(u_run, u_run + period / 2)
+    out = te_at_many([case_dict], [input_deg], solver)[0]
+    if isinstance(out, ModelEvaluationError):
+        raise out
+    return out
+
+
+def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndarray | None],
+               solver: str = "analytic") -> list[np.ndarray | ModelEvaluationError]:
+    """:func:`te_at` of many cases (each with its angles) in one batch of the forward runner; a case
+    rvdyn cannot evaluate (or whose angles are None) gives a :class:`ModelEvaluationError` in its place."""
+    if len(input_deg) != len(case_dicts):
+        raise ValueError(f"input_deg has {len(input_deg)} entries for {len(case_dicts)} cases")
+    runner = forward_runner()
+    if solver != runner.solver:
+        raise ValueError(f"solver {solver!r}: the forward runner solves with {runner.solver!r}")
+    out: list[np.ndarray | ModelEvaluationError | None] = [None] * len(case_dicts)
+    todo: list[tuple[int, Case, np.ndarray, np.ndarray, bool]] = []  # index, case, angles solved, inverse, reversed
+    for i, (d, a) in enumerate(zip(case_dicts, input_deg)):
         try:
-            res = run_te(case, solver=solver, theta_in_deg=pts)
-        except (ValueError, RuntimeError) as exc:
-            raise ModelEvaluationError(f"rvdyn could not evaluate the case: {exc}") from None
-        _STATS["solves"] += 1
-        _STATS["seconds"] += time.perf_counter() - t0
-        te = res.table["te_arcsec"].to_numpy()[:u_run.size]
-        hit = (te[::-1] if case.direction == -1 else te).copy()
-        _store(key, hit)
-    else:
-        _CACHE.move_to_end(key)
-        _STATS["hits"] += 1
-    return hit[inv]
+            case = _case(d)
+        except ModelEvaluationError as exc:
+            out[i] = exc
+            continue
+        if a is None:
+            out[i] = ModelEvaluationError(f"case {i} has no angles")
+            continue
+        period = period_deg(case.design)
+        x = np.mod(np.asarray(a, dtype=float), period)
+        u, inv = np.unique(np.round(x, 9), return_inverse=True)
+        rev = case.direction == -1
+        u_run = u[::-1] if rev else u  # in the order of motion
+        pts = u_run if u_run.size >= 2 else np.append(u_run, u_run + period / 2)
+        todo.append((i, case, pts, inv, rev))
+    res = runner([t[1] for t in todo], "forward model", theta_in_deg=[t[2] for t in todo])
+    for (i, _, _, inv, rev), r in zip(todo, res):
+        if r["status"] != "ok":
+            out[i] = ModelEvaluationError(f"rvdyn could not evaluate the case: {r['error']}")
+            continue
+        te = r["te_arcsec"][:int(inv.max()) + 1]  # without the padding angle of a single-angle request
+        out[i] = (te[::-1] if rev else te)[inv]
+    return out  # type: ignore[return-value]
 
 
 def merge_case(base: dict[str, Any], errors: list[tuple[str, dict]] | None = None,

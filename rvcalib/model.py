@@ -10,9 +10,17 @@ import numpy as np
 
 from rvcalib.dataset import MeasuredDataset
 from rvcalib.effects import Effect, Library, build_library
-from rvcalib.forward import grid_te, merge_case, te_at
+from rvcalib.forward import ModelEvaluationError, grid_te_many, merge_case, te_at_many
 from rvcalib.orders import screen_grid
 from rvcalib.results import Active, EmpiricalTerm
+
+
+def _raise_any(results: list) -> list[np.ndarray]:
+    """The arrays of a batch of the forward model; its first :class:`ModelEvaluationError` raised."""
+    for r in results:
+        if isinstance(r, ModelEvaluationError):
+            raise r
+    return results
 
 
 class LoopModel:
@@ -108,7 +116,7 @@ class LoopModel:
     def _phys_grid(self, active: list[tuple[Effect, np.ndarray]], steps: int) -> list[np.ndarray]:
         """Model TE on the grid for each condition."""
         phys = [(e, p) for e, p in active if e.family != "measurement"]
-        return [grid_te(self._case(c, phys), steps) for c in range(len(self.cond_base))]
+        return _raise_any(grid_te_many([self._case(c, phys) for c in range(len(self.cond_base))], steps))
 
     def _meas(self, active, input_deg: np.ndarray, output_deg: np.ndarray) -> np.ndarray:
         out = np.zeros(np.asarray(input_deg).size)
@@ -126,9 +134,9 @@ class LoopModel:
         """
         phys = [(e, p) for e, p in active if e.family != "measurement"]
         out: list[np.ndarray] = [np.empty(0)] * len(self.runs)
-        for c, members in enumerate(self._cond_runs):
-            x = np.concatenate([self.runs[i].input_deg for i in members])
-            te = te_at(self._case(c, phys), x)
+        xs = [np.concatenate([self.runs[i].input_deg for i in members]) for members in self._cond_runs]
+        tes = _raise_any(te_at_many([self._case(c, phys) for c in range(len(self._cond_runs))], xs))
+        for members, te in zip(self._cond_runs, tes):
             j = 0
             for i in members:
                 r = self.runs[i]

@@ -17,7 +17,7 @@ import numpy as np
 
 from rvcalib.dataset import RunRecord
 from rvcalib.effects import Effect, polar_to_xy, trial_points
-from rvcalib.forward import ModelEvaluationError, grid_te
+from rvcalib.forward import ModelEvaluationError, grid_te_many
 from rvcalib.lsq import fit_option, ftest, projector
 from rvcalib.model import LoopModel
 from rvcalib.results import Candidate, EmpiricalTerm, HarmonicCandidate
@@ -80,25 +80,47 @@ class Screening(LoopModel):
         return ms if (ms < self.m and self.m % ms == 0 and ms % self.design.z_pins == 0) else self.m
 
     def screening_signatures(self) -> None:
-        """Solve every template candidate at its trial values on its screening grid, per condition."""
+        """Solve every template candidate at its trial values on its screening grid, per condition
+        (one batch of the forward runner: :func:`rvcalib.forward.grid_te_many`)."""
         t0 = time.perf_counter()
-        base: dict[int, list[np.ndarray]] = {}
-        for e in self.lib.templates():
-            if e.expensive:
-                continue  # solved on demand (see _ensure_expensive)
-            ms = self._ms(e)
-            if ms not in base:
-                base[ms] = [grid_te(b, ms) for b in self.cond_base]
-            sigs: list[list[np.ndarray] | None] = []
-            for p in trial_points(e):
-                try:
-                    sigs.append([grid_te(self._case(c, [(e, p)]), ms) - base[ms][c]
-                                 for c in range(len(self.cond_base))])
-                except ModelEvaluationError:
-                    sigs.append(None)
-            self.sig[e.name] = sigs
+        todo = [e for e in self.lib.templates() if not e.expensive]  # expensive: on demand (_ensure_expensive)
+        self._solve_signatures(todo)
         self.log(f"screening signatures: {len(self.sig)} candidates x {len(self.cond_base)} conditions on "
                  f"{self.m} points in {time.perf_counter() - t0:.1f} s")
+
+    def _solve_signatures(self, effects: list[Effect]) -> None:
+        """``self.sig[e.name]``: per trial value of each effect, per condition, the change of the model
+        TE on the effect's screening grid (None for a trial value rvdyn cannot evaluate). The base
+        cases and every trial case are solved in one batch."""
+        nc = len(self.cond_base)
+        cases: list[dict] = []
+        steps: list[int] = []
+        base_at: dict[int, int] = {}  # screening grid -> index of its first base case in the batch
+        plan: list[tuple[Effect, int, list[int]]] = []  # effect, grid, first batch index of each trial value
+        for e in effects:
+            ms = self._ms(e)
+            if ms not in base_at:
+                base_at[ms] = len(cases)
+                cases += list(self.cond_base)
+                steps += [ms] * nc
+            firsts = []
+            for p in trial_points(e):
+                firsts.append(len(cases))
+                cases += [self._case(c, [(e, p)]) for c in range(nc)]
+                steps += [ms] * nc
+            plan.append((e, ms, firsts))
+        te = grid_te_many(cases, steps)
+        for ms, i0 in base_at.items():
+            for c in range(nc):
+                if isinstance(te[i0 + c], ModelEvaluationError):
+                    raise te[i0 + c]  # the declared model itself cannot be evaluated
+        for e, ms, firsts in plan:
+            sigs: list[list[np.ndarray] | None] = []
+            for i in firsts:
+                got = te[i:i + nc]
+                sigs.append(None if any(isinstance(g, ModelEvaluationError) for g in got)
+                            else [g - te[base_at[ms] + c] for c, g in enumerate(got)])
+            self.sig[e.name] = sigs
 
     def meas_coarse(self, e: Effect, ms: int | None = None) -> np.ndarray:
         """A measurement effect's columns at every run's screening points, taken there from its values
@@ -134,16 +156,7 @@ class Screening(LoopModel):
         if pv >= 0.01:
             return
         t0 = time.perf_counter()
-        for e in todo:
-            ms = self._ms(e)
-            base = [grid_te(b, ms) for b in self.cond_base]
-            sigs: list[list[np.ndarray] | None] = []
-            for p in trial_points(e):
-                try:
-                    sigs.append([grid_te(self._case(c, [(e, p)]), ms) - base[c] for c in range(len(self.cond_base))])
-                except ModelEvaluationError:
-                    sigs.append(None)
-            self.sig[e.name] = sigs
+        self._solve_signatures(todo)
         self.log(f"screening signatures of {', '.join(e.name for e in todo)} (the residual has an offset) in "
                  f"{time.perf_counter() - t0:.1f} s")
 

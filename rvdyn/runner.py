@@ -6,9 +6,9 @@ Use
 >>> res = run_cases(cases, solver="analytic", steps=360, cache="cache-dir", executor=2)  # doctest: +SKIP
 >>> res[0]["stats"]["pp"], res[0]["te_arcsec"]  # doctest: +SKIP
 
-or keep one :class:`Runner` (its cache, executor and counters) for several batches::
+or keep one :class:`Runner` (its caches, executor and counters) for several batches::
 
-    with Runner(executor=2, cache="cache-dir", solver="fcl", steps=360) as run:
+    with Runner(executor=2, cache="cache-dir", solver="fcl", steps=360, memory_bytes=2**26) as run:
         first = run(cases_a, "screen")
         second = run(cases_b, "design", steps=[720] * len(cases_b))        # per-case steps
         third = run(cases_c, "readings", theta_in_deg=[angles_c0, angles_c1])  # at given input angles
@@ -24,7 +24,11 @@ Every call returns one result dict per case, in the order of the cases:
   and ``seconds`` (solver wall time, s); NaN when failed;
 * ``te_arcsec`` -- the TE curve (ndarray, arcsec, one value per step or per given input angle, in the
   order of motion) or None when failed;
-* ``error`` -- the message of a failed solve (else empty); ``cached`` -- taken from the cache.
+* ``error`` -- the message of a failed solve (else empty); ``cached`` -- taken from a cache.
+
+Two caches, both keyed by :meth:`rvdyn.cache.Job.key`: the disk cache (:class:`rvdyn.cache.CaseCache`,
+survives the process) and an optional in-memory one (:class:`MemoryCache`, ``memory_bytes`` > 0: for
+callers that ask for the same solves again and again within a process, e.g. a fit's trial values).
 
 Executors run the same worker function, :func:`solve_job`, on JSON-ready job payloads
 (:meth:`rvdyn.cache.Job.to_payload`) and yield ``(index, result)`` pairs as they finish. The results
@@ -46,6 +50,7 @@ import math
 import sys
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -56,6 +61,7 @@ import numpy as np
 from rvcad.errors import Case
 from rvdyn.contacts import ContactLaw
 from rvdyn.cache import CaseCache, Job
+from rvdyn.solver import law_from_model
 from rvdyn.te import SOLVERS, run_te
 
 SolveFn = Callable[[dict[str, Any]], dict[str, Any]]
@@ -381,6 +387,74 @@ def make_executor(workers: int = 1, scheduler: str | None = None, timeout_s: flo
     return SerialExecutor() if workers == 1 else LocalPoolExecutor(workers)
 
 
+#: Bytes counted per in-memory entry besides its TE array (the result dict, its stats and key; an estimate).
+ENTRY_OVERHEAD_BYTES = 1024
+
+
+class MemoryCache:
+    """Results of this process by job key, the least recently used dropped first beyond ``max_bytes``.
+
+    Entries are result dicts whose ``te_arcsec`` is a read-only float64 array (or None when failed).
+
+    Parameters
+    ----------
+    max_bytes : int
+        Budget, bytes: each entry counts its TE array plus :data:`ENTRY_OVERHEAD_BYTES` (>= 0; 0 keeps
+        nothing).
+
+    Attributes
+    ----------
+    hits, misses : int
+        Lookups since construction.
+    bytes : int
+        Bytes held now.
+    """
+
+    def __init__(self, max_bytes: int) -> None:
+        if isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, np.integer)) or max_bytes < 0:
+            raise ValueError(f"memory_bytes {max_bytes!r} must be an integer >= 0")
+        self.max_bytes = int(max_bytes)
+        self._d: OrderedDict[str, tuple[dict[str, Any], int]] = OrderedDict()
+        self.bytes = self.hits = self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._d)
+
+    def get(self, key: str) -> dict[str, Any] | None:
+        """The stored result of a key (now the most recently used), or None."""
+        hit = self._d.get(key)
+        if hit is None:
+            self.misses += 1
+            return None
+        self._d.move_to_end(key)
+        self.hits += 1
+        return hit[0]
+
+    def put(self, key: str, result: dict[str, Any]) -> dict[str, Any]:
+        """Keep a result (its TE made a read-only array); drop the oldest entries beyond the budget.
+        Returns the entry as kept."""
+        te = result.get("te_arcsec")
+        if te is not None:
+            te = np.array(te, dtype=np.float64)
+            te.setflags(write=False)
+        entry = {**result, "te_arcsec": te}
+        size = ENTRY_OVERHEAD_BYTES + (0 if te is None else te.nbytes)
+        old = self._d.pop(key, None)
+        if old is not None:
+            self.bytes -= old[1]
+        self._d[key] = (entry, size)
+        self.bytes += size
+        while self.bytes > self.max_bytes and self._d:
+            _, (_, n) = self._d.popitem(last=False)
+            self.bytes -= n
+        return entry
+
+    def clear(self) -> None:
+        """Forget every entry."""
+        self._d.clear()
+        self.bytes = 0
+
+
 def _check_steps(steps: Any, what: str = "steps") -> int:
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 2:
         raise ValueError(f"{what} {steps!r} must be an integer >= 2")
@@ -388,7 +462,8 @@ def _check_steps(steps: Any, what: str = "steps") -> int:
 
 
 class Runner:
-    """Solve cases through an executor, reusing and filling a :class:`rvdyn.cache.CaseCache`.
+    """Solve cases through an executor, reusing and filling a :class:`rvdyn.cache.CaseCache` (and a
+    :class:`MemoryCache` if ``memory_bytes`` > 0).
 
     ``runner(cases, desc)`` returns one result dict per case, in order (see the module docstring).
     Equal jobs (equal keys) are solved once per call. Every finished solve is written to the cache at
@@ -407,18 +482,26 @@ class Runner:
     steps : int
         Default steps per ``revolutions`` output turns (>= 2).
     law : ContactLaw or None
-        Contact law (default K = 2e5 N/mm^1.5, n = 1.5).
+        Contact law of every case; None: each case's own (its ``model`` options,
+        :func:`rvdyn.solver.law_from_model`, as :func:`rvdyn.te.run_te` does; the paper's K = 2e5
+        N/mm^1.5, n = 1.5 unless the case says otherwise).
     revolutions : float
         Output revolutions of a solve.
     progress : bool
         tqdm bars on stderr.
     solve_fn : callable
         Worker function (default :func:`solve_job`; tests swap it).
+    memory_bytes : int
+        Budget of the in-memory cache, bytes (:class:`MemoryCache`; default 0: none). Looked up before
+        the disk cache and filled from it and from every solve.
 
     Attributes
     ----------
     computed, reused, failed : int
-        Unique solves done now, taken from the cache, and failed (computed or cached), cumulative.
+        Unique solves done now, taken from a cache (memory or disk), and failed (computed or cached),
+        cumulative.
+    memory : MemoryCache or None
+        The in-memory cache (None when ``memory_bytes`` is 0).
     solve_seconds : list of float
         Solver wall time of every computed case, s.
     wall_seconds : float
@@ -429,7 +512,8 @@ class Runner:
 
     def __init__(self, executor: Executor | int | str | None = None, cache: CaseCache | str | Path | None = None,
                  solver: str = "analytic", steps: int = 720, law: ContactLaw | None = None,
-                 revolutions: float = 1.0, progress: bool = False, solve_fn: SolveFn = solve_job) -> None:
+                 revolutions: float = 1.0, progress: bool = False, solve_fn: SolveFn = solve_job,
+                 memory_bytes: int = 0) -> None:
         if solver not in SOLVERS:
             raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
         self.steps = _check_steps(steps)
@@ -443,9 +527,10 @@ class Runner:
         elif not hasattr(executor, "run"):
             executor = make_executor(workers=executor)
         self.executor: Executor = executor
+        self.memory = MemoryCache(memory_bytes) if memory_bytes else None
         self.cache = cache if isinstance(cache, CaseCache) else CaseCache(cache)
         self.solver = solver
-        self.law = law if law is not None else ContactLaw()
+        self.law = law
         self.revolutions = float(revolutions)
         self.progress = progress
         self.solve_fn = solve_fn
@@ -479,7 +564,8 @@ class Runner:
                     raise ValueError(f"theta_in_deg[{i}] must be a 1-D array of at least 2 finite angles (deg); "
                                      f"got shape {arr.shape}")
                 th[i] = tuple(float(x) for x in arr)
-        return [Job(c, self.solver, s, self.revolutions, self.law, t) for c, s, t in zip(cases, st, th)]
+        return [Job(c, self.solver, s, self.revolutions, self.law if self.law is not None else law_from_model(c.model),
+                    t) for c, s, t in zip(cases, st, th)]
 
     def __call__(self, cases: Sequence[Case], desc: str = "cases", *, steps: int | Sequence[int] | None = None,
                  theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None,
@@ -525,7 +611,11 @@ class Runner:
                 results[k] = self._memo[k]
                 n_memo += 1
                 continue
-            hit = self.cache.get(k)
+            hit = self.memory.get(k) if self.memory is not None else None
+            if hit is None:
+                hit = self.cache.get(k)
+                if hit is not None:
+                    hit = self._keep(k, hit)
             if hit is None:
                 todo.append(k)
             else:
@@ -548,7 +638,7 @@ class Runner:
                     if r.get("key") != k:
                         raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
                     self.cache.put(k, r)
-                    results[k] = {**r, "cached": False}
+                    results[k] = {**self._keep(k, r), "cached": False}
                     self.computed += 1
                     self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
                 bar.update(len(got))
@@ -563,10 +653,16 @@ class Runner:
         out = []
         for k in keys:
             r = dict(results[k])
-            te = r.get("te_arcsec")
-            r["te_arcsec"] = np.asarray(te, dtype=float) if te else None
+            te = r["te_arcsec"]
+            r["te_arcsec"] = None if te is None else np.array(te, dtype=float)  # the caller's own copy
             out.append(r)
         return out
+
+    def _keep(self, key: str, res: dict[str, Any]) -> dict[str, Any]:
+        """A result with its TE as an array (None when failed), kept in memory if there is a memory cache."""
+        te = res.get("te_arcsec")
+        r = {**res, "te_arcsec": np.asarray(te, dtype=float) if te is not None and len(te) else None}
+        return self.memory.put(key, r) if self.memory is not None else r
 
     def prefetch(self, cases: Sequence[Case], desc: str = "cases", **kw: Any) -> None:
         """Solve a batch now and keep its results in memory for later calls of this runner (the same

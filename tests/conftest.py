@@ -1,4 +1,6 @@
-"""Shared test fixtures: the paper's tables as the package ships them (no folder outside the clone)."""
+"""Shared test fixtures: the paper's tables as the package ships them (no folder outside the clone), the
+shared study runs, and the grouping of the tests for two worker processes (``pytest -n 2 --dist loadgroup``,
+pytest-xdist; see :func:`pytest_collection_modifyitems`)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,11 +9,86 @@ import pytest
 
 import rvpaper
 
-
 @pytest.fixture(scope="session")
 def paper_data() -> Path:
     """Folder of the paper's tables as CSV (package data of :mod:`rvpaper`)."""
     return rvpaper.DATA_DIR
+
+
+# ---------------------------------------------------------------------------------------------- test groups
+#: Session fixtures that solve many cases: every module using one runs on the same worker, so each is made once.
+SHARED_SESSION_FIXTURES = ("small_study", "doe_reference")
+#: Modules whose tests are handed out one by one (or by their own ``xdist_group`` mark) instead of as a
+#: module: their scenarios are independent and long, and the solves they share (the screening of the
+#: loop's run conditions) come from the forward runner's disk cache (:func:`calib_forward_cache`).
+SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
+#: Units handed out first, in this order (groups, modules or test names; longest first keeps both workers
+#: busy to the end); the rest follow in collection order. The first is a loop scenario, so the screening
+#: of the loop's run conditions is on disk before the other worker reaches its first loop scenario.
+HEAVY_FIRST = ("test_table4_error_single_pin_with_transient_and_duplicates", "study",
+               "test_screening_grid_does_not_alias_whatever_the_steps", "calib-declared", "test_stackup_mc",
+               "test_off_grid_readings_two_revolutions", "test_two_effects_at_once",
+               "test_scale_error_is_a_ramp_term_and_nothing_else",
+               "test_encoder_zero_offset_is_not_disguised_as_physics", "test_rvcad_export",
+               "test_load_dependent_effect", "test_calib_design", "calib-order3", "test_stackup_reducer",
+               "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_direction_dependent_effect",
+               "test_stackup_failures", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
+               "test_paper_readings")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "xdist_group(name): tests run on one pytest-xdist worker (--dist loadgroup)")
+
+
+def _unit(it: pytest.Item, study_modules: set[str]) -> tuple[str, str]:
+    """(group, name to look up in :data:`HEAVY_FIRST`) of a test: its own ``xdist_group`` mark; else
+    ``study`` for the modules using a :data:`SHARED_SESSION_FIXTURES` fixture; else the test itself in
+    :data:`SPLIT_MODULES`; else its module."""
+    mark = it.get_closest_marker("xdist_group")
+    mod = it.path.stem
+    if mark is not None:
+        name = mark.args[0] if mark.args else mark.kwargs.get("name", "default")
+        return str(name), str(name)
+    if mod in study_modules:
+        return "study", "study"
+    if mod in SPLIT_MODULES:
+        return "", it.originalname
+    return mod, mod
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the marks
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark the tests with their group (``xdist_group``, used by ``--dist loadgroup``) and order them:
+    :data:`HEAVY_FIRST` first, the rest in collection order, a group's tests together in collection
+    order. Without xdist the marks do nothing and only the order changes (no test depends on the order)."""
+    study_modules = {it.path.stem for it in items if any(f in it.fixturenames for f in SHARED_SESSION_FIXTURES)}
+    first = {g: i for i, g in enumerate(HEAVY_FIRST)}
+    seen: dict[str, int] = {}
+    keys = {}
+    for i, it in enumerate(items):
+        group, name = _unit(it, study_modules)
+        if group and it.get_closest_marker("xdist_group") is None:
+            it.add_marker(pytest.mark.xdist_group(group))
+        seen.setdefault(name, i)
+        keys[it.nodeid] = (first.get(name, len(first)), seen[name], i)
+    items.sort(key=lambda it: keys[it.nodeid])
+
+
+@pytest.fixture(scope="session")
+def calib_forward_cache(tmp_path_factory) -> Path:
+    """rvcalib's forward model for the session: rvdyn's runner with the in-memory cache of the default
+    one and a disk cache shared by the pytest-xdist workers (entries are written atomically; a solve
+    one worker made is read by the other). Returns the cache folder."""
+    import os
+
+    from rvcalib import forward
+    from rvdyn.runner import Runner
+
+    base = tmp_path_factory.getbasetemp()
+    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "rvcalib-forward-cache"
+    prev = forward.use_runner(Runner(cache=root, memory_bytes=forward.CACHE_BYTES))
+    yield root
+    forward.use_runner(prev)
 
 
 # ---------------------------------------------------------------------------------------------- shared study runs

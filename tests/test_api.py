@@ -137,3 +137,48 @@ def test_cache_key_covers_every_solver_module():
     assert set(physics_modules("analytic")) == every - NOT_PHYSICS - FCL_MODULES
     assert {"rvcad.geometry", "rvcad.params", "rvdyn.solver", "rvdyn.te", "rvdyn.contacts"} <= set(physics_modules())
     assert code_fingerprint("analytic") != code_fingerprint("fcl")
+
+
+def test_runner_memory_cache_serves_repeats_and_keeps_its_budget(tmp_path):
+    """The in-memory cache (no disk): a repeat is served from memory, equal to the solve; the caller gets
+    its own writable copy; beyond the budget the least recently used entry goes first."""
+    from rvdyn.runner import ENTRY_OVERHEAD_BYTES, Runner
+
+    cases = [Case.from_dict(CASE), Case.from_dict({})]
+    one = ENTRY_OVERHEAD_BYTES + 12 * 8  # one entry of 12 float64 TE values
+    with Runner(steps=12, memory_bytes=one) as run:  # room for one entry
+        a = run(cases[:1])
+        b = run(cases[:1])
+        assert not a[0]["cached"] and b[0]["cached"] and (run.computed, run.reused) == (1, 1)
+        np.testing.assert_array_equal(a[0]["te_arcsec"], b[0]["te_arcsec"])
+        b[0]["te_arcsec"][:] = 0.0  # the caller's copy; the kept entry is unchanged
+        assert run(cases[:1])[0]["te_arcsec"].tolist() == a[0]["te_arcsec"].tolist()
+        run(cases[1:])  # pushes the first case out
+        assert len(run.memory) == 1 and run.memory.bytes == one
+        assert not run(cases[:1])[0]["cached"] and run.computed == 3
+    assert not list(tmp_path.iterdir())  # nothing on disk
+    with Runner(steps=12, memory_bytes=2 * one) as run:
+        assert [r["cached"] for r in run(cases + cases)] == [False, False, False, False]  # equal jobs solved once
+        assert run.computed == 2 and run.memory.hits == 0 and run(cases)[0]["cached"]
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True])
+def test_runner_memory_budget_must_be_a_nonnegative_integer(bad):
+    from rvdyn.runner import Runner
+
+    with pytest.raises(ValueError, match=f"memory_bytes {bad!r} must be an integer >= 0"):
+        Runner(memory_bytes=bad)
+
+
+def test_runner_without_a_law_solves_each_case_with_its_own():
+    """``law=None``: every case with the contact law of its ``model`` options (as ``run_te`` does);
+    a law given to the runner replaces it for every case."""
+    from rvdyn.contacts import ContactLaw
+
+    soft = Case.from_dict({**CASE, "model": {"contact_K_N_per_mm_n": 5.0e4}})
+    own, paper = rvdyn.run_cases([soft, Case.from_dict(CASE)], steps=STEPS)
+    np.testing.assert_array_equal(own["te_arcsec"], run_te(soft, "analytic", STEPS).table["te_arcsec"])
+    forced = rvdyn.run_cases([soft], steps=STEPS, law=ContactLaw())[0]
+    np.testing.assert_array_equal(forced["te_arcsec"], paper["te_arcsec"])
+    assert forced["key"] != own["key"]  # the law enters the key
+    assert np.max(np.abs(own["te_arcsec"] - paper["te_arcsec"])) > 0.1  # a softer contact winds up more

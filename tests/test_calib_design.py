@@ -16,6 +16,8 @@ from rvcalib.cli import main
 from rvcalib.dataset import read_dataset
 from rvcalib.simulate import simulate_dataset
 
+pytestmark = pytest.mark.usefixtures("calib_forward_cache")  # solves shared by the session
+
 DESIGN81 = {"z_sun": 18, "z_planet": 36}
 RUNS = [{"run": "cw", "load_Nm": 15.0, "direction": 1}, {"run": "ccw", "load_Nm": 15.0, "direction": -1}]
 

@@ -18,6 +18,8 @@ from rvcalib.identify import Calibrator, calibrate
 from rvcalib.residual import structured_noise
 from rvcalib.simulate import simulate_dataset
 
+pytestmark = pytest.mark.usefixtures("calib_forward_cache")  # solves shared by the session
+
 RUNS = [{"run": "1", "load_Nm": 10.0, "direction": 1}, {"run": "2", "load_Nm": 10.0, "direction": -1},
         {"run": "3", "load_Nm": 30.0, "direction": 1}]
 

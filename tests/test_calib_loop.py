@@ -24,6 +24,8 @@ from rvcalib.orders import period_deg
 from rvcalib.identify import calibrate
 from rvcalib.simulate import simulate_dataset
 
+pytestmark = pytest.mark.usefixtures("calib_forward_cache")  # solves shared by the session
+
 RUNS = [{"run": "1", "load_Nm": 10.0, "direction": 1}, {"run": "2", "load_Nm": 10.0, "direction": -1},
         {"run": "3", "load_Nm": 30.0, "direction": 1}]
 STEPS = 240
@@ -115,6 +117,7 @@ def test_two_effects_at_once(workdir):
     check_found(res, ans, ans["expected_effects"])
 
 
+@pytest.mark.xdist_group("calib-order3")  # shares its scenario's solves
 def test_effect_outside_library_is_unexplained(workdir):
     res, ans, _ = run_scenario(workdir, "order3", {"harmonics": [{"order": 3, "amplitude_arcsec": 2.0,
                                                                   "phase_deg": 40.0}]})
@@ -155,6 +158,7 @@ def declared_runs():
     return [dict(r, declared=dict(DECLARED)) for r in RUNS]
 
 
+@pytest.mark.xdist_group("calib-declared")  # shares its scenario's solves
 def test_declared_errors_clean(workdir):
     res, _, ds = run_scenario(workdir, "declared-clean", {}, runs=declared_runs())
     assert ds.runs[0].declared == DECLARED
@@ -162,6 +166,7 @@ def test_declared_errors_clean(workdir):
     assert res.effects == [] and res.status == "fits"
 
 
+@pytest.mark.xdist_group("calib-declared")  # shares its scenario's solves
 def test_misdeclared_error(workdir):
     # the runs declare cam_eccentricity 5 um; the part has 9 um: the loop finds the +4 um correction
     res, ans, _ = run_scenario(workdir, "misdeclared", {"errors": {"cam_eccentricity": 4.0}}, runs=declared_runs())
@@ -173,7 +178,8 @@ def test_misdeclared_error(workdir):
     assert d["declared_value"] == 5.0 and d["implied_total"] == e.implied_total
 
 
-def test_cli_json_and_report(workdir, capsys):
+@pytest.mark.xdist_group("calib-order3")  # shares its scenario's solves
+def test_cli_json_and_report(workdir, capsys, calib_forward_cache):
     run_scenario(workdir, "order3", {"harmonics": [{"order": 3, "amplitude_arcsec": 2.0, "phase_deg": 40.0}]})
     out = workdir / "report-order3"
     assert main([str(workdir / "order3"), "--out", str(out), "--json", "--steps", str(STEPS)]) == 0
@@ -191,6 +197,13 @@ def test_cli_json_and_report(workdir, capsys):
     human = capsys.readouterr().out
     assert "unexplained order-3 harmonic" in human and "report:" in human
     assert math.isfinite(d["rms_after_arcsec"])
+    # rvdyn's runner with a local pool and a disk cache (here the session's, so its solves are reused): the same result
+    pooled = workdir / "report-order3-pooled"
+    assert main([str(workdir / "order3"), "--out", str(pooled), "--json", "--steps", str(STEPS), "--workers", "2",
+                 "--cache", str(calib_forward_cache)]) == 0
+    p = json.loads(capsys.readouterr().out)
+    assert (p["effects"], p["unexplained"], p["rms_before_arcsec"], p["rms_after_arcsec"]) == (
+        d["effects"], d["unexplained"], d["rms_before_arcsec"], d["rms_after_arcsec"])
 
 
 @pytest.mark.parametrize("direction", [1, -1])
@@ -203,6 +216,45 @@ def test_te_at_equals_the_grid_at_its_nodes_in_any_order_and_revolution(directio
     idx = np.random.default_rng(0).permutation(360)[:120]
     assert np.max(np.abs(te_at(case, x[idx] + 3 * PERIOD_DEG) - g[idx])) < 1e-3
     assert np.max(np.abs(te_at(case, x) - g)) < 1e-3
+
+
+
+def test_forward_model_runs_on_the_rvdyn_runner_it_is_given(tmp_path):
+    """rvcalib's forward model is rvdyn's runner: another runner (here with a disk cache) gives the same
+    numbers as the default one, a batch gives what one-by-one calls give, and a case rvdyn cannot
+    evaluate is a ModelEvaluationError (in its slot of a batch) naming the cause."""
+    from rvcalib import forward
+    from rvdyn.runner import Runner
+
+    cases = [{"errors": {"pin_pitch": {"pin": 3, "value": 0.02}}, "load_Nm": 10.0, "direction": d} for d in (1, -1)]
+    one = [forward.grid_te(c, 80) for c in cases]
+    x = grid_angles_deg(80, PERIOD_DEG)[::-7] + PERIOD_DEG
+    at = forward.te_at(cases[1], x)
+    disk = Runner(cache=tmp_path / "cache", memory_bytes=forward.CACHE_BYTES)
+    prev = forward.use_runner(disk)
+    try:
+        many = forward.grid_te_many(cases + [{"errors": {"no_such_error": 1.0}}], 80)
+        for a, b in zip(one, many):
+            np.testing.assert_array_equal(a, b)
+        assert isinstance(many[2], forward.ModelEvaluationError) and "no_such_error" in str(many[2])
+        np.testing.assert_array_equal(forward.te_at_many([cases[1]], [x])[0], at)
+        assert forward.cache_stats()["solves"] == 3 and len(disk.cache.entries()) == 3
+        forward.clear_cache()
+        assert forward.cache_stats()["bytes"] == 0
+        np.testing.assert_array_equal(forward.grid_te(cases[0], 80), one[0])  # now from the disk
+        assert disk.cache.hits == 1 and disk.computed == 3
+    finally:
+        assert forward.use_runner(prev) is disk
+    failing = Runner(solve_fn=lambda p: {"key": p["key"], "status": "failed", "stats": {"seconds": 0.0},
+                                         "te_arcsec": [], "error": "InterferenceError: pins overlap"})
+    forward.use_runner(failing)
+    try:
+        with pytest.raises(forward.ModelEvaluationError, match="could not evaluate the case: InterferenceError"):
+            forward.grid_te(cases[0], 80)
+    finally:
+        forward.use_runner(prev)
+    with pytest.raises(TypeError, match="rvdyn.runner.Runner"):
+        forward.use_runner("serial")
 
 
 def test_ramp_fit_separates_a_trend_from_periodic_orders():
