@@ -56,6 +56,7 @@ from rvcalib.results import (Active, CalibrationResult, Candidate, EmpiricalTerm
                              Unexplained, Validated)
 from rvcalib.screening import coarse_values
 from rvcalib.groups import Groups
+from rvcalib.joint import JointSelection
 
 __all__ = ["Calibrator", "calibrate", "CalibrationResult", "FittedEffect", "Unexplained", "EmpiricalTerm",
            "Active", "Candidate", "HarmonicCandidate", "Validated"]
@@ -70,7 +71,7 @@ RAMP_NOISE_FACTOR = 3.0
 HARMONIC_BIC_MARGIN = 2.0
 
 
-class Calibrator(Groups):
+class Calibrator(JointSelection, Groups):
     """The loop on one dataset (see the module docstring and :class:`rvcalib.model.LoopModel` for the
     parameters)."""
 
@@ -104,6 +105,11 @@ class Calibrator(Groups):
                 break
             it += 1
             t_it = time.perf_counter()
+            if self.rescreen_every and self.rescreen_due >= self.rescreen_every:
+                n_sol = self.solve_signatures([e for e in self.lib.templates() if not e.expensive], self._pairs())
+                self.rescreen_due = 0
+                self.log(f"screening signatures re-solved at the current state ({n_sol} solves) in "
+                         f"{time.perf_counter() - t_it:.1f} s")
             p_cur = self._p_cur()
             # the residual at the readings (the model solved there) taken to the coarse grid: where the
             # readings are off the grid only this smooth remainder is interpolated, not the TE's kinks
@@ -185,7 +191,10 @@ class Calibrator(Groups):
             elif sig_h:
                 dec = "empirical"
             if dec == "physical":
-                ok, msg = self._add_physical(best, ranking, r_full, it, log, harms)
+                got = self.joint_step(ranking, best, rc, rc_cat, Ec, Pc, r_full, it, log, harms) \
+                    if self.joint else None
+                ok, msg = got if got is not None else self._add_physical(best, ranking, r_full, it, log, harms)
+                self.rescreen_due += int(ok)
                 log["decision"] = msg
                 if not ok:
                     tried.add(best.effect.name)
@@ -279,7 +288,8 @@ class Calibrator(Groups):
 
 def calibrate(dataset: MeasuredDataset, steps: int | None = None, alpha: float = 0.01, max_terms: int = 6,
               top_k: int = 4, log: Callable[[str], None] | None = None,
-              screen_points: int | None = None, time_budget_s: float | None = None) -> CalibrationResult:
+              screen_points: int | None = None, time_budget_s: float | None = None, joint: bool = True,
+              joint_new: int = 6, rescreen_every: int = 0) -> CalibrationResult:
     """Close the loop on a measured dataset (see the module docstring).
 
     Parameters
@@ -303,10 +313,19 @@ def calibrate(dataset: MeasuredDataset, steps: int | None = None, alpha: float =
         An explicit screening grid (refused unless it resolves the orders that matter).
     time_budget_s : float or None
         Stop adding terms after this many seconds (the verdict and ``stopped_by`` say so).
+    joint : bool
+        Joint selection over a shortlist at the current state (:mod:`rvcalib.joint`); False: greedy
+        forward selection only (the loop before issue 10 item 1).
+    joint_new : int
+        New candidates in the joint shortlist (one per family).
+    rescreen_every : int
+        Re-solve the whole library's screening signatures at the current state after every this many
+        accepted joint changes (0: only the shortlist's families, at every joint step).
 
     Returns
     -------
     CalibrationResult
     """
     return Calibrator(dataset, steps=steps, alpha=alpha, max_terms=max_terms, top_k=top_k, log=log,
-                      screen_points=screen_points, time_budget_s=time_budget_s).run()
+                      screen_points=screen_points, time_budget_s=time_budget_s, joint=joint, joint_new=joint_new,
+                      rescreen_every=rescreen_every).run()

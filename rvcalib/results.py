@@ -180,6 +180,65 @@ class Validated:
     entry: Candidate
 
 
+@dataclass
+class PoolMember:
+    """A member of the joint selection's pool, linearised at the current state.
+
+    Attributes
+    ----------
+    effect : Effect
+    cols : ndarray
+        (n_coarse, k) columns of the TE change per unit of its coefficients at the current state
+        (projected off the empirical terms).
+    contribution : ndarray or None
+        For an effect in the model: its present contribution to the model TE (the TE of the state
+        minus the TE of the state without it), projected; None for a new candidate.
+    to_p : callable
+        Coefficients of ``cols`` -> the effect's parameters (for an effect in the model: its present
+        parameters plus the change).
+    active : Active or None
+        The model's record of it, if it is in the model.
+    entry : Candidate or None
+        Its screening record at the current state, if it is a new candidate.
+    """
+
+    effect: Effect
+    cols: np.ndarray
+    contribution: np.ndarray | None
+    to_p: Callable[[np.ndarray], np.ndarray]
+    active: "Active | None" = None
+    entry: Candidate | None = None
+
+
+@dataclass
+class SubsetFit:
+    """One subset of the pool fitted jointly by linear least squares at the current state.
+
+    Attributes
+    ----------
+    members : tuple of int
+        Pool indices in the subset.
+    dropped : tuple of int
+        Pool indices of effects in the model that the subset leaves out (a swap when it also adds).
+    n_params : int
+        Parameters (effects' components and empirical columns).
+    rss : float
+        Residual sum of squares on the screening grid.
+    bic, aic : float
+        Information criteria on the screening grid.
+    coef : ndarray
+        Coefficients of the members' columns, concatenated.
+    """
+
+    members: tuple[int, ...]
+    dropped: tuple[int, ...]
+    n_params: int
+    rss: float
+    bic: float
+    aic: float
+    coef: np.ndarray
+
+
 # ---------------------------------------------------------------------------------------------
 # results
 @dataclass

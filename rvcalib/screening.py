@@ -80,25 +80,37 @@ class Screening(LoopModel):
         return ms if (ms < self.m and self.m % ms == 0 and ms % self.design.z_pins == 0) else self.m
 
     def screening_signatures(self) -> None:
-        """Solve every template candidate at its trial values on its screening grid, per condition."""
+        """Solve every template candidate at its trial values on its screening grid, per condition,
+        at the declared model."""
         t0 = time.perf_counter()
+        self.solve_signatures([e for e in self.lib.templates() if not e.expensive], [])
+        self.log(f"screening signatures: {len(self.sig)} candidates x {len(self.cond_base)} conditions on "
+                 f"{self.m} points in {time.perf_counter() - t0:.1f} s")
+
+    def solve_signatures(self, templates: list[Effect], state: list[tuple[Effect, np.ndarray]]) -> int:
+        """Solve the screening signatures of ``templates`` at a model state (``state``: effects and
+        parameters in the model; empty = the declared model): for each trial value the change of
+        the model TE on the effect's screening grid, per condition. Stored in ``self.sig`` (the
+        ranking uses them from then on) with the state's size in ``self.sig_state``. Returns the
+        number of rvdyn solves asked for (cache hits included)."""
+        phys = [(e, p) for e, p in state if e.family != "measurement"]
         base: dict[int, list[np.ndarray]] = {}
-        for e in self.lib.templates():
-            if e.expensive:
-                continue  # solved on demand (see _ensure_expensive)
+        n = 0
+        for e in templates:
             ms = self._ms(e)
             if ms not in base:
-                base[ms] = [grid_te(b, ms) for b in self.cond_base]
+                base[ms] = [grid_te(self._case(c, phys), ms) for c in range(len(self.cond_base))]
             sigs: list[list[np.ndarray] | None] = []
             for p in trial_points(e):
                 try:
-                    sigs.append([grid_te(self._case(c, [(e, p)]), ms) - base[ms][c]
+                    sigs.append([grid_te(self._case(c, phys + [(e, p)]), ms) - base[ms][c]
                                  for c in range(len(self.cond_base))])
                 except ModelEvaluationError:
                     sigs.append(None)
+                n += len(self.cond_base)
             self.sig[e.name] = sigs
-        self.log(f"screening signatures: {len(self.sig)} candidates x {len(self.cond_base)} conditions on "
-                 f"{self.m} points in {time.perf_counter() - t0:.1f} s")
+            self.sig_state[e.name] = len(phys)
+        return n
 
     def meas_coarse(self, e: Effect, ms: int | None = None) -> np.ndarray:
         """A measurement effect's columns at every run's screening points, taken there from its values
@@ -211,35 +223,42 @@ class Screening(LoopModel):
         for e in self.lib:
             if e.name in active_names:
                 continue
-            ms = self._ms(e)
-            if ms not in groups:
-                groups[ms] = self._group(ms, rc_cat, Ec)
-            r, Pg, rss0 = groups[ms]
-            if rss0 <= 0:
-                continue
-            meas = None
-            if e.screen == "analytic":
-                meas = self.meas_coarse(e, ms)
-                if r_full is not None:
-                    expl, c = self._analytic_full(e, r_full)
-                    cols = np.column_stack([Pg(meas[:, k]) for k in range(meas.shape[1])]) if ms == self.m else None
-                    out.append(Candidate(e, expl, c, cols, None if cols is None else cols @ c,
-                                         to_p=lambda b: np.asarray(b, dtype=float)))
-                    continue
-            best = None
-            for A, nonneg, to_p in self._options(e, meas):
-                A = np.column_stack([Pg(A[:, k]) for k in range(A.shape[1])])
-                rss, c = fit_option(r, A, nonneg)
-                if best is None or rss < best[0]:
-                    best = (rss, to_p(c), A, A @ c, to_p)
-            if best is None:
-                continue
-            out.append(Candidate(e, 1.0 - best[0] / rss0, best[1], best[2] if ms == self.m else None,
-                                 best[3] if ms == self.m else None, to_p=best[4]))
+            d = self.screen_effect(e, groups, rc_cat, Ec, r_full)
+            if d is not None:
+                out.append(d)
         # ties (e.g. pins 20 apart, whose TE signatures coincide) go to the library order
         order = {e.name: i for i, e in enumerate(self.lib)}
         out.sort(key=lambda d: (-round(d.explained, 6), order[d.effect.name]))
         return out
+
+    def screen_effect(self, e: Effect, groups: dict, rc_cat: np.ndarray, Ec: np.ndarray | None,
+                      r_full: np.ndarray | None = None) -> Candidate | None:
+        """One candidate's screening fit to the coarse residual (see :meth:`rank`; ``groups`` caches
+        the residual per screening grid)."""
+        ms = self._ms(e)
+        if ms not in groups:
+            groups[ms] = self._group(ms, rc_cat, Ec)
+        r, Pg, rss0 = groups[ms]
+        if rss0 <= 0:
+            return None
+        meas = None
+        if e.screen == "analytic":
+            meas = self.meas_coarse(e, ms)
+            if r_full is not None:
+                expl, c = self._analytic_full(e, r_full)
+                cols = np.column_stack([Pg(meas[:, k]) for k in range(meas.shape[1])]) if ms == self.m else None
+                return Candidate(e, expl, c, cols, None if cols is None else cols @ c,
+                                 to_p=lambda b: np.asarray(b, dtype=float))
+        best = None
+        for A, nonneg, to_p in self._options(e, meas):
+            A = np.column_stack([Pg(A[:, k]) for k in range(A.shape[1])])
+            rss, c = fit_option(r, A, nonneg)
+            if best is None or rss < best[0]:
+                best = (rss, to_p(c), A, A @ c, to_p)
+        if best is None:
+            return None
+        return Candidate(e, 1.0 - best[0] / rss0, best[1], best[2] if ms == self.m else None,
+                         best[3] if ms == self.m else None, to_p=best[4])
 
     def lookahead(self, ranking: list[Candidate], rc: np.ndarray, n_top: int = 12) -> list[Candidate]:
         """Re-order the ranking by what each candidate explains together with its best partner.
