@@ -288,8 +288,11 @@ class JointSelection(Selection):
             v = Validated(m.effect, d.explained, p, d.explained, d.explained, None, d.cols, fit, d)
             info = {"explained_fraction": 1.0 - rss1 / self.rss_full, "F": F, "p_value": pv, "delta_bic": dbic,
                     "alternatives": self._alternatives(v, ranking, sigma2, rss1, harms),
-                    "inclusion_weight_bic": incl[m.effect.name][0], "inclusion_weight_aic": incl[m.effect.name][1],
-                    "joint_with": [pool[j].effect.name for j in added if j != i]}
+                    "selection": {"method": "joint best subset", "iteration": it,
+                                  "inclusion_weight_bic": incl[m.effect.name][0],
+                                  "inclusion_weight_aic": incl[m.effect.name][1],
+                                  "chosen_with": [pool[j].effect.name for j in choice.members if j != i],
+                                  "swapped_out": [pool[j].effect.name for j in choice.dropped]}}
             new_active.append(Active(m.effect, p, it, info=info))
         self.active = new_active
         msg = "joint: added " + ", ".join(pool[i].effect.name for i in added)

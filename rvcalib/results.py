@@ -274,6 +274,10 @@ class FittedEffect:
     implied_total : float or None
         The declared value plus the correction found (the magnitude for a two-component error,
         whose declared part lies along 0 deg).
+    selection : dict
+        How it was chosen: ``method`` (``joint best subset`` or ``greedy``); for a joint choice the
+        BIC and AIC inclusion weights (sum of the model weights of the subsets that held it, at the
+        step that chose it) and the effects chosen with it (see :mod:`rvcalib.joint`).
     """
 
     name: str
@@ -295,6 +299,7 @@ class FittedEffect:
     alternatives: list[dict] = field(default_factory=list)
     declared_value: float | None = None
     implied_total: float | None = None
+    selection: dict = field(default_factory=dict)
 
     @property
     def alternative_names(self) -> list[str]:
@@ -307,7 +312,8 @@ class FittedEffect:
              "ci_low": self.ci_low, "ci_high": self.ci_high, "std_err": self.std_err, "meaning": self.meaning,
              "params": self.params, "iteration": self.iteration, "explained_fraction": self.explained_fraction,
              "F": self.F, "p_value": self.p_value, "delta_bic": self.delta_bic, "alternatives": self.alternatives,
-             "declared_value": self.declared_value, "implied_total": self.implied_total}
+             "declared_value": self.declared_value, "implied_total": self.implied_total,
+             "selection": self.selection}
         if self.angle_deg is not None:
             d["angle_deg"] = self.angle_deg
         return d
