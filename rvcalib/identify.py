@@ -191,7 +191,7 @@ class Calibrator(JointSelection, Groups):
             elif sig_h:
                 dec = "empirical"
             if dec == "physical":
-                got = self.joint_step(ranking, best, rc, rc_cat, Ec, Pc, r_full, it, log, harms) \
+                got = self.joint_step(ranking, best, rc, rc_cat, Ec, r_full, it, log, harms) \
                     if self.joint else None
                 ok, msg = got if got is not None else self._add_physical(best, ranking, r_full, it, log, harms)
                 self.rescreen_due += int(ok)

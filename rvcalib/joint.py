@@ -79,11 +79,13 @@ class JointSelection(Selection):
     """The joint selection stage (methods on the loop; see the module docstring)."""
 
     # ------------------------------------------------------------------ pool
-    def shortlist(self, ranking: list[Candidate]) -> list[Candidate]:
-        """The best-ranked new candidates, one per family, solved on the full screening grid and not
-        expensive (at most ``joint_new``)."""
+    def shortlist(self, ranking: list[Candidate], n: int | None = None,
+                  seen: set[str] | None = None) -> list[Candidate]:
+        """The best-ranked new candidates, one per family (not in ``seen``), solved on the full
+        screening grid and not expensive (at most ``n``, default ``joint_new``)."""
+        n = self.joint_new if n is None else n
         active = {a.effect.name for a in self.active}
-        seen: set[str] = set()
+        seen = set() if seen is None else seen
         out: list[Candidate] = []
         for d in ranking:
             e = d.effect
@@ -91,15 +93,16 @@ class JointSelection(Selection):
                 continue
             seen.add(d.family_key)
             out.append(d)
-            if len(out) >= self.joint_new:
+            if len(out) >= n:
                 break
         return out
 
     def _grid_cat(self, pairs: list[tuple[Effect, np.ndarray]]) -> np.ndarray:
         return np.concatenate(self.predict_grid(pairs))
 
-    def active_members(self, Pc) -> list[PoolMember]:
-        """The effects in the model linearised at the current state (see the module docstring)."""
+    def active_members(self, Pc=lambda v: v) -> list[PoolMember]:
+        """The effects in the model linearised at the current state (see the module docstring);
+        ``Pc`` a projector applied to the columns (default none)."""
         pairs = self._pairs()
         base = self._grid_cat(pairs)
         out: list[PoolMember] = []
@@ -143,12 +146,12 @@ class JointSelection(Selection):
         return out
 
     # ------------------------------------------------------------------ subsets
-    def best_subsets(self, pool: list[PoolMember], rc: np.ndarray, max_effects: int) -> list[SubsetFit]:
+    def best_subsets(self, pool: list[PoolMember], rc: np.ndarray, max_members: int) -> list[SubsetFit]:
         """Every subset of the pool within the limits of the module docstring, fitted linearly to the
-        projected coarse residual ``rc`` (an effect in the model left out gives its contribution back)."""
-        act = [i for i, m in enumerate(pool) if m.active is not None]
-        new = [i for i, m in enumerate(pool) if m.active is None]
-        n_emp = sum(t.n_cols for t in self.empirical)
+        coarse residual ``rc`` of the current model (a member in the model left out gives its
+        contribution back); at most ``max_members`` effects and empirical terms."""
+        act = [i for i, m in enumerate(pool) if m.in_model]
+        new = [i for i, m in enumerate(pool) if not m.in_model]
         nc = rc.size
         fits: list[SubsetFit] = []
         for nd in range(0, min(MAX_DROP, len(act)) + 1):
@@ -156,7 +159,7 @@ class JointSelection(Selection):
                 t = rc + sum((pool[i].contribution for i in drop), np.zeros_like(rc))
                 keep = [i for i in act if i not in drop]
                 for na in range(0, min(MAX_ADD, len(new)) + 1):
-                    if len(keep) + na > max_effects:
+                    if len(keep) + na > max_members:
                         break
                     for add in itertools.combinations(new, na):
                         S = tuple(keep) + add
@@ -167,7 +170,7 @@ class JointSelection(Selection):
                         else:
                             coef, res = np.zeros(0), t
                         rss = float(res @ res)
-                        k = sum(pool[i].effect.n_params for i in S) + n_emp
+                        k = sum(pool[i].n_params for i in S)
                         fits.append(SubsetFit(S, tuple(drop), k, rss, bic(rss, nc, k), aic(rss, nc, k), coef))
         return fits
 
@@ -189,14 +192,14 @@ class JointSelection(Selection):
             S = frozenset(f.members)
             if S == cur:
                 return None
-            added = [i for i in f.members if pool[i].active is None]
+            added = [i for i in f.members if not pool[i].in_model]
             ok = True
             for i in added:
                 g = by_key.get((S - {i}, f.dropped))
                 if g is None:
                     ok = False
                     break
-                _, pv = ftest(g.rss, f.rss, pool[i].effect.n_params, nc, f.n_params)
+                _, pv = ftest(g.rss, f.rss, pool[i].n_params, nc, f.n_params)
                 if not pv < self.thr:
                     ok = False
                     break
@@ -206,7 +209,7 @@ class JointSelection(Selection):
 
     # ------------------------------------------------------------------ the step
     def joint_step(self, ranking: list[Candidate], best: Validated, rc: np.ndarray, rc_cat: np.ndarray,
-                   Ec: np.ndarray | None, Pc, r_full: np.ndarray, it: int, log: dict,
+                   Ec: np.ndarray | None, r_full: np.ndarray, it: int, log: dict,
                    harms: list[HarmonicCandidate] | None = None) -> tuple[bool, str] | None:
         """One joint selection step (see the module docstring). Returns (accepted, message), or None
         when the greedy step is to be taken instead (same choice, nothing better, or not confirmed)."""
@@ -214,55 +217,77 @@ class JointSelection(Selection):
         short = self.shortlist(ranking)
         if best.effect.name not in {d.effect.name for d in short} and not best.effect.expensive:
             short = [best.entry] + short[:max(0, self.joint_new - 1)]
+        if self.empirical and self.joint_new:
+            # candidates that explain what the empirical terms absorbed: ranked against the residual
+            # with the empirical terms' parts given back (half as many more)
+            raw = [d for d in self.rank(rc_cat, None, None) if d.effect.family != "measurement"]
+            short += self.shortlist(raw, max(1, self.joint_new // 2), {d.family_key for d in short})
         temps = {}
         for d in short:
             if d.effect.screen != "analytic":
                 t = self.lib.by_name(d.effect.template or d.effect.name)
                 temps[t.name] = t
         n_solves = self.solve_signatures(list(temps.values()), self._pairs())
+        # everything on the screening grid without projection: the empirical terms are pool members
+        # (a subset may drop one and let physical effects explain its part)
+        ce = np.zeros(0)
+        if Ec is not None:
+            ce, *_ = np.linalg.lstsq(Ec, rc_cat, rcond=None)
         groups: dict[int, tuple] = {}
-        fresh = [self.screen_effect(d.effect, groups, rc_cat, Ec) for d in short]
+        fresh = [self.screen_effect(d.effect, groups, rc, None) for d in short]
         jl: dict[str, Any] = {"shortlist": [d.effect.name for d in short], "resolved_templates": sorted(temps),
                               "signature_solves": n_solves, "seconds_signatures": time.perf_counter() - t0}
         log["joint"] = jl
-        pool = self.active_members(Pc)
+        pool = self.active_members()
+        j = 0
+        for t in self.empirical:
+            E = Ec[:, j:j + t.n_cols]
+            c = ce[j:j + t.n_cols]
+            pool.append(PoolMember(None, E, E @ c, lambda d: np.asarray(d, dtype=float), None, None, t))
+            j += t.n_cols
         current = tuple(range(len(pool)))
         for d in fresh:
             if d is not None and d.cols is not None:
                 pool.append(PoolMember(d.effect, d.cols, None, d.to_p, None, d))
         jl["seconds_pool"] = time.perf_counter() - t0
-        max_eff = max(0, self.max_terms - len(self.empirical))
-        fits = self.best_subsets(pool, rc, max_eff)
+        fits = self.best_subsets(pool, rc, self.max_terms)
         if not fits:
             return None
         nc = rc.size
         wb = model_weights(np.array([f.bic for f in fits]))
         wa = model_weights(np.array([f.aic for f in fits]))
-        incl = {pool[i].effect.name: (float(sum(w for w, f in zip(wb, fits) if i in f.members)),
-                                      float(sum(w for w, f in zip(wa, fits) if i in f.members)))
+        incl = {pool[i].name: (float(sum(w for w, f in zip(wb, fits) if i in f.members)),
+                               float(sum(w for w, f in zip(wa, fits) if i in f.members)))
                 for i in range(len(pool))}
         order = np.argsort([f.bic for f in fits])
         bic_cur = next(f.bic for f in fits if f.members == current)
         jl["subsets"] = len(fits)
-        jl["top_subsets"] = [{"members": [pool[i].effect.name for i in fits[j].members],
-                              "delta_bic_vs_model": fits[j].bic - bic_cur, "weight_bic": float(wb[j]),
-                              "weight_aic": float(wa[j])} for j in order[:5]]
+        jl["top_subsets"] = [{"members": [pool[i].name for i in fits[k].members],
+                              "delta_bic_vs_model": fits[k].bic - bic_cur, "weight_bic": float(wb[k]),
+                              "weight_aic": float(wa[k])} for k in order[:5]]
         jl["inclusion_weights"] = {k: {"bic": v[0], "aic": v[1]} for k, v in incl.items()}
         choice = self.choose_subset(pool, fits, nc, current)
-        greedy = frozenset(current) | {next((i for i, m in enumerate(pool) if m.effect.name == best.effect.name),
-                                            -1)}
+        greedy = frozenset(current) | {next((i for i, m in enumerate(pool)
+                                             if m.effect is not None and m.effect.name == best.effect.name), -1)}
         if choice is None or (frozenset(choice.members) == greedy and not choice.dropped):
             jl["chosen"] = "greedy" if choice is not None else "none better than the model"
             return None
-        added = [i for i in choice.members if pool[i].active is None]
-        jl["chosen"] = [pool[i].effect.name for i in choice.members]
-        jl["dropped"] = [pool[i].effect.name for i in choice.dropped]
+        added = [i for i in choice.members if not pool[i].in_model]
+        jl["chosen"] = [pool[i].name for i in choice.members]
+        jl["dropped"] = [pool[i].name for i in choice.dropped]
         coefs = self._coef_of(pool, choice)
-        effects = [pool[i].effect for i in choice.members]
-        p0 = [np.clip(pool[i].to_p(coefs[i]), pool[i].effect.lower, pool[i].effect.upper) for i in choice.members]
+        phys = [i for i in choice.members if pool[i].effect is not None]
+        terms = [pool[i].term for i in choice.members if pool[i].term is not None]
+        effects = [pool[i].effect for i in phys]
+        p0 = [np.clip(pool[i].to_p(coefs[i]), pool[i].effect.lower, pool[i].effect.upper) for i in phys]
         t_fit = time.perf_counter()
         try:
-            params, rss1, x, _, jac = self.fit_full(effects, p0, self.empirical)
+            if effects:
+                params, rss1, x, _, jac = self.fit_full(effects, p0, terms)
+            else:
+                params, x, jac = [], np.zeros(0), np.zeros((self.n, 0))
+                r1 = self.full_residual([], terms)[0]
+                rss1 = float(r1 @ r1)
         except ModelEvaluationError as exc:
             jl["full_fit_error"] = str(exc)
             return None
@@ -277,7 +302,7 @@ class JointSelection(Selection):
             return None
         sigma2 = self._noise2(r_full)
         new_active: list[Active] = []
-        for i, p in zip(choice.members, params):
+        for i, p in zip(phys, params):
             m = pool[i]
             if m.active is not None:
                 m.active.p = p
@@ -289,17 +314,22 @@ class JointSelection(Selection):
             info = {"explained_fraction": 1.0 - rss1 / self.rss_full, "F": F, "p_value": pv, "delta_bic": dbic,
                     "alternatives": self._alternatives(v, ranking, sigma2, rss1, harms),
                     "selection": {"method": "joint best subset", "iteration": it,
-                                  "inclusion_weight_bic": incl[m.effect.name][0],
-                                  "inclusion_weight_aic": incl[m.effect.name][1],
-                                  "chosen_with": [pool[j].effect.name for j in choice.members if j != i],
-                                  "swapped_out": [pool[j].effect.name for j in choice.dropped]}}
+                                  "inclusion_weight_bic": incl[m.name][0],
+                                  "inclusion_weight_aic": incl[m.name][1],
+                                  "chosen_with": [pool[k].name for k in choice.members if k != i],
+                                  "swapped_out": [pool[k].name for k in choice.dropped]}}
             new_active.append(Active(m.effect, p, it, info=info))
         self.active = new_active
-        msg = "joint: added " + ", ".join(pool[i].effect.name for i in added)
+        for k in choice.dropped:
+            if pool[k].term is not None:
+                self._emp_info.pop(pool[k].term, None)
+        self.empirical = terms
+        msg = "joint: added " + ", ".join(pool[i].name for i in added)
         if choice.dropped:
-            msg += "; swapped out " + ", ".join(pool[i].effect.name for i in choice.dropped)
-        removed = self._backward(effects, x, jac, rss1)
-        if removed:
-            msg += "; removed " + ", ".join(removed) + " (no longer significant)"
-            log["removed"] = removed
+            msg += "; swapped out " + ", ".join(pool[i].name for i in choice.dropped)
+        if effects:
+            removed = self._backward(effects, x, jac, rss1)
+            if removed:
+                msg += "; removed " + ", ".join(removed) + " (no longer significant)"
+                log["removed"] = removed
         return True, msg

@@ -182,17 +182,20 @@ class Validated:
 
 @dataclass
 class PoolMember:
-    """A member of the joint selection's pool, linearised at the current state.
+    """A member of the joint selection's pool, linearised at the current state: a library effect or
+    an empirical term already in the model (which a subset may drop, giving its part back to the
+    residual for physical effects to explain).
 
     Attributes
     ----------
-    effect : Effect
+    effect : Effect or None
+        None for an empirical term.
     cols : ndarray
         (n_coarse, k) columns of the TE change per unit of its coefficients at the current state
-        (projected off the empirical terms).
+        on the screening grid.
     contribution : ndarray or None
-        For an effect in the model: its present contribution to the model TE (the TE of the state
-        minus the TE of the state without it), projected; None for a new candidate.
+        For a member in the model: its present contribution to the model TE (for an effect the TE
+        of the state minus the TE of the state without it); None for a new candidate.
     to_p : callable
         Coefficients of ``cols`` -> the effect's parameters (for an effect in the model: its present
         parameters plus the change).
@@ -202,12 +205,28 @@ class PoolMember:
         Its screening record at the current state, if it is a new candidate.
     """
 
-    effect: Effect
+    effect: Effect | None
     cols: np.ndarray
     contribution: np.ndarray | None
     to_p: Callable[[np.ndarray], np.ndarray]
     active: "Active | None" = None
     entry: Candidate | None = None
+    term: "EmpiricalTerm | None" = None
+
+    @property
+    def name(self) -> str:
+        """The effect's name or the empirical term's label."""
+        return self.effect.name if self.effect is not None else self.term.label
+
+    @property
+    def n_params(self) -> int:
+        """Parameters it holds (an effect's components or an empirical term's columns)."""
+        return self.effect.n_params if self.effect is not None else self.term.n_cols
+
+    @property
+    def in_model(self) -> bool:
+        """True for an effect or empirical term in the model now."""
+        return self.active is not None or self.term is not None
 
 
 @dataclass
