@@ -29,16 +29,35 @@ def rot(a: np.ndarray) -> np.ndarray:
     """Rotation matrices for angles a (...,) -> (..., 2, 2)."""
     a = np.asarray(a, dtype=float)
     c, s = np.cos(a), np.sin(a)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+    R = np.empty(a.shape + (2, 2))
+    R[..., 0, 0] = c
+    R[..., 0, 1] = -s
+    R[..., 1, 0] = s
+    R[..., 1, 1] = c
+    return R
 
 
 def _apply(R: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.einsum("...ij,...j->...i", R, v)
 
 
+def _turn(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """v (..., 2) turned by the angles a (broadcast against v[..., 0]): ``_apply(rot(a), v)`` without the
+    matrices (the same products and sums, c x - s y and s x + c y, so the same numbers)."""
+    c, s = np.cos(a), np.sin(a)
+    vx, vy = v[..., 0], v[..., 1]
+    out = np.empty(np.broadcast_shapes(np.shape(c), vx.shape) + (2,))
+    out[..., 0] = c * vx - s * vy
+    out[..., 1] = s * vx + c * vy
+    return out
+
+
 def _u(a: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=float)
-    return np.stack([np.cos(a), np.sin(a)], -1)
+    out = np.empty(a.shape + (2,))
+    out[..., 0] = np.cos(a)
+    out[..., 1] = np.sin(a)
+    return out
 
 
 class ReducerGeometry:
@@ -132,8 +151,7 @@ class ReducerGeometry:
 
     def crank_axes(self, theta_out: np.ndarray) -> np.ndarray:
         """Crank axis positions in the fixed frame, (N, n_cranks, 2) mm."""
-        R = rot(np.atleast_1d(theta_out))[:, None]
-        return _apply(R, self.carrier_holes[None])
+        return _turn(np.atleast_1d(np.asarray(theta_out, dtype=float))[:, None], self.carrier_holes[None])
 
     def cam_centers(self, theta_out: np.ndarray, psi: np.ndarray) -> np.ndarray:
         """Cam centres (N, n_cranks, n_discs, 2), mm, fixed frame."""
@@ -154,7 +172,7 @@ class ReducerGeometry:
         ang = np.arctan2(dc[..., 1], dc[..., 0]) - np.arctan2(dh[..., 1], dh[..., 0])[None]
         theta_out = np.atleast_1d(theta_out)
         ang = theta_out[:, None] + (np.mod(ang - theta_out[:, None] + np.pi, 2 * np.pi) - np.pi)
-        cen = C.mean(axis=2) - _apply(rot(ang), H.mean(axis=1)[None])
+        cen = C.mean(axis=2) - _turn(ang, H.mean(axis=1)[None])
         return cen, ang
 
     def pins_in_profile_frames(self, theta_out: np.ndarray, psi: np.ndarray,
@@ -214,11 +232,11 @@ class ReducerGeometry:
     # ------------------------------------------------------------------ stage I
     def sun_center(self, theta_in: np.ndarray) -> np.ndarray:
         """Sun gear centre (N, 2), mm: the eccentricity turns with the sun."""
-        return _apply(rot(np.atleast_1d(theta_in)), self.sun_offset[None])
+        return _turn(np.atleast_1d(np.asarray(theta_in, dtype=float))[:, None], self.sun_offset[None])[:, 0]
 
     def planet_centers(self, theta_out: np.ndarray, psi: np.ndarray) -> np.ndarray:
         """Planet gear centres (N, n_cranks, 2), mm: crank axis plus the offset turning with the crank."""
-        return self.crank_axes(theta_out) + _apply(rot(np.asarray(psi)), self.planet_offsets[None])
+        return self.crank_axes(theta_out) + _turn(np.asarray(psi, dtype=float), self.planet_offsets[None])
 
     def _line_of_action(self, o1: np.ndarray, o2: np.ndarray, direction: int,
                         gamma_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

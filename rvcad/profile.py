@@ -43,6 +43,20 @@ def _up(a: np.ndarray) -> np.ndarray:
     return np.stack([-np.sin(a), np.cos(a)], axis=-1)
 
 
+def _sin_cos_small(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """sin x and cos x for |x| <= 0.05 by their Taylor series, with as many terms as the largest |x| needs
+    for remainders below 1e-19 (to x^9 and x^8 at 0.05; to x^3 and x^2 below 2e-5)."""
+    x2 = x * x
+    m = float(np.abs(x).max()) if x.size else 0.0
+    if m < 2e-5:
+        return x + x * x2 * (-1.0 / 6.0), 1.0 - 0.5 * x2
+    if m < 2e-3:
+        return (x + x * x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0)),
+                1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0))))
+    return (x + x * x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0)))),
+            1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0)))))
+
+
 def sagitta_samples(t0: float, t1: float, speed, radius, sagitta: float, max_chord: float = 1.0,
                     n_grid: int = 20001) -> np.ndarray:
     """Parameter values on [t0, t1] whose chords have at most the given sagitta.
@@ -287,7 +301,7 @@ class CycloidProfile:
         return self.boundary(t)
 
     # ------------------------------------------------------------------ distances
-    def foot_point(self, p: np.ndarray, t0: np.ndarray) -> np.ndarray:
+    def foot_point(self, p: np.ndarray, t0: np.ndarray, per_point: bool = False) -> np.ndarray:
         """Parameter of the closest point of q to each p (vectorised Newton from t0).
 
         Parameters
@@ -295,6 +309,9 @@ class CycloidProfile:
         p : (K, 2) array, mm
         t0 : (K,) array, rad
             Starting parameters (the ideal-motion parameter of the pin is a good one).
+        per_point : bool
+            False: every point iterates until all have converged (the reproducible default). True: each
+            point stops at its own convergence (fewer evaluations; the feet differ by rounding, ~1e-15 rad).
 
         Returns
         -------
@@ -303,6 +320,8 @@ class CycloidProfile:
         point moves less than ``Tolerances.foot_point_mm``.
         """
         p = np.asarray(p, dtype=float)
+        if per_point:
+            return self._foot_point_per_point(p, t0)
         px, py = p[..., 0], p[..., 1]
         t = np.array(t0, dtype=float, copy=True)
         R, e, Z, ph = self.pin_circle_radius, self.eccentricity, self.z_pins, self.cam_phase
@@ -328,7 +347,68 @@ class CycloidProfile:
                 break
         return t
 
-    def signed_distance(self, p: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _foot_point_per_point(self, p: np.ndarray, t0: np.ndarray, trig: bool = False):
+        """:meth:`foot_point` with each point stopping at its own convergence (the same Newton step).
+
+        The trig terms of t and Z t + phi_c are evaluated once; after each Newton step of Z |dt| <= 0.05
+        they follow by the angle-addition formulas with the Taylor series of the small angle (remainders below
+        1e-19), so they agree with direct evaluation to a few rounding errors.
+        ``trig``: also return cos t, sin t, cos(Z t + phi_c), sin(Z t + phi_c) at the feet."""
+        t = np.array(t0, dtype=float, copy=True).reshape(-1)
+        P = p.reshape(-1, 2)
+        R, e, Z, ph = self.pin_circle_radius, self.eccentricity, self.z_pins, self.cam_phase
+        max_step = 0.25 * math.pi / self.z_lobes
+        eZ, eZ2 = e * Z, e * Z * Z
+        c1, s1 = np.cos(t), np.sin(t)
+        a2 = Z * t + ph
+        c2, s2 = np.cos(a2), np.sin(a2)
+        T = [t, c1, s1, c2, s2]                      # results, written back for the points still iterating
+        act = None                                   # indices still iterating (None: all)
+        px, py = P[:, 0], P[:, 1]
+        for _ in range(self.tol.foot_point_max_iter):
+            dx = R * c1 - e * c2 - px
+            dy = R * s1 - e * s2 - py
+            d1x = -R * s1 + eZ * s2
+            d1y = R * c1 - eZ * c2
+            d2x = -R * c1 + eZ2 * c2
+            d2y = -R * s1 + eZ2 * s2
+            sp2 = d1x * d1x + d1y * d1y
+            f = dx * d1x + dy * d1y
+            fp = sp2 + dx * d2x + dy * d2y
+            fp = np.where(fp > 0, fp, sp2)
+            step = np.clip(f / fp, -max_step, max_step)
+            t = t - step
+            zs = Z * step
+            sa, ca = _sin_cos_small(step)
+            sb, cb = _sin_cos_small(zs)
+            c1, s1 = c1 * ca + s1 * sa, s1 * ca - c1 * sa
+            c2, s2 = c2 * cb + s2 * sb, s2 * cb - c2 * sb
+            big = np.nonzero(np.abs(zs) > 0.05)[0]
+            if big.size:                             # large steps: the trig terms evaluated directly
+                tb = t[big]
+                c1[big], s1[big] = np.cos(tb), np.sin(tb)
+                a2 = Z * tb + ph
+                c2[big], s2[big] = np.cos(a2), np.sin(a2)
+            more = np.abs(step) * np.sqrt(sp2) >= self.tol.foot_point_mm
+            cur = [t, c1, s1, c2, s2]
+            if act is None:
+                T = cur
+                act = np.nonzero(more)[0]
+            else:
+                for full, v in zip(T, cur):
+                    full[act] = v
+                act = act[more]
+            if act.size == 0:
+                break
+            t, c1, s1, c2, s2 = (v[act] for v in T)
+            px, py = P[act, 0], P[act, 1]
+        shape = np.shape(t0)
+        if trig:
+            return tuple(v.reshape(shape) for v in T)
+        return T[0].reshape(shape)
+
+    def signed_distance(self, p: np.ndarray, t0: np.ndarray,
+                        per_point: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Signed distance of points to the pin-centre curve q (positive outside the disc).
 
         Returns
@@ -338,20 +418,29 @@ class CycloidProfile:
         n : (K, 2) outward unit normals at the foot points
         """
         p = np.asarray(p, dtype=float)
-        t = self.foot_point(p, t0)
         # q(t) and the normal from one evaluation of the four trig terms (the same operations in the
-        # same order as :meth:`q` and :meth:`normal`, so bit-identical to them, at half the trig cost)
+        # same order as :meth:`q` and :meth:`normal`, so bit-identical to them, at half the trig cost;
+        # the norm and the dot product written out are the same sums as np.linalg.norm and einsum)
         R, e, Z = self.pin_circle_radius, self.eccentricity, self.z_pins
-        c1, s1 = np.cos(t), np.sin(t)
-        a2 = Z * t + self.cam_phase
-        c2, s2 = np.cos(a2), np.sin(a2)
+        if per_point:
+            t, c1, s1, c2, s2 = self._foot_point_per_point(p, t0, trig=True)
+        else:
+            t = self.foot_point(p, t0)
+            c1, s1 = np.cos(t), np.sin(t)
+            a2 = Z * t + self.cam_phase
+            c2, s2 = np.cos(a2), np.sin(a2)
         eZ = e * Z
         d1x = R * -s1 - eZ * -s2
         d1y = R * c1 - eZ * c2
-        n = np.stack([d1y, -d1x], axis=-1)
-        n = n / np.linalg.norm(n, axis=-1, keepdims=True)
-        qt = np.stack([R * c1 - e * c2, R * s1 - e * s2], axis=-1)
-        sd = np.einsum("...i,...i->...", p - qt, n)
+        mx = -d1x
+        r = np.sqrt(d1y * d1y + mx * mx)
+        n = np.empty(np.shape(t) + (2,))
+        n[..., 0] = d1y / r
+        n[..., 1] = mx / r
+        qt = np.empty_like(n)
+        qt[..., 0] = R * c1 - e * c2
+        qt[..., 1] = R * s1 - e * s2
+        sd = (p[..., 0] - qt[..., 0]) * n[..., 0] + (p[..., 1] - qt[..., 1]) * n[..., 1]
         # Newton from t0 finds the nearest foot for points closer than the roots' concave radius
         # of curvature (~0.07 mm on the pin-centre curve); farther out a second local foot can
         # exist: search a lobe pitch either side on a grid and keep the nearer foot.
@@ -400,7 +489,7 @@ class CycloidProfile:
                 y *= y
                 x += y
                 start[sl] = tf[sl] + grid[np.argmin(x, axis=1)]
-            t2 = self.foot_point(pf, start)
+            t2 = self.foot_point(pf, start, per_point)
             d_old = np.linalg.norm(pf - qt[far], axis=-1)
             d_new = np.linalg.norm(pf - self.q(t2), axis=-1)
             better = d_new < d_old - 1e-12
@@ -411,13 +500,15 @@ class CycloidProfile:
                 sd[idx] = np.einsum("...i,...i->...", p[idx] - self.q(t[idx]), n[idx])
         return sd, t, n
 
-    def boundary_distance(self, p: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def boundary_distance(self, p: np.ndarray, t0: np.ndarray,
+                          per_point: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Signed distance of points to the disc boundary (positive outside), mm.
 
         Exact wherever the foot point lies on the untrimmed part of the envelope (all pin
         contacts of a working disc): distance to the equidistant = distance to q + rp.
+        ``per_point``: see :meth:`foot_point`.
         """
-        sd, t, n = self.signed_distance(p, t0)
+        sd, t, n = self.signed_distance(p, t0, per_point)
         return sd + self.pin_radius, t, n
 
 

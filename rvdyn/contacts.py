@@ -174,8 +174,11 @@ class AnalyticContacts:
 
     name = "analytic"
 
-    def __init__(self, geom: ReducerGeometry) -> None:
+    def __init__(self, geom: ReducerGeometry, per_point: bool = False) -> None:
         self.geom = geom
+        #: foot-point searches stop point by point (:meth:`rvcad.profile.CycloidProfile.foot_point`): the
+        #: batch solver's setting; False keeps the reproducible shared iteration count of the single solves
+        self.per_point = per_point
         self._last_t: dict[int, np.ndarray] = {}
 
     def disc_distance(self, k: int, p: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -190,9 +193,17 @@ class AnalyticContacts:
         if last is not None and last.shape == start.shape:
             near = np.abs(last - start) < 0.25 * np.pi / prof.z_lobes
             start = np.where(near, last, start)
-        d, t, n = prof.boundary_distance(p, start)
+        d, t, n = prof.boundary_distance(p, start, self.per_point)
         self._last_t[k] = t
         return d, n
+
+    def keep_rows(self, keep: np.ndarray, per_row: int) -> None:
+        """Keep the warm starts of the solver rows ``keep`` only ((R,) bool over the rows of the last call,
+        ``per_row`` points each): a batch whose converged solves leave it starts the rest as before."""
+        keep = np.asarray(keep, dtype=bool)
+        for k, t in list(self._last_t.items()):
+            if t.size == keep.size * per_row:
+                self._last_t[k] = t.reshape(keep.size, per_row)[keep].ravel()
 
     def foot_parameters(self, k: int) -> np.ndarray | None:
         """Foot parameters (rad) of disc k's last ``disc_distance`` call, or None."""

@@ -52,11 +52,12 @@ class PhysicsMixin:
         self._R_all: np.ndarray | None = None
         self._nrm_last: np.ndarray | None = None
 
-    def _line_C(self, k: int, pts: np.ndarray, t0: np.ndarray, r_pin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _line_C(self, k: int, pts: np.ndarray, t0: np.ndarray, r_pin: np.ndarray,
+                t: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Johnson constant C and relative radius R (mm) of the pin contacts of disc k from the local
-        radius of curvature of the disc boundary at the foot points (signed: negative where concave)."""
+        radius of curvature of the disc boundary at the foot points ``t`` (signed: negative where concave;
+        without ``t`` (a provider that gives no foot parameters) the foot points are found from ``t0``)."""
         prof = self.geom.profiles[k]
-        t = getattr(self.contacts, "foot_parameters", lambda _k: None)(k)
         if t is None or t.shape != t0.shape:
             t = prof.foot_point(pts, t0)
         kap = prof.curvature(t)

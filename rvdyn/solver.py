@@ -31,7 +31,7 @@ import numpy as np
 
 from rvcad.geometry import ReducerGeometry
 from rvcad.tolerances import TOL, Tolerances
-from rvdyn.contacts import ContactLaw
+from rvdyn.contacts import AnalyticContacts, ContactLaw
 from rvdyn.options import model_choice, model_value, parse_model
 from rvdyn.physical import PhysicsMixin
 
@@ -46,6 +46,9 @@ MAX_ELASTIC_PENETRATION_MM = 0.1
 
 #: Largest change of a state coordinate (mm) in one outer iteration (trust region of the linearised gaps).
 OUTER_TRUST_MM = 0.01
+
+#: Step (mm of scaled state) of the central differences of the kinematic Jacobians.
+FD_STEP_MM = 1e-6
 
 
 class InterferenceError(ValueError):
@@ -156,26 +159,49 @@ class QuasiStaticSolver(PhysicsMixin):
             ang = ang + turn
         return cen, ang
 
-    def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _stacked(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The states x and their central-difference neighbours in one array.
+
+        Rows ``[0, N)`` are x; block ``1 + 2 i`` holds x + h e_i and block ``2 + 2 i`` holds x - h e_i for each
+        kinematic coordinate i (output and cranks), h = 1e-6 mm. One evaluation of the (row-wise) kinematics on
+        the stacked array gives the same numbers as one call per neighbour, without the per-call overhead.
+        Returns the input angles (tiled) and the states ((1 + 2 (1 + nc)) N, ndof)."""
+        N = x.shape[0]
+        nk = 1 + self.nc
+        X = np.empty(((1 + 2 * nk) * N, self.ndof))
+        X[:N] = x
+        for i in range(nk):
+            xp = X[(1 + 2 * i) * N:(2 + 2 * i) * N]
+            xm = X[(2 + 2 * i) * N:(3 + 2 * i) * N]
+            xp[:] = x
+            xm[:] = x
+            xp[:, i] += FD_STEP_MM
+            xm[:, i] -= FD_STEP_MM
+        return np.tile(th_in, 1 + 2 * nk), X
+
+    def _central(self, v: np.ndarray, N: int) -> np.ndarray:
+        """Central differences of a stacked evaluation v ((1 + 2 nk) N, ...) -> (N, ..., nk)."""
+        nk = 1 + self.nc
+        parts = [(v[(1 + 2 * i) * N:(2 + 2 * i) * N] - v[(2 + 2 * i) * N:(3 + 2 * i) * N]) / (2 * FD_STEP_MM)
+                 for i in range(nk)]
+        return np.stack(parts, axis=-1)
+
+    def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray, stacked=None) -> tuple[np.ndarray, np.ndarray]:
         """Pin gaps (N, nd, Zp) mm and Jacobians (N, nd, Zp, ndof) mm/mm.
 
-        Disc poses are differentiated by central differences (cheap: N x nd values); the pins
-        follow by the chain rule: p = R(-phi)(P - c), dp = -R(-phi) dc + dphi (p_y, -p_x), and
-        the gap's gradient is the outward normal n: dg = n . dp.
+        Disc poses are differentiated by central differences (cheap: N x nd values, all neighbours in
+        one stacked evaluation, :meth:`_stacked`); the pins follow by the chain rule: p = R(-phi)(P - c),
+        dp = -R(-phi) dc + dphi (p_y, -p_x), and the gap's gradient is the outward normal n: dg = n . dp.
         """
         N = x.shape[0]
-        cen, ang = self._poses(th_in, x)
-        h = 1e-6
+        nk = 1 + self.nc
+        TH, X = self._stacked(th_in, x) if stacked is None else stacked
+        cen_all, ang_all = self._poses(TH, X)
+        cen, ang = cen_all[:N], ang_all[:N]
         dcen = np.zeros(cen.shape + (self.ndof,))
         dang = np.zeros(ang.shape + (self.ndof,))
-        for i in range(1 + self.nc):
-            xp, xm = x.copy(), x.copy()
-            xp[:, i] += h
-            xm[:, i] -= h
-            cp, ap = self._poses(th_in, xp)
-            cm, am = self._poses(th_in, xm)
-            dcen[..., i] = (cp - cm) / (2 * h)
-            dang[..., i] = (ap - am) / (2 * h)
+        dcen[..., :nk] = self._central(cen_all, N)
+        dang[..., :nk] = self._central(ang_all, N)
         if self.float_discs:
             for k in range(self.nd):
                 b = 1 + self.nc + 3 * k
@@ -192,27 +218,40 @@ class QuasiStaticSolver(PhysicsMixin):
         gaps = np.empty((N, self.nd, self.zp))
         nx = np.empty_like(gaps)
         ny = np.empty_like(gaps)
-        Cs = np.empty((N, self.nd, self.zp))
-        Rs = np.empty((N, self.nd, self.zp))
+        feet = []
         for k in range(self.nd):
             pts = np.stack([px[:, k].ravel(), py[:, k].ravel()], axis=1)
-            dist, nrm = self.contacts.disc_distance(k, pts, t0[:, k].ravel())
+            tk = t0[:, k].ravel()
+            dist, nrm = self.contacts.disc_distance(k, pts, tk)
             gaps[:, k] = dist.reshape(N, self.zp) - self.geom.pin_radii[None]
             nx[:, k] = nrm[:, 0].reshape(N, self.zp)
             ny[:, k] = nrm[:, 1].reshape(N, self.zp)
-            r_pin = np.broadcast_to(self.geom.pin_radii[None], (N, self.zp)).ravel()
-            Ck, Rk = self._line_C(k, pts, t0[:, k].ravel(), r_pin)
-            Cs[:, k] = Ck.reshape(N, self.zp)
-            Rs[:, k] = Rk.reshape(N, self.zp)
+            foot = getattr(self.contacts, "foot_parameters", lambda _k: None)(k)
+            feet.append((pts, tk, None if foot is None else foot.copy()))
         mx = nx * c - ny * s
         my = nx * s + ny * c
-        self._C_last = Cs.reshape(N, -1)
-        self._R_last = Rs.reshape(N, -1)
+        # the Johnson constants and relative radii of the pin contacts, computed when asked for (the
+        # physical law at every linearisation; the impact law only for the pressures at the solution)
+        self._feet_last = feet
+        self._C_last = self._R_last = None
         self._nrm_last = np.stack([mx, my], axis=-1)                            # fixed frame, (N, nd, Zp, 2)
         lever = nx * py - ny * px
         jac = (-(mx[..., None] * dcen[:, :, None, 0, :] + my[..., None] * dcen[:, :, None, 1, :])
                + lever[..., None] * dang[:, :, None, :])
         return gaps, jac
+
+    def _line_last(self) -> tuple[np.ndarray, np.ndarray]:
+        """Johnson constants C and relative radii R (N, nd Zp) of the pin contacts of the last linearisation."""
+        if self._C_last is None:
+            Cs, Rs = [], []
+            for k, (pts, tk, foot) in enumerate(self._feet_last):
+                r_pin = np.broadcast_to(self.geom.pin_radii[None], (len(tk) // self.zp, self.zp)).ravel()
+                Ck, Rk = self._line_C(k, pts, tk, r_pin, foot)
+                Cs.append(Ck.reshape(-1, self.zp))
+                Rs.append(Rk.reshape(-1, self.zp))
+            self._C_last = np.stack(Cs, axis=1).reshape(len(Cs[0]), -1)
+            self._R_last = np.stack(Rs, axis=1).reshape(len(Rs[0]), -1)
+        return self._C_last, self._R_last
 
     def _stage1(self, th_in: np.ndarray, x: np.ndarray, direction: int, provider: bool) -> np.ndarray:
         to, ps, _, _ = self._unpack(th_in, x)
@@ -220,29 +259,37 @@ class QuasiStaticSolver(PhysicsMixin):
             return self.contacts.stage1_gaps(th_in, to, ps, direction)
         return self.geom.stage1_gaps(th_in, to, ps, direction)
 
-    def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction) -> tuple[np.ndarray, np.ndarray]:
         """Gaps (N, M) mm and their Jacobians (N, M, ndof) mm/mm at the states x.
 
         Columns: the 2 x Zp pin gaps, then the stage I flank gaps of each planet, loaded flank
         (``direction``) first, coast flank (``-direction``, open by the stage I backlash) second.
+        ``direction`` is +1, -1 or an (N,) array of them (one per state).
         The stage I Jacobians are central differences of the closed-form involute gap (the
         kinematic derivative; the provider only supplies the gap value).
         """
         N = x.shape[0]
-        h = 1e-6
-        gaps, jac = self._pin_gaps(th_in, x)
-        g1_parts, j1_parts = [], []
-        for flank in (direction, -direction):
-            g1_parts.append(self._stage1(th_in, x, flank, provider=True))
+        nk = 1 + self.nc
+        dirs = np.broadcast_to(np.asarray(direction), (N,))
+        stacked = self._stacked(th_in, x)
+        gaps, jac = self._pin_gaps(th_in, x, stacked)
+        TH, X = stacked
+        to, ps, _, _ = self._unpack(TH, X)
+        analytic = isinstance(self.contacts, AnalyticContacts)
+        val, der = {}, {}
+        for flank in (1, -1):
+            if not (np.any(dirs == flank) or np.any(dirs == -flank)):
+                continue
+            g_all = self.geom.stage1_gaps(TH, to, ps, flank)
+            # the provider's gap value (the analytic provider's is the closed form just evaluated)
+            val[flank] = g_all[:N] if analytic else self.contacts.stage1_gaps(th_in, to[:N], ps[:N], flank)
             j1 = np.zeros((N, self.nc, self.ndof))
-            for i in range(1 + self.nc):
-                xp, xm = x.copy(), x.copy()
-                xp[:, i] += h
-                xm[:, i] -= h
-                j1[..., i] = (self._stage1(th_in, xp, flank, False) - self._stage1(th_in, xm, flank, False)) / (2 * h)
-            j1_parts.append(j1)
-        g1 = np.concatenate(g1_parts, axis=1)
-        j1 = np.concatenate(j1_parts, axis=1)
+            j1[..., :nk] = self._central(g_all, N)
+            der[flank] = j1
+        up = (dirs == 1)[:, None]
+        g1 = np.concatenate([np.where(up, val[1], val[-1]), np.where(up, val[-1], val[1])], axis=1)
+        j1 = np.concatenate([np.where(up[..., None], der[1], der[-1]), np.where(up[..., None], der[-1], der[1])],
+                            axis=1)
         G = np.concatenate([gaps.reshape(N, -1), g1], axis=1)
         J = np.concatenate([jac.reshape(N, -1, self.ndof), j1], axis=1)
         return G, J
@@ -305,43 +352,46 @@ class QuasiStaticSolver(PhysicsMixin):
             return ContactLaw(self.law.K, self.law.n, rigid=True, kind=self.law.kind)
         return self.law
 
-    def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200) -> np.ndarray:
+    def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200,
+               floor_k: np.ndarray | None = None) -> np.ndarray:
         """Minimise the linearised potential around x0; returns the step (N, ndof).
 
-        ``mu`` (N,) is the Levenberg-Marquardt damping, updated in place so that the next outer
-        iteration starts from where this one ended.
+        ``b`` is the load vector (ndof,) or one per state (N, ndof). ``mu`` (N,) is the Levenberg-Marquardt
+        damping, updated in place so that the next outer iteration starts from where this one ended.
+        ``floor_k`` (N,): the law's typical working stiffness per state (default ``law.floor_stiffness()``;
+        the physical law's depends on the contacts of its own solve).
         """
         N, M, D = J.shape
+        B = np.broadcast_to(b, (N, D))
         step = np.zeros((N, D))
         # damping floor: about a quarter of the contacts at 1 um of penetration (typical working stiffness)
-        floor = law.floor_stiffness() * max(1.0, M / 4.0) * np.ones(D)
+        fk = np.full(N, law.floor_stiffness()) if floor_k is None else floor_k
+        floor = (fk * max(1.0, M / 4.0))[:, None]
         eye = np.eye(D)
 
         arms = self._hole_arms(th_in, x0)
-
-        def energy(s):
-            delta = -(G + _jdot(J, s))
-            return law.energy(delta).sum(axis=1) + s @ b + self._bearing(x0 + s, arms, derivs=False)[0]
-
-        E0 = energy(step)
+        E0 = energy_sub(self, x0, G, J, B, law, step, arms)
         Jnorm = np.linalg.norm(J, axis=2)
+        bnorm = np.linalg.norm(B, axis=1)
         tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
         active = np.ones(N, dtype=bool)
         for _ in range(max_iter):
             idx = np.nonzero(active)[0]
             if idx.size == 0:
                 break
-            s = step[idx]
-            delta = -(G[idx] + _jdot(J[idx], s))
+            every = idx.size == N                     # all states still iterating: views, no copies
+            sel = slice(None) if every else idx
+            s = step[sel]
+            Gi, Ji = G[sel], J[sel]
+            delta = -(Gi + _jdot(Ji, s))
             f, k = law.force_stiffness(delta, idx)
-            Ji = J[idx]
-            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + b[None]
+            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[sel]
             H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
             if arms is not None:
                 _, gb, Hb = self._bearing(x0[idx] + s, arms[idx])
                 grad = grad + gb
                 H = H + Hb
-            diag = np.einsum("ndd->nd", H) + floor[None]
+            diag = np.einsum("ndd->nd", H) + floor[idx]
             A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
             dstep = -np.linalg.solve(A, grad[:, :, None])[:, :, 0]
             # backtracking on the (convex) potential: take the first step length that lowers it
@@ -353,9 +403,14 @@ class QuasiStaticSolver(PhysicsMixin):
                 w = np.nonzero(pending)[0]
                 if w.size == 0:
                     break
-                cand = s[w] + alpha * dstep[w]
-                Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], b, law, cand,
-                                None if arms is None else arms[idx[w]], rows=idx[w])
+                if w.size == idx.size:
+                    cand = s + alpha * dstep
+                    Ec = energy_sub(self, x0[sel], Gi, Ji, B[sel], law, cand, None if arms is None else arms[sel],
+                                    rows=idx)
+                else:
+                    cand = s[w] + alpha * dstep[w]
+                    Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], B[idx[w]], law, cand,
+                                    None if arms is None else arms[idx[w]], rows=idx[w])
                 upd = Ec < best_E[w]
                 best_E[w[upd]] = Ec[upd]
                 best_s[w[upd]] = cand[upd]
@@ -367,11 +422,21 @@ class QuasiStaticSolver(PhysicsMixin):
             E0[idx] = best_E
             mu[idx] = np.where(accepted_full, np.maximum(mu[idx] / 10.0, 1e-12), np.minimum(mu[idx] * 10.0, 1e12))
             # stationarity of the potential relative to the forces in play, plus a settled step
-            scale = np.linalg.norm(b) + np.einsum("nm,nm->n", np.abs(f), Jnorm[idx])
+            scale = bnorm[idx] + np.einsum("nm,nm->n", np.abs(f), Jnorm[idx])
             done = (moved < tol_mm) & (np.linalg.norm(grad, axis=1) <= 1e-7 * scale)
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False
         return step
+
+    def _check_solve_args(self, theta_in, direction, load_Nm) -> np.ndarray:
+        if direction not in (1, -1):
+            raise ValueError(f"direction {direction!r} must be +1 or -1")
+        if not (math.isfinite(load_Nm) and load_Nm >= 0):
+            raise ValueError(f"load_Nm {load_Nm} must be a finite number >= 0")
+        th = np.atleast_1d(np.asarray(theta_in, dtype=float))
+        if not np.all(np.isfinite(th)):
+            raise ValueError("theta_in contains NaN or inf")
+        return th
 
     def solve(self, theta_in: np.ndarray, direction: int = 1, load_Nm: float = 20.0,
               chunk: int | None = None, x_init: np.ndarray | None = None) -> Solution:
@@ -391,29 +456,15 @@ class QuasiStaticSolver(PhysicsMixin):
         x_init : (N, ndof) or None
             Start states (scaled coordinates); default the ideal kinematics.
         """
-        if direction not in (1, -1):
-            raise ValueError(f"direction {direction!r} must be +1 or -1")
-        if not (math.isfinite(load_Nm) and load_Nm >= 0):
-            raise ValueError(f"load_Nm {load_Nm} must be a finite number >= 0")
-        th = np.atleast_1d(np.asarray(theta_in, dtype=float))
-        if not np.all(np.isfinite(th)):
-            raise ValueError("theta_in contains NaN or inf")
+        th = self._check_solve_args(theta_in, direction, load_Nm)
         N = th.size
         law = self._law(load_Nm)
-        T = self._load_Nmm(load_Nm)
-        b = np.zeros(self.ndof)
-        b[0] = direction * T / self.Rp
+        B = np.zeros((N, self.ndof))
+        B[:, 0] = direction * self._load_Nmm(load_Nm) / self.Rp
+        dirs = np.full(N, direction)
         x = np.zeros((N, self.ndof)) if x_init is None else np.array(x_init, dtype=float)
         chunk = N if chunk is None else max(1, int(chunk))
-        tol_mm = self.tol.solver_angle_rad * self.Rp
-        G_all = np.empty((N, self.nd * self.zp + 2 * self.nc))
-        C_all = np.empty((N, self.nd * self.zp))
-        R_all = np.empty((N, self.nd * self.zp))
-        nrm_all = np.empty((N, self.nd, self.zp, 2))
-        J_all = np.empty((N, self.nd * self.zp + 2 * self.nc, self.ndof))
-        trust = np.full(N, OUTER_TRUST_MM)
-        last_dx = np.zeros((N, self.ndof))
-        mu_all = np.ones(N)
+        out = self._outputs(N)
         iters = 0
         prev: np.ndarray | None = None
         for s0 in range(0, N, chunk):
@@ -421,44 +472,136 @@ class QuasiStaticSolver(PhysicsMixin):
             xs = x[sl]
             if x_init is None and prev is not None:
                 xs[:] = prev
-            for it in range(self.tol.solver_max_iter):
-                G, J = self._linearise(th[sl], xs, direction)
-                step_law = self._step_law(law, self._C_last)
-                mu = mu_all[sl]
-                dx = self._inner(th[sl], xs, G, J, b, step_law, mu)
-                mu_all[sl] = np.minimum(mu, 1e-2)
-                # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
-                # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
-                # OUTER_TRUST_MM); a step that reverses the previous one (a contact flipping between
-                # two linearisations) halves that state's trust radius for good
-                if it > 0:
-                    flip = np.einsum("nd,nd->n", dx, last_dx[sl]) < 0
-                    trust[sl] = np.where(flip, 0.5 * trust[sl], trust[sl])
-                big = np.abs(dx).max(axis=1)
-                dx = dx * np.minimum(1.0, trust[sl] / np.maximum(big, 1e-300))[:, None]
-                last_dx[sl] = dx
-                xs += dx
-                iters = max(iters, it + 1)
-                change = np.abs(dx).max()
+            used = self._outer(th[sl], xs, dirs[sl], B[sl], law, [(0, sl.stop - s0)], out, s0, load_Nm)
+            iters = max(iters, used[0])
+            prev = xs[-1].copy()
+        return self._finish_rows(th, x, direction, load_Nm, law, iters, out, slice(0, N))
+
+    def solve_many(self, theta_in: list, directions: list, loads_Nm: list) -> list[Solution]:
+        """Equilibria of several solves of this case in one batch: solve i has the input angles
+        ``theta_in[i]`` (rad, in the order of motion), direction ``directions[i]`` and load ``loads_Nm[i]``
+        (N m, > 0: the batch shares the contact law, and load 0 is the rigid limit's).
+
+        The states of all solves are linearised and minimised together (one provider call and one inner
+        solve per outer iteration for the whole batch); each solve stops on its own convergence test, so
+        each result equals :meth:`solve` of that solve alone within the solver tolerance (the foot-point
+        searches of a batch share their iteration count, which moves the results by rounding only).
+        """
+        if not (len(theta_in) == len(directions) == len(loads_Nm)) or len(theta_in) == 0:
+            raise ValueError(f"theta_in, directions and loads_Nm must be equally long, non-empty lists; got "
+                             f"{len(theta_in)}, {len(directions)}, {len(loads_Nm)}")
+        ths, bounds = [], []
+        for th, d, L in zip(theta_in, directions, loads_Nm):
+            t = self._check_solve_args(th, d, L)
+            if not L > 0:
+                raise ValueError(f"load_Nm {L!r} must be > 0 in a batch (solve load 0, the rigid limit, with solve())")
+            bounds.append((sum(len(a) for a in ths), sum(len(a) for a in ths) + t.size))
+            ths.append(t)
+        th = np.concatenate(ths)
+        N = th.size
+        B = np.zeros((N, self.ndof))
+        dirs = np.empty(N, dtype=int)
+        for (a, b), d, L in zip(bounds, directions, loads_Nm):
+            B[a:b, 0] = d * self._load_Nmm(L) / self.Rp
+            dirs[a:b] = d
+        law = self._law(loads_Nm[0])
+        x = np.zeros((N, self.ndof))
+        out = self._outputs(N)
+        used = self._outer(th, x, dirs, B, law, bounds, out, 0, max(loads_Nm))
+        return [self._finish_rows(th[a:b], x[a:b], d, L, law, it, out, slice(a, b))
+                for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used)]
+
+    def _outputs(self, N: int) -> dict[str, np.ndarray]:
+        """Arrays of the converged linearisation (gaps, normals, Jacobians, Johnson constants, radii)."""
+        M = self.nd * self.zp + 2 * self.nc
+        return {"G": np.empty((N, M)), "nrm": np.empty((N, self.nd, self.zp, 2)), "J": np.empty((N, M, self.ndof)),
+                "C": np.empty((N, self.nd * self.zp)), "R": np.empty((N, self.nd * self.zp))}
+
+    def _outer(self, th, x, dirs, B, law, bounds: list[tuple[int, int]], out: dict, offset: int,
+               load_Nm: float) -> list[int]:
+        """Outer iterations of the solves whose rows are ``bounds`` (row ranges of th and x, solved together,
+        each to its own convergence test); x is updated in place, the converged linearisation is written to
+        ``out`` at row ``offset + row``. Returns the outer iterations each solve used."""
+        N = th.size
+        tol_mm = self.tol.solver_angle_rad * self.Rp
+        trust = np.full(N, OUTER_TRUST_MM)
+        last_dx = np.zeros((N, self.ndof))
+        mu_all = np.ones(N)
+        used = [0] * len(bounds)
+        active = list(range(len(bounds)))
+        prev_rows = None
+        dx = np.zeros((0, self.ndof))
+        for it in range(self.tol.solver_max_iter):
+            if not active:
+                break
+            if len(active) == len(bounds) and len(bounds) == 1:
+                rows = slice(bounds[0][0], bounds[0][1])
+                n_rows = bounds[0][1] - bounds[0][0]
+            else:
+                rows = np.concatenate([np.arange(*bounds[g]) for g in active])
+                n_rows = rows.size
+            if prev_rows is not None and n_rows != prev_rows.size and hasattr(self.contacts, "keep_rows"):
+                self.contacts.keep_rows(np.isin(prev_rows, rows), self.zp)      # warm starts of the rows left
+            prev_rows = np.arange(N)[rows]
+            locs, pos = [], 0
+            for g in active:
+                n = bounds[g][1] - bounds[g][0]
+                locs.append(slice(pos, pos + n))
+                pos += n
+            xs = x[rows]
+            G, J = self._linearise(th[rows], xs, dirs[rows] if len(bounds) > 1 else dirs[0])
+            C = self._line_last()[0] if law.physical else None
+            step_law = self._step_law(law, C)
+            floor_k = None
+            if C is not None and len(bounds) > 1:
+                floor_k = np.empty(n_rows)
+                for lc in locs:
+                    floor_k[lc] = self._step_law(law, C[lc]).floor_stiffness()
+            mu = mu_all[rows]
+            dx = self._inner(th[rows], xs, G, J, B[rows], step_law, mu, floor_k=floor_k)
+            mu_all[rows] = np.minimum(mu, 1e-2)
+            # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
+            # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
+            # OUTER_TRUST_MM); a step that reverses the previous one (a contact flipping between
+            # two linearisations) halves that state's trust radius for good
+            if it > 0:
+                flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
+                trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
+            big = np.abs(dx).max(axis=1)
+            dx = dx * np.minimum(1.0, trust[rows] / np.maximum(big, 1e-300))[:, None]
+            last_dx[rows] = dx
+            xs += dx
+            x[rows] = xs
+            still = []
+            for g, lc in zip(active, locs):
+                used[g] = it + 1
+                change = np.abs(dx[lc]).max()
                 if change < tol_mm or (it >= self.tol.solver_max_iter // 3 and change < 10 * tol_mm):
                     # the step is below the tolerance: the linearised gaps at the new state are exact
                     # to O(dx^2 / rho), far below 1e-12 mm
-                    G_all[sl] = G + _jdot(J, dx)
-                    nrm_all[sl] = self._nrm_last
-                    J_all[sl] = J
-                    C_all[sl] = self._C_last
-                    R_all[sl] = self._R_last
-                    break
-            else:
-                self._check_penetration(th[sl], xs, direction, law, load_Nm=load_Nm)  # an overlap is the usual cause
+                    o = slice(offset + bounds[g][0], offset + bounds[g][1])
+                    out["G"][o] = G[lc] + _jdot(J[lc], dx[lc])
+                    out["nrm"][o] = self._nrm_last[lc]
+                    out["J"][o] = J[lc]
+                    Cl, Rl = self._line_last()
+                    out["C"][o], out["R"][o] = Cl[lc], Rl[lc]
+                else:
+                    still.append((g, lc))
+            if still and it + 1 == self.tol.solver_max_iter:
+                g, lc = still[0]
+                a, b = bounds[g]
+                self._check_penetration(th[a:b], x[a:b], dirs[a], law, load_Nm=load_Nm)  # an overlap is the usual cause
                 raise RuntimeError(
                     f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
-                    f"(last change {np.abs(dx).max():.3e} mm)")
-            x[sl] = xs
-            prev = xs[-1].copy()
-        self._R_all = R_all
-        self._J_all = J_all
-        return self._finish(th, x, direction, load_Nm, self._step_law(law, C_all), iters, G_all, nrm_all)
+                    f"(last change {np.abs(dx[lc]).max():.3e} mm)")
+            active = [g for g, _ in still]
+        return used
+
+    def _finish_rows(self, th, x, direction, load_Nm, law, iters, out: dict, rows: slice) -> Solution:
+        self._R_all = out["R"][rows]
+        self._J_all = out["J"][rows]
+        return self._finish(th, x, direction, load_Nm, self._step_law(law, out["C"][rows]), iters, out["G"][rows],
+                            out["nrm"][rows])
 
     def _check_penetration(self, th, x, direction, law, G: np.ndarray | None = None,
                            load_Nm: float = 0.0) -> np.ndarray:
@@ -539,7 +682,9 @@ def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 def energy_sub(solver: QuasiStaticSolver, x0, G, J, b, law: ContactLaw, s: np.ndarray,
                arms: np.ndarray | None = None, rows=None) -> np.ndarray:
-    """Linearised potential of the states x0 + s (N,), N mm (``arms``: hole arms at x0, floating discs;
-    ``rows``: the steps of the law's per-step constants)."""
+    """Linearised potential of the states x0 + s (N,), N mm (``b``: load vector (ndof,) or one per state
+    (N, ndof); ``arms``: hole arms at x0, floating discs; ``rows``: the steps of the law's per-step constants)."""
     delta = -(G + _jdot(J, s))
-    return law.energy(delta, rows).sum(axis=1) + s @ b + solver._bearing(x0 + s, arms, derivs=False)[0]
+    work = s @ b if b.ndim == 1 else np.einsum("nd,nd->n", s, b)
+    E = law.energy(delta, rows).sum(axis=1) + work
+    return E if arms is None else E + solver._bearing(x0 + s, arms, derivs=False)[0]

@@ -144,7 +144,12 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, make_contacts(g, solver), law)
     sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else FCL_CHUNK)
-    secs = time.perf_counter() - t0
+    return _te_result(case, solver, s, sol, steps, revolutions, d, load, time.perf_counter() - t0)
+
+
+def _te_result(case: Case, solver: str, s: QuasiStaticSolver, sol, steps: int, revolutions: float, d: int,
+               load: float, secs: float) -> TEResult:
+    """The TEResult of one solution (table, statistics, timing)."""
     te = sol.te_rad * ARCSEC_PER_RAD
     table = pd.DataFrame({
         "input_deg": np.degrees(sol.theta_in),
@@ -163,6 +168,73 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
                       np.isfinite(sol.peak_pressure_MPa)) else float("nan"),
                   "warnings": list(sol.warnings)})
     return TEResult(case=case, solver=solver, table=table, stats=stats)
+
+
+def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 720,
+                loads: list[tuple[float, int]] | None = None, revolutions: float = 1.0,
+                law: ContactLaw | None = None, geom: ReducerGeometry | None = None) -> list[TEResult]:
+    """Quasi-static TE of one case under several (load, direction) pairs, solved as one batch.
+
+    ``run_te_many(case, "analytic", 37, loads=[(5.01, 1), (5.01, -1), (167.0, 1), (167.0, -1)])`` returns
+    one :class:`TEResult` per pair, in the order of ``loads``; result i equals
+    ``run_te(case, solver, steps_i, revolutions, load_i, direction_i, law)`` within the solver tolerance
+    (``Tolerances.solver_angle_rad``; the batch moves the results by the rounding of the shared foot-point
+    searches only, measured below 1e-4 arcsec). The analytic provider linearises and minimises all the solves'
+    states together (one call per outer iteration instead of one per solve), which is what makes it faster
+    than separate calls; the fcl provider solves them one after the other (``run_te``).
+
+    Parameters
+    ----------
+    case : Case
+        The case (geometry, errors, model); its own load and direction are not used.
+    solver : {"analytic", "fcl"}
+    steps : int or list of int
+        Steps over the revolutions (>= 2): one count for all pairs, or one per pair.
+    loads : list of (float, int)
+        ``(load_Nm, direction)`` pairs: output load torque, N m, finite and > 0 (the rigid limit, load 0,
+        is ``run_te``'s), and direction +1 or -1. At least one pair.
+    revolutions : float
+        Output revolutions (all pairs).
+    law : ContactLaw or None
+        Contact law (default: the case's ``model.contact``).
+    geom : ReducerGeometry or None
+        Pre-built geometry of the case.
+
+    Returns
+    -------
+    list of TEResult
+        ``stats["seconds"]`` is the batch's time divided by the number of pairs.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
+    if loads is None or isinstance(loads, (str, bytes)) or len(loads) == 0:
+        raise ValueError(f"loads {loads!r} must be a non-empty list of (load_Nm, direction) pairs")
+    pairs: list[tuple[float, int]] = []
+    for i, pair in enumerate(loads):
+        try:
+            L, d = pair
+        except (TypeError, ValueError):
+            raise ValueError(f"loads[{i}] = {pair!r} must be a (load_Nm, direction) pair") from None
+        if isinstance(L, bool) or not isinstance(L, (int, float, np.integer, np.floating)) or not (
+                math.isfinite(L) and L > 0):
+            raise ValueError(f"loads[{i}] load_Nm {L!r} must be a finite number > 0 (N m; the rigid limit, load 0, "
+                             "is run_te's)")
+        if isinstance(d, bool) or d not in (1, -1):
+            raise ValueError(f"loads[{i}] direction {d!r} must be +1 or -1")
+        pairs.append((float(L), int(d)))
+    counts = list(steps) if isinstance(steps, (list, tuple, np.ndarray)) else [steps] * len(pairs)
+    if len(counts) != len(pairs):
+        raise ValueError(f"steps has {len(counts)} entries for {len(pairs)} loads; give one count or one per load")
+    g = geom if geom is not None else ReducerGeometry(case)
+    ths = [input_angles(g.ratio, n, revolutions, d) for n, (_, d) in zip(counts, pairs)]
+    if solver != "analytic":
+        return [run_te(case, solver, n, revolutions, L, d, law, geom=g) for n, (L, d) in zip(counts, pairs)]
+    t0 = time.perf_counter()
+    s = QuasiStaticSolver(g, AnalyticContacts(g, per_point=True), law)
+    sols = s.solve_many(ths, [d for _, d in pairs], [L for L, _ in pairs])
+    secs = (time.perf_counter() - t0) / len(pairs)
+    return [_te_result(case, solver, s, sol, n, revolutions, d, L, secs)
+            for sol, n, (L, d) in zip(sols, counts, pairs)]
 
 
 def backlash(case: Case, solver: str = "analytic", steps: int = 720, load_Nm: float = LIGHT_LOAD_NM,
