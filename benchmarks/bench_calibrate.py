@@ -91,6 +91,7 @@ def run_realistic(args) -> int:
         secs = time.perf_counter() - t0
         cpu = time.process_time() - c0
         c = check_realistic(res, hidden, ans["noise_te_arcsec"], secs)
+        (root / f"result{k}.json").write_text(json.dumps(res.to_dict(), default=str, indent=1))
         print(f"draw {k}: RMS {res.rms_before:.3g} -> {res.rms_after:.3g} arcsec (noise {ans['noise_te_arcsec']:.3g}; "
               f"after/noise {res.rms_after / ans['noise_te_arcsec']:.2f}, target <= 1.5: "
               f"{'ok' if c['rms_ok'] else 'FAIL'}); {secs:.0f} s wall, {cpu:.0f} s CPU "
@@ -108,7 +109,7 @@ def run_realistic(args) -> int:
         print(f"  other effects: {others}; unexplained: {[u.label for u in res.unexplained]}; groups: "
               f"{len(res.groups)}; stopped by: {res.stopped_by}")
         all_ok &= c["rms_ok"] and c["compliance_ok"] and c["named_ok"] and c["seconds_ok"]
-        print(f"BENCH calibrate_realistic_draw{k}_seconds {secs:.1f}")
+        print(f"BENCH calibrate_realistic_draw{k}_seconds {secs:.1f}  (result: {root / f'result{k}.json'})")
     print(f"realistic reducers: {'all conditions hold' if all_ok else 'NOT all conditions hold'}")
     return 0 if all_ok else 1
 

@@ -190,10 +190,18 @@ class Calibrator(JointSelection, Groups):
                 dec = "physical"
             elif sig_h:
                 dec = "empirical"
-            if dec == "physical":
-                got = self.joint_step(ranking, best, rc, rc_cat, Ec, r_full, it, log, harms) \
-                    if self.joint else None
-                ok, msg = got if got is not None else self._add_physical(best, ranking, r_full, it, log, harms)
+            got = None
+            if self.joint and dec in ("physical", "empirical"):
+                got = self.joint_step(ranking, best if dec == "physical" else None,
+                                      hbest.term if dec == "empirical" else None, rc, rc_cat, Ec, r_full, it, log,
+                                      harms)
+                if got is not None:
+                    log["decision"] = got[1]
+                    self.rescreen_due += 1
+            if got is not None:
+                pass
+            elif dec == "physical":
+                ok, msg = self._add_physical(best, ranking, r_full, it, log, harms)
                 self.rescreen_due += int(ok)
                 log["decision"] = msg
                 if not ok:

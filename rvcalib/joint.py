@@ -50,7 +50,8 @@ import numpy as np
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError
 from rvcalib.lsq import bic, ftest
-from rvcalib.results import Active, Candidate, HarmonicCandidate, PoolMember, SubsetFit, Validated
+from rvcalib.results import (Active, Candidate, EmpiricalTerm, HarmonicCandidate, PoolMember, SubsetFit,
+                             Validated)
 from rvcalib.selection import Selection
 
 #: Most effects already in the model that one joint step may drop.
@@ -208,14 +209,17 @@ class JointSelection(Selection):
         return None
 
     # ------------------------------------------------------------------ the step
-    def joint_step(self, ranking: list[Candidate], best: Validated, rc: np.ndarray, rc_cat: np.ndarray,
-                   Ec: np.ndarray | None, r_full: np.ndarray, it: int, log: dict,
-                   harms: list[HarmonicCandidate] | None = None) -> tuple[bool, str] | None:
-        """One joint selection step (see the module docstring). Returns (accepted, message), or None
-        when the greedy step is to be taken instead (same choice, nothing better, or not confirmed)."""
+    def joint_step(self, ranking: list[Candidate], best: Validated | None, hterm: EmpiricalTerm | None,
+                   rc: np.ndarray, rc_cat: np.ndarray, Ec: np.ndarray | None, r_full: np.ndarray, it: int,
+                   log: dict, harms: list[HarmonicCandidate] | None = None) -> tuple[bool, str] | None:
+        """One joint selection step (see the module docstring). ``best`` is the greedy step's physical
+        choice, or ``hterm`` its empirical one (then a pool member too, so that physical effects that
+        explain its part jointly can win over it). Returns (accepted, message), or None when the
+        greedy step is to be taken instead (same choice, nothing better, or not confirmed)."""
         t0 = time.perf_counter()
         short = self.shortlist(ranking)
-        if best.effect.name not in {d.effect.name for d in short} and not best.effect.expensive:
+        if best is not None and best.effect.name not in {d.effect.name for d in short} \
+                and not best.effect.expensive:
             short = [best.entry] + short[:max(0, self.joint_new - 1)]
         if self.empirical and self.joint_new:
             # candidates that explain what the empirical terms absorbed: ranked against the residual
@@ -249,6 +253,10 @@ class JointSelection(Selection):
         for d in fresh:
             if d is not None and d.cols is not None:
                 pool.append(PoolMember(d.effect, d.cols, None, d.to_p, None, d))
+        if hterm is not None:
+            th = np.radians(self.coarse_out_deg)
+            E = np.vstack([hterm.columns(th, r.direction, r.load_Nm) for r in self.runs])
+            pool.append(PoolMember(None, E, None, lambda d: np.asarray(d, dtype=float), None, None, hterm))
         jl["seconds_pool"] = time.perf_counter() - t0
         fits = self.best_subsets(pool, rc, self.max_terms)
         if not fits:
@@ -267,8 +275,9 @@ class JointSelection(Selection):
                               "weight_aic": float(wa[k])} for k in order[:5]]
         jl["inclusion_weights"] = {k: {"bic": v[0], "aic": v[1]} for k, v in incl.items()}
         choice = self.choose_subset(pool, fits, nc, current)
-        greedy = frozenset(current) | {next((i for i, m in enumerate(pool)
-                                             if m.effect is not None and m.effect.name == best.effect.name), -1)}
+        greedy_name = best.effect.name if best is not None else (hterm.label if hterm is not None else None)
+        greedy = frozenset(current) | {next((i for i, m in enumerate(pool) if not m.in_model
+                                             and m.name == greedy_name), -1)}
         if choice is None or (frozenset(choice.members) == greedy and not choice.dropped):
             jl["chosen"] = "greedy" if choice is not None else "none better than the model"
             return None
@@ -323,6 +332,9 @@ class JointSelection(Selection):
         for k in choice.dropped:
             if pool[k].term is not None:
                 self._emp_info.pop(pool[k].term, None)
+        for k in added:
+            if pool[k].term is not None:
+                self._emp_info[pool[k].term] = (it, 1.0 - rss1 / self.rss_full)
         self.empirical = terms
         msg = "joint: added " + ", ".join(pool[i].name for i in added)
         if choice.dropped:

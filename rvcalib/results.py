@@ -225,8 +225,9 @@ class PoolMember:
 
     @property
     def in_model(self) -> bool:
-        """True for an effect or empirical term in the model now."""
-        return self.active is not None or self.term is not None
+        """True for an effect or empirical term in the model now (a new empirical term has no
+        contribution yet)."""
+        return self.active is not None or (self.term is not None and self.contribution is not None)
 
 
 @dataclass
