@@ -24,7 +24,9 @@ This stage replaces the greedy addition by a joint choice:
    adds another is a swap.
 4. Refit: the chosen subset is refitted through the full nonlinear model at every reading (the
    loop's chord Gauss-Newton from the linearised estimates) and accepted when it lowers the BIC on all
-   samples and its added parameters pass the F test there; backward elimination follows as before.
+   samples and its added parameters pass the F test there. No backward elimination follows (the
+   subset search has just weighed dropping members, and does at every step); the loop's final
+   backward elimination checks every effect.
 
 When the chosen subset is the greedy choice (the model plus the best validated candidate), or nothing
 beats the present model, or the refit does not confirm it, the loop takes the greedy step as before:
@@ -292,9 +294,9 @@ class JointSelection(Selection):
         t_fit = time.perf_counter()
         try:
             if effects:
-                params, rss1, x, _, jac = self.fit_full(effects, p0, terms)
+                params, rss1, _, _, _ = self.fit_full(effects, p0, terms)
             else:
-                params, x, jac = [], np.zeros(0), np.zeros((self.n, 0))
+                params = []
                 r1 = self.full_residual([], terms)[0]
                 rss1 = float(r1 @ r1)
         except ModelEvaluationError as exc:
@@ -339,9 +341,6 @@ class JointSelection(Selection):
         msg = "joint: added " + ", ".join(pool[i].name for i in added)
         if choice.dropped:
             msg += "; swapped out " + ", ".join(pool[i].name for i in choice.dropped)
-        if effects:
-            removed = self._backward(effects, x, jac, rss1)
-            if removed:
-                msg += "; removed " + ", ".join(removed) + " (no longer significant)"
-                log["removed"] = removed
+        # no backward elimination here: the subset search has just weighed dropping members at this
+        # state (the next joint step does again), and the loop's final backward elimination checks all
         return True, msg
