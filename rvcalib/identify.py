@@ -36,6 +36,9 @@ Algorithm (:func:`calibrate`)
 5. Estimation: all added parameters are re-fitted jointly through the full nonlinear model
    solved exactly at every reading (``least_squares``; empirical terms are projected out linearly) and
    the F test and BIC are confirmed on all samples.
+   With ``joint`` (default) every step that would add a term is first put to the joint selection
+   of :mod:`rvcalib.joint` (a best subset of a shortlist re-solved at the current state, with
+   swaps), which replaces the greedy choice when it differs and is confirmed.
 6. Repeat until nothing passes; then confidence intervals from the Jacobian (forward differences)
    and the residual variance, widened by ``sqrt((1 + rho) / (1 - rho))`` for a lag-1 residual
    autocorrelation ``rho > 0`` (the residual is then not white and the plain interval too narrow).
@@ -198,21 +201,19 @@ class Calibrator(JointSelection, Groups):
                 if got is not None:
                     log["decision"] = got[1]
                     self.rescreen_due += 1
-            if got is not None:
-                pass
-            elif dec == "physical":
+            if got is None and dec == "physical":
                 ok, msg = self._add_physical(best, ranking, r_full, it, log, harms)
                 self.rescreen_due += int(ok)
                 log["decision"] = msg
                 if not ok:
                     tried.add(best.effect.name)
                     dec = "retry" if len(tried) < 3 else "stop"
-            elif dec == "empirical":
+            elif got is None and dec == "empirical":
                 ok, msg = self._add_empirical(hbest.term, it, log)
                 log["decision"] = msg
                 if not ok:
                     dec = "stop"
-            else:
+            elif got is None:
                 log["decision"] = "stop: no candidate passes the F test and the BIC"
             r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
             self.rss_full = float(r_full @ r_full)

@@ -7,7 +7,9 @@ first choice made at the declared model can be a stand-in for several others and
 This stage replaces the greedy addition by a joint choice:
 
 1. Shortlist: the ``joint_new`` best-ranked new candidates, one per screening family (instances that
-   share a template count once), plus every effect already in the model.
+   share a template count once); half as many more ranked against the residual beyond the empirical
+   term the greedy step would absorb, and half as many ranked against the residual with the model's
+   empirical terms given back; plus every effect and empirical term already in the model.
 2. Re-solved signatures: the shortlisted families' screening signatures are solved again through rvdyn
    at the *current* state (all effects in the model at their present sizes), stored for the ranking of
    the next iterations, and each new candidate is re-screened with them. Effects in the model are
@@ -223,6 +225,12 @@ class JointSelection(Selection):
         if best is not None and best.effect.name not in {d.effect.name for d in short} \
                 and not best.effect.expensive:
             short = [best.entry] + short[:max(0, self.joint_new - 1)]
+        if hterm is not None and self.joint_new:
+            # what is left beyond the empirical term the greedy step would absorb (its own next step)
+            th = np.radians(self.coarse_out_deg)
+            Eh = np.vstack([hterm.columns(th, r.direction, r.load_Nm) for r in self.runs])
+            after = self.rank(rc_cat, Eh if Ec is None else np.column_stack([Ec, Eh]), None)
+            short += self.shortlist(after, max(1, self.joint_new // 2), {d.family_key for d in short})
         if self.empirical and self.joint_new:
             # candidates that explain what the empirical terms absorbed: ranked against the residual
             # with the empirical terms' parts given back (half as many more)
