@@ -30,8 +30,9 @@ This stage replaces the greedy addition by a joint choice:
    subset search has just weighed dropping members, and does at every step); the loop's final
    backward elimination checks every effect.
 
-When the chosen subset is the greedy choice (the model plus the best validated candidate), or nothing
-beats the present model, or the refit does not confirm it, the loop takes the greedy step as before:
+When the chosen subset is the greedy choice (the model plus the best validated candidate) or within
+:data:`JOINT_BIC_MARGIN` of it, or nothing beats the present model, or the refit does not confirm
+it, the loop takes the greedy step as before:
 single-effect datasets behave as they did.
 
 Why BIC over subsets rather than a sparse (lasso) path or Bayesian model selection: the shortlist is
@@ -66,6 +67,10 @@ MAX_ADD = 3
 #: least this fraction of its typical size; otherwise by a step of STEP_FRACTION of it.
 MIN_SECANT = 0.1
 STEP_FRACTION = 0.3
+#: The joint choice replaces the greedy one only when its BIC is lower by more than this (a BIC
+#: difference below 2 is "not worth more than a bare mention", Kass and Raftery 1995): ties, e.g.
+#: the members of an identifiability group (pin radius / pin circle diameter), keep the greedy choice.
+JOINT_BIC_MARGIN = 2.0
 
 
 def aic(rss: float, n: int, k: int) -> float:
@@ -288,7 +293,9 @@ class JointSelection(Selection):
         greedy_name = best.effect.name if best is not None else (hterm.label if hterm is not None else None)
         greedy = frozenset(current) | {next((i for i, m in enumerate(pool) if not m.in_model
                                              and m.name == greedy_name), -1)}
-        if choice is None or (frozenset(choice.members) == greedy and not choice.dropped):
+        g_fit = next((f for f in fits if frozenset(f.members) == greedy and not f.dropped), None)
+        if choice is None or (frozenset(choice.members) == greedy and not choice.dropped) or \
+                (g_fit is not None and g_fit.bic - choice.bic <= JOINT_BIC_MARGIN):
             jl["chosen"] = "greedy" if choice is not None else "none better than the model"
             return None
         added = [i for i in choice.members if not pool[i].in_model]
