@@ -172,7 +172,8 @@ class ReducerGeometry:
         ang = np.arctan2(dc[..., 1], dc[..., 0]) - np.arctan2(dh[..., 1], dh[..., 0])[None]
         theta_out = np.atleast_1d(theta_out)
         ang = theta_out[:, None] + (np.mod(ang - theta_out[:, None] + np.pi, 2 * np.pi) - np.pi)
-        cen = C.mean(axis=2) - _turn(ang, H.mean(axis=1)[None])
+        mid = (C[:, :, 0] + C[:, :, 1]) / 2.0 if C.shape[2] == 2 else C.mean(axis=2)  # as np.mean forms it
+        cen = mid - _turn(ang, H.mean(axis=1)[None])
         return cen, ang
 
     def pins_in_profile_frames(self, theta_out: np.ndarray, psi: np.ndarray,
@@ -241,7 +242,7 @@ class ReducerGeometry:
     def _line_of_action(self, o1: np.ndarray, o2: np.ndarray, direction: int,
                         gamma_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         c = o2 - o1
-        ad = np.linalg.norm(c, axis=-1)
+        ad = np.sqrt(c[..., 0] * c[..., 0] + c[..., 1] * c[..., 1])   # |c| (the sum np.linalg.norm forms)
         raw = np.arctan2(c[..., 1], c[..., 0])
         # unwrap the centre-line angle next to its nominal value (carrier angle + crank position), so
         # that the gap is continuous in every coordinate and no tooth pair is ever skipped
@@ -251,8 +252,16 @@ class ReducerGeometry:
         tau1 = gam - direction * alpha_w
         return ad * np.sin(alpha_w), tau1, tau1 + np.pi
 
+    def stage1_gaps_both(self, theta_in: np.ndarray, theta_out: np.ndarray,
+                         psi: np.ndarray) -> dict[int, np.ndarray]:
+        """:meth:`stage1_gaps` of both flanks, ``{1: ..., -1: ...}`` (N, n_cranks) mm, from one evaluation of
+        the gear centres (the same numbers as two calls)."""
+        th_in = np.atleast_1d(theta_in)
+        centres = (self.sun_center(th_in)[:, None, :], self.planet_centers(theta_out, psi))
+        return {d: self.stage1_gaps(th_in, theta_out, psi, d, centres) for d in (1, -1)}
+
     def stage1_gaps(self, theta_in: np.ndarray, theta_out: np.ndarray, psi: np.ndarray,
-                    direction: int) -> np.ndarray:
+                    direction: int, _centres: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """Gap of the loaded flank pair between the sun and each planet, along the line of action.
 
         Exact for involute flanks (contact inside the active line): with base radii rb1, rb2,
@@ -272,8 +281,11 @@ class ReducerGeometry:
         (N, n_cranks) mm
         """
         th_in = np.atleast_1d(theta_in)
-        o1 = self.sun_center(th_in)[:, None, :]
-        o2 = self.planet_centers(theta_out, psi)
+        if _centres is None:
+            o1 = self.sun_center(th_in)[:, None, :]
+            o2 = self.planet_centers(theta_out, psi)
+        else:
+            o1, o2 = _centres
         gamma_ref = np.atleast_1d(np.asarray(theta_out, dtype=float))[:, None] + self.crank_angles[None]
         L, tau1, tau2 = self._line_of_action(o1, o2, direction, gamma_ref)
         rb1, rb2 = self.sun.base_radius, self.planet.base_radius

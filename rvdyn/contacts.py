@@ -104,6 +104,10 @@ class ContactLaw:
         return n * self.k_eff * d ** (n - 1.0)
 
     def force_stiffness(self, delta: np.ndarray, rows=None) -> tuple[np.ndarray, np.ndarray]:
+        if self.n_eff == 1.5:                      # force and stiffness from one square root (same numbers)
+            d = np.maximum(delta, 0.0)
+            r = np.sqrt(d)
+            return self.k_eff * d * r, 1.5 * self.k_eff * r
         return self.force(delta), self.stiffness(delta)
 
     def energy(self, delta: np.ndarray, rows=None) -> np.ndarray:

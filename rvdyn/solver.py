@@ -31,7 +31,8 @@ import numpy as np
 
 from rvcad.geometry import ReducerGeometry
 from rvcad.tolerances import TOL, Tolerances
-from rvdyn.contacts import AnalyticContacts, ContactLaw
+from rvdyn.contacts import ContactLaw
+from rvdyn.linearise import LinearisationMixin
 from rvdyn.options import model_choice, model_value, parse_model
 from rvdyn.physical import PhysicsMixin
 
@@ -47,8 +48,9 @@ MAX_ELASTIC_PENETRATION_MM = 0.1
 #: Largest change of a state coordinate (mm) in one outer iteration (trust region of the linearised gaps).
 OUTER_TRUST_MM = 0.01
 
-#: Step (mm of scaled state) of the central differences of the kinematic Jacobians.
-FD_STEP_MM = 1e-6
+#: Largest trust radius (mm) a batch (:meth:`QuasiStaticSolver.solve_many`) grows to: the largest penetration
+#: an elastic solution may have, so one outer step never crosses more than the elastic range.
+MAX_TRUST_MM = 0.1
 
 
 class InterferenceError(ValueError):
@@ -106,7 +108,7 @@ class Solution:
     n_pin_contacts: np.ndarray | None = field(default=None, repr=False)
 
 
-class QuasiStaticSolver(PhysicsMixin):
+class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
     """Quasi-static equilibrium for one case geometry with one contact provider.
 
     Parameters
@@ -139,208 +141,6 @@ class QuasiStaticSolver(PhysicsMixin):
         self.pressure_limit = model_value(m, "contact_pressure_limit_MPa")
         self._setup_physical(d, m)
 
-    def _unpack(self, th_in: np.ndarray, x: np.ndarray):
-        to0, ps0 = self.geom.ideal_state(th_in)
-        to = to0 + x[:, 0] / self.Rp
-        ps = ps0 + x[:, 1:1 + self.nc] / self.e
-        shift = turn = None
-        if self.float_discs:
-            f = x[:, 1 + self.nc:].reshape(-1, self.nd, 3)
-            shift = f[:, :, :2]
-            turn = f[:, :, 2] / self.a
-        return to, ps, shift, turn
-
-    def _poses(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Disc centres (N, nd, 2) mm and rotations (N, nd) rad (without the profile rotation)."""
-        to, ps, shift, turn = self._unpack(th_in, x)
-        cen, ang = self.geom.disc_poses(to, ps)
-        if shift is not None:
-            cen = cen + shift
-            ang = ang + turn
-        return cen, ang
-
-    def _stacked(self, th_in: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The states x and their central-difference neighbours in one array.
-
-        Rows ``[0, N)`` are x; block ``1 + 2 i`` holds x + h e_i and block ``2 + 2 i`` holds x - h e_i for each
-        kinematic coordinate i (output and cranks), h = 1e-6 mm. One evaluation of the (row-wise) kinematics on
-        the stacked array gives the same numbers as one call per neighbour, without the per-call overhead.
-        Returns the input angles (tiled) and the states ((1 + 2 (1 + nc)) N, ndof)."""
-        N = x.shape[0]
-        nk = 1 + self.nc
-        X = np.empty(((1 + 2 * nk) * N, self.ndof))
-        X[:N] = x
-        for i in range(nk):
-            xp = X[(1 + 2 * i) * N:(2 + 2 * i) * N]
-            xm = X[(2 + 2 * i) * N:(3 + 2 * i) * N]
-            xp[:] = x
-            xm[:] = x
-            xp[:, i] += FD_STEP_MM
-            xm[:, i] -= FD_STEP_MM
-        return np.tile(th_in, 1 + 2 * nk), X
-
-    def _central(self, v: np.ndarray, N: int) -> np.ndarray:
-        """Central differences of a stacked evaluation v ((1 + 2 nk) N, ...) -> (N, ..., nk)."""
-        nk = 1 + self.nc
-        parts = [(v[(1 + 2 * i) * N:(2 + 2 * i) * N] - v[(2 + 2 * i) * N:(3 + 2 * i) * N]) / (2 * FD_STEP_MM)
-                 for i in range(nk)]
-        return np.stack(parts, axis=-1)
-
-    def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray, stacked=None) -> tuple[np.ndarray, np.ndarray]:
-        """Pin gaps (N, nd, Zp) mm and Jacobians (N, nd, Zp, ndof) mm/mm.
-
-        Disc poses are differentiated by central differences (cheap: N x nd values, all neighbours in
-        one stacked evaluation, :meth:`_stacked`); the pins follow by the chain rule: p = R(-phi)(P - c),
-        dp = -R(-phi) dc + dphi (p_y, -p_x), and the gap's gradient is the outward normal n: dg = n . dp.
-        """
-        N = x.shape[0]
-        nk = 1 + self.nc
-        TH, X = self._stacked(th_in, x) if stacked is None else stacked
-        cen_all, ang_all = self._poses(TH, X)
-        cen, ang = cen_all[:N], ang_all[:N]
-        dcen = np.zeros(cen.shape + (self.ndof,))
-        dang = np.zeros(ang.shape + (self.ndof,))
-        dcen[..., :nk] = self._central(cen_all, N)
-        dang[..., :nk] = self._central(ang_all, N)
-        if self.float_discs:
-            for k in range(self.nd):
-                b = 1 + self.nc + 3 * k
-                dcen[:, k, 0, b] = 1.0
-                dcen[:, k, 1, b + 1] = 1.0
-                dang[:, k, b + 2] = 1.0 / self.a
-        full = ang + self.geom.disc_profile_rotation[None]
-        c, s = np.cos(full)[:, :, None], np.sin(full)[:, :, None]
-        rx = self.geom.pin_centers[None, None, :, 0] - cen[:, :, None, 0]
-        ry = self.geom.pin_centers[None, None, :, 1] - cen[:, :, None, 1]
-        px = c * rx + s * ry
-        py = -s * rx + c * ry
-        t0 = self.geom.pin_angles_nominal[None, None] - full[:, :, None]
-        gaps = np.empty((N, self.nd, self.zp))
-        nx = np.empty_like(gaps)
-        ny = np.empty_like(gaps)
-        feet = []
-        for k in range(self.nd):
-            pts = np.stack([px[:, k].ravel(), py[:, k].ravel()], axis=1)
-            tk = t0[:, k].ravel()
-            dist, nrm = self.contacts.disc_distance(k, pts, tk)
-            gaps[:, k] = dist.reshape(N, self.zp) - self.geom.pin_radii[None]
-            nx[:, k] = nrm[:, 0].reshape(N, self.zp)
-            ny[:, k] = nrm[:, 1].reshape(N, self.zp)
-            foot = getattr(self.contacts, "foot_parameters", lambda _k: None)(k)
-            feet.append((pts, tk, None if foot is None else foot.copy()))
-        mx = nx * c - ny * s
-        my = nx * s + ny * c
-        # the Johnson constants and relative radii of the pin contacts, computed when asked for (the
-        # physical law at every linearisation; the impact law only for the pressures at the solution)
-        self._feet_last = feet
-        self._C_last = self._R_last = None
-        self._nrm_last = np.stack([mx, my], axis=-1)                            # fixed frame, (N, nd, Zp, 2)
-        lever = nx * py - ny * px
-        jac = (-(mx[..., None] * dcen[:, :, None, 0, :] + my[..., None] * dcen[:, :, None, 1, :])
-               + lever[..., None] * dang[:, :, None, :])
-        return gaps, jac
-
-    def _line_last(self) -> tuple[np.ndarray, np.ndarray]:
-        """Johnson constants C and relative radii R (N, nd Zp) of the pin contacts of the last linearisation."""
-        if self._C_last is None:
-            Cs, Rs = [], []
-            for k, (pts, tk, foot) in enumerate(self._feet_last):
-                r_pin = np.broadcast_to(self.geom.pin_radii[None], (len(tk) // self.zp, self.zp)).ravel()
-                Ck, Rk = self._line_C(k, pts, tk, r_pin, foot)
-                Cs.append(Ck.reshape(-1, self.zp))
-                Rs.append(Rk.reshape(-1, self.zp))
-            self._C_last = np.stack(Cs, axis=1).reshape(len(Cs[0]), -1)
-            self._R_last = np.stack(Rs, axis=1).reshape(len(Rs[0]), -1)
-        return self._C_last, self._R_last
-
-    def _stage1(self, th_in: np.ndarray, x: np.ndarray, direction: int, provider: bool) -> np.ndarray:
-        to, ps, _, _ = self._unpack(th_in, x)
-        if provider:
-            return self.contacts.stage1_gaps(th_in, to, ps, direction)
-        return self.geom.stage1_gaps(th_in, to, ps, direction)
-
-    def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction) -> tuple[np.ndarray, np.ndarray]:
-        """Gaps (N, M) mm and their Jacobians (N, M, ndof) mm/mm at the states x.
-
-        Columns: the 2 x Zp pin gaps, then the stage I flank gaps of each planet, loaded flank
-        (``direction``) first, coast flank (``-direction``, open by the stage I backlash) second.
-        ``direction`` is +1, -1 or an (N,) array of them (one per state).
-        The stage I Jacobians are central differences of the closed-form involute gap (the
-        kinematic derivative; the provider only supplies the gap value).
-        """
-        N = x.shape[0]
-        nk = 1 + self.nc
-        dirs = np.broadcast_to(np.asarray(direction), (N,))
-        stacked = self._stacked(th_in, x)
-        gaps, jac = self._pin_gaps(th_in, x, stacked)
-        TH, X = stacked
-        to, ps, _, _ = self._unpack(TH, X)
-        analytic = isinstance(self.contacts, AnalyticContacts)
-        val, der = {}, {}
-        for flank in (1, -1):
-            if not (np.any(dirs == flank) or np.any(dirs == -flank)):
-                continue
-            g_all = self.geom.stage1_gaps(TH, to, ps, flank)
-            # the provider's gap value (the analytic provider's is the closed form just evaluated)
-            val[flank] = g_all[:N] if analytic else self.contacts.stage1_gaps(th_in, to[:N], ps[:N], flank)
-            j1 = np.zeros((N, self.nc, self.ndof))
-            j1[..., :nk] = self._central(g_all, N)
-            der[flank] = j1
-        up = (dirs == 1)[:, None]
-        g1 = np.concatenate([np.where(up, val[1], val[-1]), np.where(up, val[-1], val[1])], axis=1)
-        j1 = np.concatenate([np.where(up[..., None], der[1], der[-1]), np.where(up[..., None], der[-1], der[1])],
-                            axis=1)
-        G = np.concatenate([gaps.reshape(N, -1), g1], axis=1)
-        J = np.concatenate([jac.reshape(N, -1, self.ndof), j1], axis=1)
-        return G, J
-
-    # ------------------------------------------------------------------ bearings
-    def _hole_arms(self, th_in: np.ndarray, x: np.ndarray) -> np.ndarray | None:
-        """Disc holes relative to their disc's centre, turned with the disc at the states x, divided
-        by the turn lever ``a``: (N, nd, nc, 2), or None without floating discs.
-
-        The inner solve takes them at its linearisation point (like the contact gaps): the hole
-        direction turns by the disc's rotation, microradians within a step, and the outer iteration
-        re-evaluates them, so the converged state is exact."""
-        if not self.float_discs:
-            return None
-        to, ps, _, _ = self._unpack(th_in, x)
-        _, ang = self.geom.disc_poses(to, ps)
-        c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]        # (N, nd, 1)
-        h = self.geom.disc_holes[None]                                    # (1, nd, nc, 2)
-        hx, hy = h[..., 0], h[..., 1]
-        return np.stack([c * hx - sn * hy, sn * hx + c * hy], axis=-1) / self.a
-
-    def _bearing(self, x: np.ndarray, arms: np.ndarray | None,
-                 derivs: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """Energy (N,), gradient (N, ndof) and Gauss-Newton Hessian (N, ndof, ndof) of the cam bearings
-        (the derivatives None when ``derivs`` is False).
-
-        Each hole moves by ``s = shift + turn * (z x r) / a`` (disc shift and turn DOFs, r the hole's
-        arm of :meth:`_hole_arms`); its bearing is a spring ``bearing_k`` beyond the clearance."""
-        N = x.shape[0]
-        if arms is None:
-            return np.zeros(N), np.zeros((N, self.ndof)), np.zeros((N, self.ndof, self.ndof))
-        nd, nc, kb = self.nd, self.nc, self.bearing_k
-        blk = x[:, 1 + nc:].reshape(N, nd, 1, 3)                       # disc shift x, y and turn
-        perp = np.stack([-arms[..., 1], arms[..., 0]], axis=-1)        # d s / d turn, (N, nd, nc, 2)
-        s_ = blk[..., :2] + blk[..., 2:3] * perp
-        sn = np.sqrt(s_[..., 0] ** 2 + s_[..., 1] ** 2)
-        over = np.maximum(sn - self.clearance, 0.0)
-        E = 0.5 * kb * (over ** 2).sum(axis=(1, 2))
-        if not derivs:
-            return E, None, None
-        u = s_ / np.maximum(sn, 1e-300)[..., None]                     # over > 0 only where sn > 0
-        Ju = np.concatenate([u, (u * perp).sum(axis=-1, keepdims=True)], axis=-1)   # (N, nd, nc, 3)
-        g = np.zeros((N, self.ndof))
-        g[:, 1 + nc:] = ((kb * over)[..., None] * Ju).sum(axis=2).reshape(N, 3 * nd)
-        Hb = np.einsum("nkh,nkhi,nkhj->nkij", kb * (over > 0), Ju, Ju)
-        H = np.zeros((N, self.ndof, self.ndof))
-        for k in range(nd):
-            base = 1 + nc + 3 * k
-            H[:, base:base + 3, base:base + 3] = Hb[:, k]
-        return E, g, H
-
     # ------------------------------------------------------------------ solve
     def _load_Nmm(self, load_Nm: float) -> float:
         if self.law.rigid or load_Nm == 0.0:
@@ -371,7 +171,7 @@ class QuasiStaticSolver(PhysicsMixin):
 
         arms = self._hole_arms(th_in, x0)
         E0 = energy_sub(self, x0, G, J, B, law, step, arms)
-        Jnorm = np.linalg.norm(J, axis=2)
+        Jnorm = _row_norm(J)
         bnorm = np.linalg.norm(B, axis=1)
         tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
         active = np.ones(N, dtype=bool)
@@ -472,12 +272,13 @@ class QuasiStaticSolver(PhysicsMixin):
             xs = x[sl]
             if x_init is None and prev is not None:
                 xs[:] = prev
-            used = self._outer(th[sl], xs, dirs[sl], B[sl], law, [(0, sl.stop - s0)], out, s0, load_Nm)
+            used = self._outer(th[sl], xs, dirs[sl], B[sl], law, [(0, sl.stop - s0)], out, s0, [load_Nm])
             iters = max(iters, used[0])
             prev = xs[-1].copy()
         return self._finish_rows(th, x, direction, load_Nm, law, iters, out, slice(0, N))
 
-    def solve_many(self, theta_in: list, directions: list, loads_Nm: list) -> list[Solution]:
+    def solve_many(self, theta_in: list, directions: list, loads_Nm: list,
+                   expand_trust: bool = True, errors: str = "raise") -> list:
         """Equilibria of several solves of this case in one batch: solve i has the input angles
         ``theta_in[i]`` (rad, in the order of motion), direction ``directions[i]`` and load ``loads_Nm[i]``
         (N m, > 0: the batch shares the contact law, and load 0 is the rigid limit's).
@@ -486,7 +287,21 @@ class QuasiStaticSolver(PhysicsMixin):
         solve per outer iteration for the whole batch); each solve stops on its own convergence test, so
         each result equals :meth:`solve` of that solve alone within the solver tolerance (the foot-point
         searches of a batch share their iteration count, which moves the results by rounding only).
+
+        ``expand_trust``: a state whose outer step was cut to its trust radius and whose potential then fell
+        as the linearisation predicted (ratio of actual to predicted decrease > 0.75) gets 4 times the radius
+        (up to ``MAX_TRUST_MM``) for its next step, the standard trust-region update (Nocedal & Wright,
+        Numerical Optimization, 2nd ed., algorithm 4.1); a reversing step halves it as in :meth:`solve`.
+        States far from their equilibrium (the start, the ideal kinematics, is often 0.04 mm away) then take
+        two or three outer iterations to get there instead of four or five. The equilibrium is the same to the
+        solver tolerance. False: the fixed radius of :meth:`solve` (a batch of one solve is then that solve).
+
+        ``errors``: ``"raise"`` (default) raises the first solve's error (an InterferenceError, or a
+        RuntimeError when it does not converge); ``"return"`` puts the error in that solve's place and
+        returns the other solutions.
         """
+        if errors not in ("raise", "return"):
+            raise ValueError(f"errors {errors!r} must be 'raise' or 'return'")
         if not (len(theta_in) == len(directions) == len(loads_Nm)) or len(theta_in) == 0:
             raise ValueError(f"theta_in, directions and loads_Nm must be equally long, non-empty lists; got "
                              f"{len(theta_in)}, {len(directions)}, {len(loads_Nm)}")
@@ -507,9 +322,20 @@ class QuasiStaticSolver(PhysicsMixin):
         law = self._law(loads_Nm[0])
         x = np.zeros((N, self.ndof))
         out = self._outputs(N)
-        used = self._outer(th, x, dirs, B, law, bounds, out, 0, max(loads_Nm))
-        return [self._finish_rows(th[a:b], x[a:b], d, L, law, it, out, slice(a, b))
-                for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used)]
+        used = self._outer(th, x, dirs, B, law, bounds, out, 0, list(loads_Nm), expand=expand_trust,
+                           collect=errors == "return")
+        res: list = []
+        for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used):
+            if isinstance(it, Exception):
+                res.append(it)
+                continue
+            try:
+                res.append(self._finish_rows(th[a:b], x[a:b], d, L, law, it, out, slice(a, b)))
+            except InterferenceError as err:
+                if errors == "raise":
+                    raise
+                res.append(err)
+        return res
 
     def _outputs(self, N: int) -> dict[str, np.ndarray]:
         """Arrays of the converged linearisation (gaps, normals, Jacobians, Johnson constants, radii)."""
@@ -518,15 +344,21 @@ class QuasiStaticSolver(PhysicsMixin):
                 "C": np.empty((N, self.nd * self.zp)), "R": np.empty((N, self.nd * self.zp))}
 
     def _outer(self, th, x, dirs, B, law, bounds: list[tuple[int, int]], out: dict, offset: int,
-               load_Nm: float) -> list[int]:
+               loads: list[float], expand: bool = False, collect: bool = False) -> list:
         """Outer iterations of the solves whose rows are ``bounds`` (row ranges of th and x, solved together,
-        each to its own convergence test); x is updated in place, the converged linearisation is written to
-        ``out`` at row ``offset + row``. Returns the outer iterations each solve used."""
+        each to its own convergence test; ``loads`` N m, for the messages); x is updated in place, the converged
+        linearisation is written to ``out`` at row ``offset + row``. ``expand``: grow the trust radius of states
+        whose cut step the linearisation predicted well (see :meth:`solve_many`). Returns the outer iterations
+        each solve used; a solve that does not converge raises its error (:meth:`_unconverged`), or with
+        ``collect`` has the error in its place."""
         N = th.size
         tol_mm = self.tol.solver_angle_rad * self.Rp
         trust = np.full(N, OUTER_TRUST_MM)
         last_dx = np.zeros((N, self.ndof))
         mu_all = np.ones(N)
+        cut = np.zeros(N, dtype=bool)                # the last step was cut to the trust radius
+        e_old = np.zeros(N)                          # linearised potential at the last state (N mm) ...
+        e_pred = np.zeros(N)                         # ... and at the last state plus its (cut) step
         used = [0] * len(bounds)
         active = list(range(len(bounds)))
         prev_rows = None
@@ -567,8 +399,21 @@ class QuasiStaticSolver(PhysicsMixin):
             if it > 0:
                 flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
                 trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
+                if expand:
+                    arms = self._hole_arms(th[rows], xs)
+                    zero = np.zeros_like(xs)
+                    e_now = energy_sub(self, xs, G, J, B[rows], step_law, zero, arms) + np.einsum(
+                        "nd,nd->n", last_dx[rows], B[rows])
+                    pred = e_old[rows] - e_pred[rows]
+                    good = cut[rows] & ~flip & (pred > 0) & (e_old[rows] - e_now > 0.75 * pred)
+                    trust[rows] = np.where(good, np.minimum(4.0 * trust[rows], MAX_TRUST_MM), trust[rows])
             big = np.abs(dx).max(axis=1)
             dx = dx * np.minimum(1.0, trust[rows] / np.maximum(big, 1e-300))[:, None]
+            if expand:
+                arms = self._hole_arms(th[rows], xs)
+                cut[rows] = big > trust[rows]
+                e_old[rows] = energy_sub(self, xs, G, J, B[rows], step_law, np.zeros_like(xs), arms)
+                e_pred[rows] = energy_sub(self, xs, G, J, B[rows], step_law, dx, arms)
             last_dx[rows] = dx
             xs += dx
             x[rows] = xs
@@ -583,19 +428,27 @@ class QuasiStaticSolver(PhysicsMixin):
                     out["G"][o] = G[lc] + _jdot(J[lc], dx[lc])
                     out["nrm"][o] = self._nrm_last[lc]
                     out["J"][o] = J[lc]
-                    Cl, Rl = self._line_last()
-                    out["C"][o], out["R"][o] = Cl[lc], Rl[lc]
+                    out["C"][o], out["R"][o] = self._line_last(lc)
                 else:
                     still.append((g, lc))
             if still and it + 1 == self.tol.solver_max_iter:
-                g, lc = still[0]
-                a, b = bounds[g]
-                self._check_penetration(th[a:b], x[a:b], dirs[a], law, load_Nm=load_Nm)  # an overlap is the usual cause
-                raise RuntimeError(
-                    f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
-                    f"(last change {np.abs(dx[lc]).max():.3e} mm)")
+                for g, lc in still:
+                    a, b = bounds[g]
+                    used[g] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[g], float(np.abs(dx[lc]).max()))
+                    if not collect:
+                        raise used[g]
             active = [g for g, _ in still]
         return used
+
+    def _unconverged(self, th, x, direction, law, load_Nm: float, change: float) -> Exception:
+        """The error of a solve that did not converge: the interference that is the usual cause (an
+        InterferenceError, see :meth:`_check_penetration`), else a RuntimeError."""
+        try:
+            self._check_penetration(th, x, direction, law, load_Nm=load_Nm)
+        except InterferenceError as err:
+            return err
+        return RuntimeError(f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
+                            f"(last change {change:.3e} mm)")
 
     def _finish_rows(self, th, x, direction, load_Nm, law, iters, out: dict, rows: slice) -> Solution:
         self._R_all = out["R"][rows]
@@ -674,6 +527,15 @@ class QuasiStaticSolver(PhysicsMixin):
             iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings,
             pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F,
             n_pin_contacts=(delta[:, :n1] > (1e-12 if not law.rigid else 0.0)).sum(axis=1))
+
+def _row_norm(J: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last axis; for 3 columns written out (the same sum, in the same order, as
+    ``np.linalg.norm(J, axis=-1)``, without its temporaries)."""
+    if J.shape[-1] != 3:
+        return np.linalg.norm(J, axis=-1)
+    a, b, c = J[..., 0], J[..., 1], J[..., 2]
+    return np.sqrt(a * a + b * b + c * c)
+
 
 def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Batched J @ s: (N, M, D) x (N, D) -> (N, M)."""

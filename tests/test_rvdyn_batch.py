@@ -66,11 +66,12 @@ def test_physical_law_batch_equals_separate() -> None:
 
 
 def test_solve_many_of_one_solve_is_solve() -> None:
-    """A batch of one solve is the single solve, bit for bit (same provider setting)."""
+    """A batch of one solve with the fixed trust radius is the single solve, bit for bit (same provider
+    setting)."""
     g = ReducerGeometry(Case.from_dict({"errors": {"disc_phase": 0.03}}))
     th = input_angles(g.ratio, 10, 1.0, -1)
     one = QuasiStaticSolver(g, AnalyticContacts(g)).solve(th, -1, 30.0)
-    many = QuasiStaticSolver(g, AnalyticContacts(g)).solve_many([th], [-1], [30.0])[0]
+    many = QuasiStaticSolver(g, AnalyticContacts(g)).solve_many([th], [-1], [30.0], expand_trust=False)[0]
     np.testing.assert_array_equal(many.te_rad, one.te_rad)
     np.testing.assert_array_equal(many.pin_force_N, one.pin_force_N)
     assert many.iterations == one.iterations
@@ -109,3 +110,19 @@ def test_per_point_foot_search_agrees_with_the_shared_one() -> None:
     own = prof.boundary_distance(p, t0, per_point=True)
     assert np.abs(own[0] - shared[0]).max() < 1e-12                  # mm
     assert np.abs(own[1] - shared[1]).max() < 1e-10                  # rad
+
+
+def test_a_failing_pair_raises_or_stands_in_its_place() -> None:
+    """A load the elastic law cannot hold (more than 0.1 mm of penetration) fails that pair alone: raised by
+    default, as run_te does, or returned in its place with errors="return" while the other pair is solved."""
+    from rvdyn.solver import InterferenceError
+
+    loads = [(5.0, 1), (3e4, -1)]
+    with pytest.raises(InterferenceError, match=r"the load 30000 N m presses the contacts deeper"):
+        run_te_many(Case(), "analytic", 6, loads=loads)
+    res = run_te_many(Case(), "analytic", 6, loads=loads, errors="return")
+    assert isinstance(res[1], InterferenceError)
+    one = run_te(Case(), "analytic", 6, load_Nm=5.0, direction=1)
+    assert np.abs(res[0].table["te_arcsec"].to_numpy() - one.table["te_arcsec"].to_numpy()).max() < SOLVER_TOL_ARCSEC
+    with pytest.raises(ValueError, match=r"errors 'ignore' must be 'raise' or 'return'"):
+        run_te_many(Case(), "analytic", 6, loads=loads, errors="ignore")
