@@ -18,7 +18,10 @@ Two modes:
   (max(0.001 deg, 25 %) for angles), each draw under 180 s.
 
 Run: ``python benchmarks/bench_calibrate.py [--out DIR] [--steps N] [--samples-per-rev N]
-[--start-deg A] [--revolutions R]`` or ``python benchmarks/bench_calibrate.py --realistic 3 [--seed S]``
+[--start-deg A] [--revolutions R]`` or ``python benchmarks/bench_calibrate.py --realistic 3 [--seed S]
+[--time-budget B] [--max-terms K] [--greedy] [--joint-new M] [--rescreen-every K] [--verbose]``
+(``--greedy``: the loop without the joint selection of :mod:`rvcalib.joint`, for comparison; the
+realistic mode prints wall and CPU seconds and writes each draw's result JSON).
 """
 from __future__ import annotations
 
