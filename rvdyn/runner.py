@@ -12,6 +12,8 @@ or keep one :class:`Runner` (its cache, executor and counters) for several batch
         first = run(cases_a, "screen")
         second = run(cases_b, "design", steps=[720] * len(cases_b))        # per-case steps
         third = run(cases_c, "readings", theta_in_deg=[angles_c0, angles_c1])  # at given input angles
+        draws = run(cases_d, "draws", steps=[360, 37, 37], group=[0, 0, 0])   # one worker task (solve_group)
+        run.prefetch(cases_e, "ahead")   # solved now, read later by run(cases_e, ...) without counting twice
 
 Every call returns one result dict per case, in the order of the cases:
 
@@ -38,8 +40,11 @@ Nothing here holds a design constant: everything about the reducer comes from ea
 """
 from __future__ import annotations
 
+import functools
+import hashlib
 import math
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -56,6 +61,23 @@ from rvdyn.te import SOLVERS, run_te
 SolveFn = Callable[[dict[str, Any]], dict[str, Any]]
 
 _STAT_KEYS = ("pp", "mean", "mean_abs", "rms", "ratio", "seconds")
+
+
+def _failed(key: str, exc: BaseException, secs: float) -> dict[str, Any]:
+    stats = {k: float("nan") for k in _STAT_KEYS}
+    stats["seconds"] = secs
+    return {"key": key, "status": "failed", "stats": stats, "te_arcsec": [], "error": f"{type(exc).__name__}: {exc}"}
+
+
+def _ok(key: str, r: Any, secs: float | None = None) -> dict[str, Any]:
+    stats = {k: float(r.stats[k]) for k in _STAT_KEYS}
+    if secs is not None:
+        stats["seconds"] = float(secs)
+    return {"key": key, "status": "ok", "stats": stats,
+            "te_arcsec": [float(x) for x in r.table["te_arcsec"].to_numpy()], "error": ""}
+
+
+_SOLVE_ERRORS = (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError)
 
 
 def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
@@ -83,17 +105,85 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     try:
         r = run_te(case, payload["solver"], int(payload["steps"]), float(payload["revolutions"]), law=law,
                    theta_in_deg=None if th is None else np.asarray(th, dtype=float))
-    except (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as exc:
-        if isinstance(exc, ImportError):  # pragma: no cover - ImportError is not a ValueError; kept explicit
-            raise
-        secs = time.perf_counter() - t0
-        stats = {k: float("nan") for k in _STAT_KEYS}
-        stats["seconds"] = secs
-        return {"key": payload["key"], "status": "failed", "stats": stats, "te_arcsec": [],
-                "error": f"{type(exc).__name__}: {exc}"}
-    stats = {k: float(r.stats[k]) for k in _STAT_KEYS}
-    return {"key": payload["key"], "status": "ok", "stats": stats,
-            "te_arcsec": [float(x) for x in r.table["te_arcsec"].to_numpy()], "error": ""}
+    except _SOLVE_ERRORS as exc:  # ImportError (missing software) is none of these and propagates
+        return _failed(payload["key"], exc, time.perf_counter() - t0)
+    return _ok(payload["key"], r)
+
+
+def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dict[str, Any]:
+    """Solve a group of job payloads whose cases differ only in load and direction (worker side).
+
+    The case is read and its geometry built once for the group; the jobs of equal ``revolutions`` and no
+    given input angles, all under a load > 0, go to :func:`rvdyn.te.run_te_many` in one call (the analytic
+    provider solves their states together; each result equals :func:`rvdyn.te.run_te`'s within the
+    solver tolerance; a pair that cannot be solved fails alone with its error, the others stand), the
+    others to :func:`rvdyn.te.run_te` one after another on the shared geometry (the geometry does not
+    depend on the load or the direction).
+
+    Parameters
+    ----------
+    payload : dict
+        ``key`` (of the group) and ``jobs`` (list of :func:`solve_job` payloads; same solver and law).
+    solve_fn : callable or None
+        A worker function other than :func:`solve_job` (tests): then each job goes through it alone.
+
+    Returns
+    -------
+    dict
+        ``key`` (the group's), ``results`` (one :func:`solve_job` result per job, in order) and
+        ``task_seconds`` (wall time of the task in the worker, s).
+    """
+    t_task = time.perf_counter()
+    out = _solve_group(payload, solve_fn)
+    out["task_seconds"] = time.perf_counter() - t_task
+    return out
+
+
+def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str, Any]:
+    jobs = payload["jobs"]
+    if solve_fn is not None and solve_fn is not solve_job:
+        return {"key": payload["key"], "results": [solve_fn(p) for p in jobs]}
+    import rvdyn.te as te
+    from rvcad.geometry import ReducerGeometry
+
+    results: list[dict[str, Any] | None] = [None] * len(jobs)
+    try:
+        case = Case.from_dict(jobs[0]["case"])
+        geom = ReducerGeometry(case)
+    except _SOLVE_ERRORS:  # every job of the group shares the case: each fails as it would alone
+        return {"key": payload["key"], "results": [solve_job(p) for p in jobs]}
+    law = ContactLaw(**jobs[0]["law"])
+    runs: dict[tuple, list[int]] = {}  # jobs that one run_te_many call can take: same revolutions, no given angles
+    for i, p in enumerate(jobs):
+        th = p.get("theta_in_deg")
+        runs.setdefault((float(p["revolutions"]), None if th is None else tuple(th), i if th is not None else -1),
+                        []).append(i)
+    for (revs, th, _), idx in runs.items():
+        loads = [(float(jobs[i]["case"].get("load_Nm", 20.0)), int(jobs[i]["case"].get("direction", 1))) for i in idx]
+        steps = [int(jobs[i]["steps"]) for i in idx]
+        if len(idx) > 1 and th is None and all(load > 0 for load, _ in loads):
+            t0 = time.perf_counter()
+            try:  # a pair that cannot be solved comes back as its error, the others as results
+                rs = te.run_te_many(case, payload["solver"], steps, loads=loads, revolutions=revs, law=law, geom=geom,
+                                    errors="return")
+            except _SOLVE_ERRORS:
+                rs = None  # solved job by job below
+            if rs is not None:
+                secs = (time.perf_counter() - t0) / len(idx)
+                for i, r in zip(idx, rs):
+                    k = jobs[i]["key"]
+                    results[i] = _failed(k, r, secs) if isinstance(r, BaseException) else _ok(k, r)
+                continue
+        theta = None if th is None else np.asarray(th, dtype=float)
+        for i, n, (load, d) in zip(idx, steps, loads):
+            t0 = time.perf_counter()
+            try:
+                r = te.run_te(case, payload["solver"], n, revs, load, d, law, geom=geom, theta_in_deg=theta)
+            except _SOLVE_ERRORS as exc:
+                results[i] = _failed(jobs[i]["key"], exc, time.perf_counter() - t0)
+                continue
+            results[i] = _ok(jobs[i]["key"], r)
+    return {"key": payload["key"], "results": results}
 
 
 class Executor(Protocol):
@@ -162,8 +252,13 @@ class LocalPoolExecutor:
             raise ValueError(f"workers {workers!r} must be an integer >= 1")
         self.workers = workers
         self._pool: ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
 
     def _get(self) -> ProcessPoolExecutor:
+        with self._lock:  # threads of one study share the pool (one pool, made once)
+            return self._make()
+
+    def _make(self) -> ProcessPoolExecutor:
         if self._pool is None:
             import multiprocessing as mp
             import os
@@ -264,6 +359,19 @@ class DaskExecutor:
         return f"Dask scheduler {self.address} ({self.workers} worker threads)"
 
 
+def _payload(job: Job, key: str) -> dict[str, Any]:
+    """:meth:`rvdyn.cache.Job.to_payload` with its key already computed (the key is the costly part)."""
+    d = {"case": job.case.to_dict(), **job.settings(), "key": key}
+    if job.theta_in_deg is not None:
+        d["theta_in_deg"] = [float(x) for x in job.theta_in_deg]
+    return d
+
+
+def _solve_task(payload: dict[str, Any], solve_fn: SolveFn = solve_job) -> dict[str, Any]:
+    """Worker function of a batch with groups: a group payload (``jobs``) or a single job payload."""
+    return solve_group(payload, solve_fn) if "jobs" in payload else solve_fn(payload)
+
+
 def make_executor(workers: int = 1, scheduler: str | None = None, timeout_s: float = 20.0) -> Executor:
     """Executor from options: Dask if ``scheduler`` (an address) is given, else serial (1) or a local pool (N)."""
     if scheduler:
@@ -315,6 +423,8 @@ class Runner:
         Solver wall time of every computed case, s.
     wall_seconds : float
         Wall time spent in calls, s.
+    worker_seconds : float
+        Wall time the workers spent on this runner's tasks (solves, case reading, geometry), s.
     """
 
     def __init__(self, executor: Executor | int | str | None = None, cache: CaseCache | str | Path | None = None,
@@ -342,6 +452,9 @@ class Runner:
         self.computed = self.reused = self.failed = 0
         self.solve_seconds: list[float] = []
         self.wall_seconds = 0.0
+        self.worker_seconds = 0.0
+        self._memo: dict[str, dict[str, Any]] = {}
+        self._counted: set[str] = set()
 
     def jobs(self, cases: Sequence[Case], steps: int | Sequence[int] | None = None,
              theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None) -> list[Job]:
@@ -369,7 +482,8 @@ class Runner:
         return [Job(c, self.solver, s, self.revolutions, self.law, t) for c, s, t in zip(cases, st, th)]
 
     def __call__(self, cases: Sequence[Case], desc: str = "cases", *, steps: int | Sequence[int] | None = None,
-                 theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None) -> list[dict[str, Any]]:
+                 theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None,
+                 group: Sequence[Any] | None = None, keep: bool = False) -> list[dict[str, Any]]:
         """Solve a batch of cases.
 
         Parameters
@@ -382,6 +496,13 @@ class Runner:
         theta_in_deg : sequence of (array or None), or None
             Per case, explicit input angles (deg, order of motion) that replace steps and revolutions,
             or None for that case.
+        group : sequence or None
+            Per case, a label (any hashable) or None: the uncached cases of one label are solved in one
+            worker task (:func:`solve_group`: one case read and geometry built, the jobs of one step
+            count batched); they must differ only in load and direction (ValueError otherwise). Each
+            case keeps its own cache entry, so grouped and single solves share the cache.
+        keep : bool
+            Keep the results in memory for later calls (:meth:`prefetch`).
 
         Returns
         -------
@@ -398,37 +519,98 @@ class Runner:
             unique.setdefault(k, j)
         results: dict[str, dict[str, Any]] = {}
         todo: list[str] = []
+        n_memo = 0
         for k in unique:
+            if k in self._memo:  # solved (or taken from the cache) by this runner's prefetch: counted there
+                results[k] = self._memo[k]
+                n_memo += 1
+                continue
             hit = self.cache.get(k)
             if hit is None:
                 todo.append(k)
             else:
                 results[k] = {**hit, "cached": True}
-        self.reused += len(results)
-        payloads = [unique[k].to_payload() for k in todo]
+        self.reused += len(results) - n_memo
+        tasks = self._tasks(todo, keys, group, len(jobs))
+        payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
+                    for t in tasks]
+        fn = self.solve_fn if all(len(t) == 1 for t in tasks) else functools.partial(_solve_task,
+                                                                                     solve_fn=self.solve_fn)
         bar = tqdm(total=len(unique), initial=len(results), desc=desc, unit="case", file=sys.stderr,
                    disable=not self.progress, dynamic_ncols=True)
         try:
-            for i, res in self.executor.run(self.solve_fn, payloads):
-                k = todo[i]
-                if res.get("key") != k:
-                    raise RuntimeError(f"worker returned the result of {res.get('key')!r} for {k!r}")
-                self.cache.put(k, res)
-                results[k] = {**res, "cached": False}
-                self.computed += 1
-                self.solve_seconds.append(float(res["stats"].get("seconds", math.nan)))
-                bar.update(1)
+            for i, res in self.executor.run(fn, payloads):
+                got = res["results"] if "results" in res else [res]
+                self.worker_seconds += float(res.get("task_seconds", res.get("stats", {}).get("seconds", 0.0)))
+                if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
+                    raise RuntimeError(f"worker returned the result of {res.get('key')!r} for {payloads[i]['key']!r}")
+                for k, r in zip(tasks[i], got):
+                    if r.get("key") != k:
+                        raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
+                    self.cache.put(k, r)
+                    results[k] = {**r, "cached": False}
+                    self.computed += 1
+                    self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
+                bar.update(len(got))
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0
+        if keep:
+            self._memo.update((k, results[k]) for k in unique if k not in self._memo)
+        self.failed += sum(1 for k in unique if results[k].get("status") == "failed" and k not in self._counted)
+        if keep:
+            self._counted.update(unique)
         out = []
         for k in keys:
             r = dict(results[k])
             te = r.get("te_arcsec")
             r["te_arcsec"] = np.asarray(te, dtype=float) if te else None
             out.append(r)
-        self.failed += sum(1 for k in unique if results[k].get("status") == "failed")
         return out
+
+    def prefetch(self, cases: Sequence[Case], desc: str = "cases", **kw: Any) -> None:
+        """Solve a batch now and keep its results in memory for later calls of this runner (the same
+        arguments as :meth:`__call__`): a later call takes them without solving, reading the cache or
+        counting them again. A study submits every case it will need at once (no worker waits between
+        its stages) and then reads them stage by stage."""
+        self(cases, desc, keep=True, **kw)
+
+    @staticmethod
+    def _tasks(todo: list[str], keys: list[str], group: Sequence[Any] | None, n: int) -> list[list[str]]:
+        """The uncached keys as worker tasks: one key each, or the keys of one group label together."""
+        if group is None:
+            return [[k] for k in todo]
+        if len(group) != n:
+            raise ValueError(f"group has {len(group)} entries for {n} cases")
+        label: dict[str, Any] = {}
+        for k, g in zip(keys, group):
+            label.setdefault(k, g)
+        tasks: list[list[str]] = []
+        where: dict[Any, int] = {}
+        for k in todo:
+            g = label[k]
+            if g is None:
+                tasks.append([k])
+            elif g in where:
+                tasks[where[g]].append(k)
+            else:
+                where[g] = len(tasks)
+                tasks.append([k])
+        return tasks
+
+    @staticmethod
+    def _group_payload(jobs: list[Job], keys: list[str]) -> dict[str, Any]:
+        """The payload of a :func:`solve_group` task; ValueError if the cases differ in more than load and
+        direction or the jobs in solver or law."""
+        a = jobs[0]
+        for j in jobs[1:]:
+            c = j.case
+            if (c.raw_errors != a.case.raw_errors or c.design != a.case.design or c.model != a.case.model
+                    or j.solver != a.solver or j.law != a.law):
+                raise ValueError(f"group of cases {a.case.name!r} and {c.name!r}: the cases of one group must differ "
+                                 "only in load and direction (same design, errors, model, solver and law)")
+        key = "group-" + hashlib.sha256("".join(keys).encode()).hexdigest()[:32]
+        return {"key": key, "solver": a.solver, "jobs": [_payload(j, k) for j, k in zip(jobs, keys)]}
 
     def counters(self) -> dict[str, Any]:
         """``computed, reused, failed``, mean/median solve seconds of computed cases, wall seconds."""

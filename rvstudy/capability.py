@@ -114,17 +114,21 @@ def sobol_from_design(yA: np.ndarray, yB: np.ndarray, yAB: Mapping[str, np.ndarr
     -------
     DataFrame
         ``tolerance, first_order, total, first_order_lo, first_order_hi, total_lo, total_hi, n``;
-        S1 = mean(yB (yAB - yA)) / V (Saltelli 2010), ST = mean((yA - yAB)^2) / (2 V) (Jansen 1999).
-        Rows with a failed solve are left out.
+        S1 = mean((yB - f0) (yAB - yA)) / V (Saltelli 2010, with yB centred on the sample mean f0 of yA and
+        yB: since E[yAB - yA] = 0 the centring leaves the expectation unchanged and removes the variance
+        that the response's mean adds to the estimate, e.g. of a rigidity of mean 417 and sigma 175),
+        ST = mean((yA - yAB)^2) / (2 V) (Jansen 1999). Rows with a failed solve are left out.
     """
     yA, yB = np.asarray(yA, float), np.asarray(yB, float)
-    V = float(np.var(np.r_[yA[np.isfinite(yA)], yB[np.isfinite(yB)]])) if var is None else float(var)
+    both = np.r_[yA[np.isfinite(yA)], yB[np.isfinite(yB)]]
+    V = float(np.var(both)) if var is None else float(var)
+    f0 = float(np.mean(both)) if both.size else 0.0
     rng = np.random.default_rng(seed)
     rows = []
     for g, yab in yAB.items():
         yab = np.asarray(yab, float)
         keep = np.isfinite(yA) & np.isfinite(yB) & np.isfinite(yab)
-        a, b, ab = yA[keep], yB[keep], yab[keep]
+        a, b, ab = yA[keep], yB[keep] - f0, yab[keep]
         m = a.size
 
         def est(i: np.ndarray) -> tuple[float, float]:

@@ -33,7 +33,7 @@ from rvstudy.study import (
     run_study,
 )
 
-DEFAULT_SOLVER = "fcl"
+DEFAULT_SOLVER = "analytic"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -194,7 +194,8 @@ def headline_from_summary(mc: dict[str, Any]) -> list[str]:
                    f"{_pct(c['out_of_spec_fraction'])} (95 % CI {ci_text(lo if lo is not None else float('nan'), hi if hi is not None else float('nan'))})")
     t = mc.get("timing") or {}
     if t:
-        out.append(f"  Monte Carlo: {t['full_solver_draws']} full-solver draws in {t['wall_s']:.0f} s, "
+        out.append(f"  Monte Carlo: {t['full_solver_draws']} full-solver draws ({t.get('independent_draws', '?')} "
+                   f"independent + {t.get('design_draws', '?')} designed) in {t['wall_s']:.0f} s wall, "
                    f"{t['draws_per_s_per_worker']:.3g} draws/s per worker ({t['workers']} workers)")
     return out
 
@@ -206,7 +207,8 @@ def _human(summary: dict[str, Any], report: Path) -> str:
     lines = [f"rv-stackup: {summary['config']['solver']} solver, {summary['config']['steps']} steps, "
              f"{summary['executor']}" + (f"; reducer {red['description']}" if red else ""),
              f"  cases: {c.get('computed', 0)} solved, {c.get('reused', 0)} reused from the cache, "
-             f"{c.get('failed', 0)} failed; wall time {t.get('total', float('nan')):.1f} s"]
+             f"{c.get('failed', 0)} failed; wall time {t.get('total', float('nan')):.1f} s"
+             + (f", {t['command']:.1f} s with the report" if "command" in t else "")]
     if summary.get("monte_carlo"):  # the full-solver figures lead
         lines += headline_from_summary(summary["monte_carlo"])
     sc = summary.get("stage_check")
@@ -235,6 +237,9 @@ def _human(summary: dict[str, Any], report: Path) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``rv-stackup``; returns the exit status (2 for bad options)."""
+    import time
+
+    t_main = time.perf_counter()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -255,8 +260,11 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     from rvstudy.report import summary, write_report
 
+    t_rep = time.perf_counter()
     report = write_report(res)
     s = summary(res)
+    s["timings_s"]["report"] = time.perf_counter() - t_rep
+    s["timings_s"]["command"] = time.perf_counter() - t_main  # from the parsed options to the written report
     if args.json:
         print(json.dumps({**s, "report": str(report)}))
     else:

@@ -103,7 +103,8 @@ def draw(tols: Mapping[str, Tolerance], feats: list[Feature], n: int, rng: np.ra
 
 
 def case_dict(feats: list[Feature], row: Mapping[str, float] | np.ndarray, design: Design, name: str,
-              load_Nm: float, direction: int = 1, base_model: Mapping[str, float] | None = None) -> dict[str, Any]:
+              load_Nm: float, direction: int = 1, base_model: Mapping[str, float] | None = None,
+              design_dict: dict[str, Any] | None = None) -> dict[str, Any]:
     """The case JSON object of one draw (errors per instance, model effects, the study's design).
 
     Parameters
@@ -118,6 +119,8 @@ def case_dict(feats: list[Feature], row: Mapping[str, float] | np.ndarray, desig
     direction : {1, -1}
     base_model : mapping or None
         Model options every draw carries (a model-effect feature overrides its key).
+    design_dict : dict or None
+        ``design.to_dict()`` made once by a caller that builds many cases (saves its cost per draw).
     """
     vals = row if isinstance(row, np.ndarray) else np.array([row[f.name] for f in feats], float)
     model: dict[str, float] = dict(base_model or {})
@@ -152,7 +155,8 @@ def case_dict(feats: list[Feature], row: Mapping[str, float] | np.ndarray, desig
             objs = [{"value": v, **inst} for inst, _, v in items if v != 0.0]
             if objs:
                 errors[key] = objs
-    d: dict[str, Any] = {"name": name, "design": design.to_dict(), "errors": errors, "load_Nm": float(load_Nm),
+    d: dict[str, Any] = {"name": name, "design": design_dict if design_dict is not None else design.to_dict(),
+                         "errors": errors, "load_Nm": float(load_Nm),
                          "direction": int(direction)}
     if model:
         d["model"] = model
@@ -160,9 +164,10 @@ def case_dict(feats: list[Feature], row: Mapping[str, float] | np.ndarray, desig
 
 
 def make_draw_case(feats: list[Feature], row: Any, design: Design, name: str, load_Nm: float,
-                   direction: int = 1, base_model: Mapping[str, float] | None = None) -> Case:
+                   direction: int = 1, base_model: Mapping[str, float] | None = None,
+                   design_dict: dict[str, Any] | None = None) -> Case:
     """:func:`case_dict` validated into a :class:`rvcad.errors.Case` (ValueError naming the field)."""
-    return Case.from_dict(case_dict(feats, row, design, name, load_Nm, direction, base_model))
+    return Case.from_dict(case_dict(feats, row, design, name, load_Nm, direction, base_model, design_dict))
 
 
 def group_columns(feats: list[Feature]) -> dict[str, list[str]]:

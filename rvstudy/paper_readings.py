@@ -47,7 +47,7 @@ from rvdyn.runner import Runner
 from rvstudy.screen import ARCSEC_PER_ARCMIN, make_case
 
 __all__ = ["PATTERNS", "STATISTICS", "LAWS", "READINGS_STEPS", "DEFAULT_READING", "ReadingsResult",
-           "compare_with_paper", "run_readings", "readings_section"]
+           "compare_with_paper", "readings_cases", "run_readings", "readings_section"]
 
 #: EA pin patterns: label -> pattern of :func:`rvstudy.study.pattern_value` (None = pin 0 alone).
 PATTERNS: dict[str, str | None] = {"pin 0": None, "alternate": "alternate", "all": "all"}
@@ -156,10 +156,36 @@ def compare_with_paper(ours: np.ndarray, paper_y: np.ndarray, coded_ea: np.ndarr
     return out
 
 
+def _table6(fs: Any, runs: list[int] | None) -> tuple[pd.DataFrame, np.ndarray]:
+    t6 = paper.table6_runs()
+    if runs is not None:
+        t6 = t6[t6["run"].isin(runs)].reset_index(drop=True)
+        if len(t6) < 4:
+            raise ValueError(f"runs {runs}: at least 4 Table 6 runs are needed for a correlation")
+    return t6, fs.levels.coded_to_actual(t6[fs.names].to_numpy(float), fs.names)
+
+
+def _pattern_cases(fs: Any, t6: pd.DataFrame, actual: np.ndarray, label: str, pattern: str | None, law_name: str,
+                   load_Nm: float) -> list:
+    fsp = dataclasses.replace(fs, patterns={**fs.patterns, "EA": pattern})
+    return [make_case(fsp.case_errors({fs.errors[f]: float(v) for f, v in zip(fs.names, row)}),
+                      f"t6-{int(r)}-{label}-{law_name}", load_Nm) for r, row in zip(t6["run"], actual)]
+
+
+def readings_cases(fs: Any, load_Nm: float = 20.0, law_name: str = "impact",
+                   patterns: dict[str, str | None] | None = None, runs: list[int] | None = None) -> list:
+    """Every case :func:`run_readings` solves with the law ``law_name`` (all EA patterns), for a caller that
+    submits them ahead (:meth:`rvdyn.runner.Runner.prefetch`)."""
+    t6, actual = _table6(fs, runs)
+    return [c for label, pattern in (PATTERNS if patterns is None else patterns).items()
+            for c in _pattern_cases(fs, t6, actual, label, pattern, law_name, load_Nm)]
+
+
 def run_readings(fs: Any, executor: Any, cache: Any, steps: int = READINGS_STEPS, load_Nm: float = 20.0,
                  impact_law: ContactLaw | None = None, solver: str = "analytic", laws: tuple[str, ...] = LAWS,
                  patterns: dict[str, str | None] | None = None, progress: bool = False,
-                 runs: list[int] | None = None, **runner_kw: Any) -> ReadingsResult:
+                 runs: list[int] | None = None, runners: dict[str, Runner] | None = None,
+                 **runner_kw: Any) -> ReadingsResult:
     """Solve the Table 6 design for every EA pin pattern and contact law and compare each reading.
 
     Parameters
@@ -184,6 +210,9 @@ def run_readings(fs: Any, executor: Any, cache: Any, steps: int = READINGS_STEPS
         tqdm bars.
     runs : list of int or None
         Table 6 run numbers to use (default all 27; tests use a few).
+    runners : dict or None
+        ``{law name: Runner}`` to solve with (e.g. runners that prefetched :func:`readings_cases`); default
+        one made here per law from ``executor``, ``cache``, ``solver``, ``steps``.
     **runner_kw
         Passed to :class:`Runner` (e.g. ``solve_fn``).
 
@@ -195,24 +224,18 @@ def run_readings(fs: Any, executor: Any, cache: Any, steps: int = READINGS_STEPS
         raise ValueError(f"the paper's readings need the paper's factors EA, EB, EC, ED at Table 5 levels, "
                          f"not {list(fs.names)}")
     patterns = PATTERNS if patterns is None else patterns
-    t6 = paper.table6_runs()
-    if runs is not None:
-        t6 = t6[t6["run"].isin(runs)].reset_index(drop=True)
-        if len(t6) < 4:
-            raise ValueError(f"runs {runs}: at least 4 Table 6 runs are needed for a correlation")
+    t6, actual = _table6(fs, runs)
     coded = t6[fs.names].to_numpy(float)
-    actual = fs.levels.coded_to_actual(coded, fs.names)
     centre = np.all(coded == 0, axis=1)
     impact_law = ContactLaw() if impact_law is None else impact_law
     frames, rows, notes = [], [], []
     counters = {"computed": 0, "reused": 0, "failed": 0}
     for law_name in laws:
         law = impact_law if law_name == "impact" else ContactLaw(kind=law_name)
-        runner = Runner(executor, cache, solver, int(steps), law, progress=progress, **runner_kw)
+        runner = (runners[law_name] if runners and law_name in runners else
+                  Runner(executor, cache, solver, int(steps), law, progress=progress, **runner_kw))
         for label, pattern in patterns.items():
-            fsp = dataclasses.replace(fs, patterns={**fs.patterns, "EA": pattern})
-            cases = [make_case(fsp.case_errors({fs.errors[f]: float(v) for f, v in zip(fs.names, row)}),
-                               f"t6-{int(r)}-{label}-{law_name}", load_Nm) for r, row in zip(t6["run"], actual)]
+            cases = _pattern_cases(fs, t6, actual, label, pattern, law_name, load_Nm)
             out = runner(cases, f"Table 6 reading: EA on {label}, {law_name} law ({len(cases)} runs)")
             st = pd.DataFrame([o["stats"] for o in out])
             df = t6[["run"] + fs.names].copy()

@@ -424,7 +424,10 @@ def write_report(res: StudyResult) -> Path:
          "value": f"{c.get('computed', 0)} / {c.get('reused', 0)} / {c.get('failed', 0)}"},
         {"item": "solver seconds per case (mean / median, computed cases)",
          "value": f"{_fmt(c.get('solve_seconds_mean'))} / {_fmt(c.get('solve_seconds_median'))}"},
-        {"item": "wall time [s]: " + ", ".join(res.timings), "value": ", ".join(f"{v:.1f}" for v in res.timings.values())},
+        {"item": "wall time [s]: " + ", ".join(res.timings) + (
+            " (with 2+ workers the stages' cases are solved together: a stage's time is the wait for its cases "
+            "plus its analysis; mc runs from the first draw to its analysis)" if "mc_wait_and_analysis" in res.timings
+            else ""), "value": ", ".join(f"{v:.1f}" for v in res.timings.values())},
         {"item": "seed (validation [seed,1], MC [seed,2], check [seed,3])", "value": str(cfg.seed)},
     ])
     add(md_table(run_rows) + "\n")

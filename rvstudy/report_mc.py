@@ -159,10 +159,14 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
             "value (pin 0's pitch, disc 0 hole 0) or the mean over the pins (all-pins errors). Difference = surface - "
             "full solver, arcmin:\n")
         add(md_table(st) + "\n")
+    busy = t.get("worker_s")
     add(f"Throughput: {t['full_solver_draws']} full-solver draws ({t['solves_per_draw']} solves each: the TE "
-        "revolution, and +-3 % and +-100 % of rated torque at the locked positions) in "
-        f"{t['wall_s']:.1f} s on {t['workers']} worker(s): {t['draws_per_s_per_worker']:.3g} draws per second per "
-        f"worker, with {t['analytic_solves_computed']} analytic solves computed now and "
+        "revolution, and +-3 % and +-100 % of rated torque at the locked positions; one worker task per draw) in "
+        f"{t['wall_s']:.1f} s wall on {t['workers']} worker(s)"
+        + (f" (solved beside the other stages' cases; {busy:.1f} worker-seconds on the draws)" if busy else "")
+        + f": {t['draws_per_s_per_worker']:.3g} draws per second per worker"
+        + (" (draws / worker-seconds on the draws)" if busy else "")
+        + f", with {t['analytic_solves_computed']} analytic solves computed now and "
         f"{t['analytic_solves_reused']} taken from the cache"
         + (" (a rerun: the figure is not the solver's speed)" if t['analytic_solves_reused'] else "")
         + ", plus the fcl check.\n")

@@ -31,6 +31,7 @@ allocation re-weights the independent draws (:func:`rvstudy.capability.allocatio
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from typing import Any
@@ -38,7 +39,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from rvcad.errors import ERROR_TYPES
+from rvcad.errors import ERROR_TYPES, Case
 from rvcad.params import Design
 from rvstudy.capability import allocation, capability, recommend, sobol_from_design
 from rvstudy.features import Feature, draw, features, group_columns, make_draw_case
@@ -54,7 +55,11 @@ MC_RESPONSES = {
     "te_mean_abs_arcmin": "mean |TE| [arcmin] (paper's response)",
 }
 
-Runner = Callable[[list, str], list[dict[str, Any]]]
+Runner = Callable[..., list[dict[str, Any]]]
+#: The play/rigidity solves of a draw: name, fraction of the rated torque, direction (positive torque on the
+#: output = direction -1).
+PLAY_RUNS = (("dp_3", PLAY_LOAD_FRACTION, 1), ("dm_3", PLAY_LOAD_FRACTION, -1), ("dp_full", 1.0, 1),
+             ("dm_full", 1.0, -1))
 
 
 def play_positions(design: Design) -> int:
@@ -90,27 +95,35 @@ def factor_values(feats: list[Feature], X: pd.DataFrame, fs: Any) -> pd.DataFram
     return pd.DataFrame(out)
 
 
-def _cases(feats, X: pd.DataFrame, design: Design, prefix: str, load: float, direction: int,
-           base_model: dict, notes: list[str]) -> tuple[list, list[int]]:
-    cases, idx = [], []
+def draw_cases(feats: list[Feature], X: pd.DataFrame, design: Design, prefix: str, load: float,
+               base_model: dict, notes: list[str], start: int = 0) -> list[Case | None]:
+    """The validated case of each draw at the study load, direction +1 (None for a draw that is not a valid
+    case: a note says why and the draw counts as failed)."""
+    dd = design.to_dict()
     vals = X.to_numpy(float)
+    out: list[Case | None] = []
     for i in range(len(X)):
         try:
-            cases.append(make_draw_case(feats, vals[i], design, f"{prefix}-{i + 1}", load, direction, base_model))
-            idx.append(i)
+            out.append(make_draw_case(feats, vals[i], design, f"{prefix}-{start + i + 1}", load, 1, base_model, dd))
         except ValueError as exc:
-            if direction == 1:
-                notes.append(f"Monte Carlo draw {prefix}-{i + 1} is not a valid case (counted as a failed "
-                             f"draw): {exc}")
-    return cases, idx
+            notes.append(f"Monte Carlo draw {prefix}-{start + i + 1} is not a valid case (counted as a failed draw): "
+                         f"{exc}")
+            out.append(None)
+    return out
 
 
-def _solve(runner: Runner, feats, X: pd.DataFrame, design: Design, prefix: str, load: float, direction: int,
-           base_model: dict, notes: list[str], desc: str) -> list[dict[str, Any] | None]:
-    cases, idx = _cases(feats, X, design, prefix, load, direction, base_model, notes)
-    out: list[dict[str, Any] | None] = [None] * len(X)
-    for i, r in zip(idx, runner(cases, desc) if cases else []):
-        out[i] = r
+def play_loads(design: Design, rated_Nm: float, notes: list[str]) -> list[tuple[str, float, int]]:
+    """``(name, load N m, direction)`` of the four play/rigidity solves (:data:`PLAY_RUNS` at ``rated_Nm``);
+    empty, with a note, when such a load is not a valid case load."""
+    out = []
+    for name, frac, d in PLAY_RUNS:
+        try:
+            Case.from_dict({"design": design.to_dict(), "load_Nm": frac * rated_Nm, "direction": d})
+        except ValueError as exc:
+            notes.append(f"the play/rigidity solves are left out (every draw's play and rigidity count as failed): "
+                         f"{exc}")
+            return []
+        out.append((name, frac * rated_Nm, d))
     return out
 
 
@@ -146,21 +159,43 @@ def rigidity_at_positions(r: dict[str, dict | None], rated_Nm: float) -> np.ndar
     return 0.5 * (b / (t["dm_full"] - t["dm_3"]) + b / (t["dp_3"] - t["dp_full"]))
 
 
-def responses_of(feats, X: pd.DataFrame, design: Design, cfg: Any, runners: dict[str, Runner], base_model: dict,
-                 notes: list[str], prefix: str) -> pd.DataFrame:
-    """Solve the draws ``X`` (TE at the study load; play at +-3 % rated) and return the responses."""
-    te = _solve(runners["te"], feats, X, design, prefix, cfg.load_Nm, 1, base_model, notes,
-                f"MC {prefix}: TE ({len(X)} draws)")
-    curve: dict[str, list] = {}
-    for name, frac, d in (("dp_3", PLAY_LOAD_FRACTION, 1), ("dm_3", PLAY_LOAD_FRACTION, -1),
-                          ("dp_full", 1.0, 1), ("dm_full", 1.0, -1)):
-        res = _solve(runners["play"], feats, X, design, prefix, frac * cfg.rated_Nm, d, base_model, notes,
-                     f"MC {prefix}: torque {'+' if d < 0 else '-'}{100 * frac:g} % rated")
-        curve[name] = [None if r is None else {**r, "direction": d} for r in res]
+def responses_of(cases: list[Case | None], design: Design, cfg: Any, runner: Runner, notes: list[str],
+                 desc: str) -> pd.DataFrame:
+    """Solve the draws (TE at the study load; play and rigidity at +-3 % and +-100 % rated) and return the
+    responses, one row per draw.
+
+    Parameters
+    ----------
+    cases : list of Case or None
+        Each draw's case at the study load (:func:`draw_cases`); None = not a valid case (a failed draw).
+    runner : Runner
+        An analytic runner; the five solves of a draw go to one worker task (``group``): one case read and
+        geometry built per draw, the four play solves batched.
+    """
+    loads = play_loads(design, cfg.rated_Nm, notes)
+    n_pos = play_positions(design)
+    batch, steps, group, slot = [], [], [], []
+    for i, c in enumerate(cases):
+        if c is None:
+            continue
+        batch.append(c)
+        steps.append(int(cfg.steps))
+        slot.append((i, "te"))
+        for name, load, d in loads:  # same errors: only the load and the direction change (no new validation)
+            batch.append(dataclasses.replace(c, load_Nm=float(load), direction=int(d)))
+            steps.append(n_pos)
+            slot.append((i, name))
+        group.extend([i] * (1 + len(loads)))
+    res: dict[tuple[int, str], dict[str, Any]] = {}
+    if batch:
+        for sl, r, d in zip(slot, runner(batch, desc, steps=steps, group=group), [c.direction for c in batch]):
+            res[sl] = {**r, "direction": d}
+    te = [res.get((i, "te")) for i in range(len(cases))]
     play, rig = [], []
-    for i in range(len(X)):
-        pl = play_at_positions(curve["dp_3"][i], curve["dm_3"][i])
-        rg = rigidity_at_positions({k: v[i] for k, v in curve.items()}, cfg.rated_Nm)
+    for i in range(len(cases)):
+        curve = {name: res.get((i, name)) for name, _, _ in PLAY_RUNS}
+        pl = play_at_positions(curve["dp_3"], curve["dm_3"])
+        rg = rigidity_at_positions(curve, cfg.rated_Nm)
         play.append(float(np.max(pl)) if pl is not None else float("nan"))
         rig.append(float(np.min(rg)) if rg is not None else float("nan"))
     return pd.DataFrame({
@@ -173,8 +208,72 @@ def responses_of(feats, X: pd.DataFrame, design: Design, cfg: Any, runners: dict
     })
 
 
+def designed_sample(X: pd.DataFrame, groups: dict[str, list[str]], n_s: int) -> pd.DataFrame:
+    """The designed draws of the contributors: for every tolerance group a block of A (the first ``n_s``
+    rows of ``X``) with that group's columns taken from B (the next ``n_s`` rows); empty if ``n_s < 2``."""
+    if n_s < 2 or not groups:
+        return pd.DataFrame(columns=X.columns)
+    A, B = X.iloc[:n_s].reset_index(drop=True), X.iloc[n_s:2 * n_s].reset_index(drop=True)
+    AB = []
+    for cols in groups.values():
+        m = A.copy()
+        m[cols] = B[cols].to_numpy()
+        AB.append(m)
+    return pd.concat(AB, ignore_index=True)
+
+
+def solve_full_mc(cfg: Any, design: Design, runners: dict[str, Runner], base_model: dict | None = None,
+                  background: Any = None) -> dict[str, Any]:
+    """Draw and solve every Monte Carlo case (the part of :func:`run_full_mc` that needs the workers).
+
+    Parameters
+    ----------
+    cfg, design, runners, base_model
+        As :func:`run_full_mc`.
+    background : concurrent.futures.Executor or None
+        A thread pool: the fcl check is then submitted at once, before the draws, and solved beside them.
+
+    Returns
+    -------
+    dict
+        ``feats, X, Xab, groups, n_s, cases, Y, Yab, check`` (fcl results of the check draws or None),
+        ``notes``, ``t0`` (start, ``time.perf_counter``), ``counts`` (the runners' counters before).
+    """
+    t0 = time.perf_counter()
+    done0 = {k: (getattr(r, "computed", 0), getattr(r, "reused", 0), getattr(r, "worker_seconds", 0.0))
+             for k, r in runners.items()}
+    notes: list[str] = []
+    tols = cfg.tolerances
+    base_model = dict(base_model or {})
+    feats = features(tols, design)
+    X = draw(tols, feats, cfg.mc_draws, np.random.default_rng([cfg.seed, 2]))
+    groups = {g: c for g, c in group_columns(feats).items() if tols[g].std > 0}
+    n_s = min(int(cfg.mc_sobol), len(X) // 2)
+    Xab = designed_sample(X, groups, n_s)
+    n_chk = min(int(cfg.mc_check), len(X)) if "check" in runners else 0
+    cases = draw_cases(feats, X.iloc[:n_chk], design, "mc", cfg.load_Nm, base_model, notes)
+    idx = [i for i in range(n_chk) if cases[i] is not None]
+
+    def check() -> list[dict[str, Any] | None]:
+        got = dict(zip(idx, runners["check"]([cases[i] for i in idx], f"MC check: fcl ({n_chk} draws)")
+                       if idx else []))
+        return [got.get(i) for i in range(n_chk)]
+
+    chk = background.submit(check) if background is not None and n_chk else None
+    cases = (cases + draw_cases(feats, X.iloc[n_chk:], design, "mc", cfg.load_Nm, base_model, notes, start=n_chk)
+             + draw_cases(feats, Xab, design, "sobol", cfg.load_Nm, base_model, notes))
+    # the independent and the designed draws in one batch (no wait between them)
+    Yall = responses_of(cases, design, cfg, runners["mc"], notes,
+                        f"MC: {len(X)} + {len(Xab)} designed draws x {1 + len(PLAY_RUNS)} solves")
+    checked = (chk.result() if chk is not None else check()) if n_chk else None
+    return {"feats": feats, "X": X, "Xab": Xab, "groups": groups, "n_s": n_s, "cases": cases,
+            "Y": Yall.iloc[:len(X)].reset_index(drop=True), "Yab": Yall.iloc[len(X):].reset_index(drop=True),
+            "check": checked, "notes": notes, "t0": t0, "counts": done0}
+
+
 def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], fits: dict[str, Any],
-                notes: list[str], base_model: dict | None = None, workers: int = 1) -> dict[str, Any]:
+                notes: list[str], base_model: dict | None = None, workers: int = 1,
+                solved: dict[str, Any] | None = None) -> dict[str, Any]:
     """The full-solver Monte Carlo of the study (see the module docstring).
 
     Parameters
@@ -186,40 +285,33 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
     design : Design
         The reducer.
     runners : dict
-        ``te`` (analytic, ``cfg.steps``), ``play`` (analytic, :func:`play_positions` steps) and ``check``
-        (fcl, ``cfg.steps``) runners, ``runner(cases, desc) -> results``.
+        ``mc`` (analytic; the TE at ``cfg.steps``, the play at :func:`play_positions` steps, per case) and
+        optionally ``check`` (fcl, ``cfg.steps``): :class:`rvdyn.runner.Runner` objects.
     fits : dict
         Response -> FitBundle of the design stage (surface comparison), may be empty.
     notes : list
         Notes of the run (appended to).
+    workers : int
+        Workers of the executor (for the throughput figure).
+    solved : dict or None
+        The output of :func:`solve_full_mc` when the solves ran already (beside other stages); default:
+        solved here.
     """
-    t0 = time.perf_counter()
-    done0 = {k: (getattr(r, "computed", 0), getattr(r, "reused", 0)) for k, r in runners.items()}
+    sv = solved if solved is not None else solve_full_mc(cfg, design, runners, base_model)
+    notes.extend(sv["notes"])
+    t0, done0 = sv["t0"], sv["counts"]
     tols = cfg.tolerances
-    base_model = dict(base_model or {})
-    feats = features(tols, design)
-    X = draw(tols, feats, cfg.mc_draws, np.random.default_rng([cfg.seed, 2]))
-    Y = responses_of(feats, X, design, cfg, runners, base_model, notes, "mc")
+    feats, X, Xab, groups, n_s = sv["feats"], sv["X"], sv["Xab"], sv["groups"], sv["n_s"]
+    Y, Yab = sv["Y"], sv["Yab"]
+    n_design = len(Xab)
     specs = cfg.specs()
     out: dict[str, Any] = {"tolerances": tols, "n_features": len(feats), "specs": specs,
                            "play_positions": play_positions(design), "play_load_Nm": PLAY_LOAD_FRACTION * cfg.rated_Nm,
                            "features": pd.DataFrame([{"feature": f.name, "tolerance": f.tolerance,
                                                       "component": f.component} for f in feats])}
-    groups = {g: c for g, c in group_columns(feats).items() if tols[g].std > 0}
-    # designed sample for the contributors: A, B = first two blocks of the independent draws
-    n_s = min(int(cfg.mc_sobol), len(X) // 2)
+    out["sobol_n"] = n_s
     sob_rows = []
-    n_design = 0
-    if n_s >= 2 and groups:
-        A, B = X.iloc[:n_s].reset_index(drop=True), X.iloc[n_s:2 * n_s].reset_index(drop=True)
-        AB = []
-        for g, cols in groups.items():
-            m = A.copy()
-            m[cols] = B[cols].to_numpy()
-            AB.append(m)
-        Xab = pd.concat(AB, ignore_index=True)
-        Yab = responses_of(feats, Xab, design, cfg, runners, base_model, notes, "sobol")
-        n_design = len(Xab)
+    if n_design:
         for resp in MC_RESPONSES:
             yA, yB = Y[resp].to_numpy()[:n_s], Y[resp].to_numpy()[n_s:2 * n_s]
             yab = {g: Yab[resp].to_numpy()[j * n_s:(j + 1) * n_s] for j, g in enumerate(groups)}
@@ -227,7 +319,6 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
             s.insert(0, "response", resp)
             sob_rows.append(s)
     out["sobol"] = pd.concat(sob_rows, ignore_index=True) if sob_rows else pd.DataFrame()
-    out["sobol_n"] = n_s
     per: dict[str, Any] = {}
     alloc_rows = []
     for resp in MC_RESPONSES:
@@ -264,10 +355,9 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
                                         else None)}
     out["surface"] = surf
     # fcl on a check subsample of the independent draws
-    n_chk = min(int(cfg.mc_check), len(X))
-    if n_chk > 0 and "check" in runners:
-        chk = _solve(runners["check"], feats, X.iloc[:n_chk], design, "mc", cfg.load_Nm, 1, base_model, [],
-                     f"MC check: fcl ({n_chk} draws)")
+    if sv["check"] is not None:
+        chk = sv["check"]
+        n_chk = len(chk)
         cdf = pd.DataFrame({"draw": np.arange(1, n_chk + 1),
                             "te_pp_arcmin_analytic": Y["te_pp_arcmin"].to_numpy()[:n_chk],
                             "te_pp_arcmin_fcl": [_stat(r, "pp") for r in chk],
@@ -286,10 +376,15 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
     n_eval = len(X) + n_design
     computed = sum(getattr(r, "computed", 0) - done0[k][0] for k, r in runners.items() if k != "check")
     reused = sum(getattr(r, "reused", 0) - done0[k][1] for k, r in runners.items() if k != "check")
+    busy = sum(getattr(r, "worker_seconds", 0.0) - done0[k][2] for k, r in runners.items() if k != "check")
     out["timing"] = {"wall_s": wall, "full_solver_draws": n_eval, "independent_draws": len(X),
                      "analytic_solves_computed": computed, "analytic_solves_reused": reused,
-                     "design_draws": n_design, "solves_per_draw": 5, "workers": workers,
-                     "draws_per_s_per_worker": n_eval / wall / max(1, workers) if wall > 0 else float("nan")}
+                     "design_draws": n_design, "solves_per_draw": 1 + len(PLAY_RUNS), "workers": workers,
+                     "worker_s": busy, "draws_per_s_wall": n_eval / wall if wall > 0 else float("nan"),
+                     # worker time on the Monte Carlo tasks (case reading, geometry, the five solves): the rate
+                     # of one worker, also when the draws shared the workers with other stages
+                     "draws_per_s_per_worker": (n_eval / busy if busy > 0 else
+                                                n_eval / wall / max(1, workers) if wall > 0 else float("nan"))}
     return out
 
 

@@ -20,14 +20,19 @@ Stages (each one a list of cases solved through the cached, parallel :class:`rvd
 The reducer is the paper's by default or a user's design JSON (``--reducer``): every count and ratio
 of the study comes from that :class:`rvcad.params.Design`.
 
+With more than one worker the stages' cases are all submitted at the start (the paper stages' cases
+in one batch, the Table 6 readings, the Monte Carlo draws and their fcl check, each from a thread of
+this process), so the workers never wait while this process fits a stage or builds the next one's
+cases; the stages then read their results in the order above (the numbers are those of a serial run).
+
 :func:`run_study` returns a :class:`StudyResult`; :func:`rvstudy.report.write_report` writes it.
 """
 from __future__ import annotations
 
 import math
-import re
 import time
 import warnings
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,9 +42,9 @@ import pandas as pd
 
 import rsm
 from rsm.terms import preset_terms
-from rvcad.errors import ERROR_TYPES, MAX_ABS, Case
+from rvcad.errors import Case
 from rvcad.params import Design
-from rvcad.validation import DesignError, TableError, as_mapping, read_json_file
+from rvcad.validation import DesignError, as_mapping, read_json_file
 from rvdyn.contacts import ContactLaw
 from rvstudy.screen import (
     ARCSEC_PER_ARCMIN,
@@ -47,14 +52,18 @@ from rvstudy.screen import (
     ScreenResult,
     make_case,
     run_screen,
+    screen_cases,
+    sweep_cases,
 )
 from rvdyn.te import SOLVERS
 import rvpaper as paper
 from rvdyn.cache import CaseCache
 from rvdyn.runner import Executor, Runner, make_executor
-from rvstudy.paper_readings import READINGS_STEPS, run_readings
+from rvstudy.factors import PIN_PATTERNS, FactorSet, load_factors, pattern_value  # noqa: F401  (re-exported)
+from rvstudy.paper_readings import LAWS as READINGS_LAWS
+from rvstudy.paper_readings import READINGS_STEPS, readings_cases, run_readings
 from rvstudy.montecarlo import Tolerance, default_tolerances
-from rvstudy.stackup import MC_RESPONSES, play_positions, run_full_mc
+from rvstudy.stackup import MC_RESPONSES, run_full_mc, solve_full_mc
 
 STAGES = ("screen", "doe", "validation", "mc", "readings")
 DESIGNS = ("bbd", "ccd")
@@ -67,8 +76,8 @@ RESPONSE_LABEL = {"mean_abs_arcmin": "mean |TE| [arcmin]", "pp_arcmin": "TE peak
 DEFAULT_STEPS = 360
 DEFAULT_SEED = 20240
 #: Full-solver Monte Carlo draws, designed-sample block size, fcl check draws (defaults).
-DEFAULT_MC_DRAWS = 200
-DEFAULT_MC_SOBOL = 10
+DEFAULT_MC_DRAWS = 1500
+DEFAULT_MC_SOBOL = 50
 DEFAULT_MC_CHECK = 8
 
 
@@ -152,7 +161,7 @@ class StudyConfig:
     """
 
     out: Path = Path("rv-stackup-out")
-    solver: str = "fcl"
+    solver: str = "analytic"
     steps: int = DEFAULT_STEPS
     load_Nm: float = 20.0
     workers: int = 2
@@ -288,133 +297,6 @@ def min_resolving_steps(design: Design) -> int:
 
 #: For the paper's design: 242.
 MIN_RESOLVING_STEPS = min_resolving_steps(Design())
-
-# ---------------------------------------------------------------------------------------------- factors
-#: Pin patterns a factor of a pin-wise error (pin_pitch, pin_circle_diameter, pin_radius) can take,
-#: written ``key[pattern]`` in the levels table's ``error`` column: ``all`` = every pin gets the
-#: factor's value (for pin_pitch a rotation of the whole pin ring), ``alternate`` = the even pins
-#: 0, 2, ..., 38 get it and the odd pins none. Without a pattern the value goes to the error's
-#: default instance (pin_pitch: pin 0 only; the radius errors: all pins).
-PIN_PATTERNS = ("all", "alternate")
-
-
-def pattern_value(key: str, pattern: str | None, value: float, z_pins: int | None = None) -> float | list[float]:
-    """The case-JSON value of a factor setting: the number itself, or the list of ``z_pins`` pin values
-    (default: the default design's 40) of a pin pattern (see :data:`PIN_PATTERNS`), in the error's unit."""
-    if pattern is None:
-        return value
-    z_pins = Design().z_pins if z_pins is None else int(z_pins)
-    if pattern == "all":
-        return [value] * z_pins
-    if pattern == "alternate":
-        return [value if i % 2 == 0 else 0.0 for i in range(z_pins)]
-    raise ValueError(f"pattern {pattern!r} of {key} is unknown; allowed: {list(PIN_PATTERNS)}")
-
-
-@dataclass
-class FactorSet:
-    """RSM factors: names, the error type of each (and its pin pattern), and the levels table
-    (actual units = error units)."""
-
-    names: list[str]
-    errors: dict[str, str]
-    levels: rsm.Levels
-    table: pd.DataFrame
-    is_paper: bool
-    patterns: dict[str, str | None] = field(default_factory=dict)
-    z_pins: int = field(default_factory=lambda: Design().z_pins)
-
-    @property
-    def error_keys(self) -> list[str]:
-        return [self.errors[f] for f in self.names]
-
-    def spec(self, f: str) -> str:
-        """``key`` or ``key[pattern]`` of factor ``f``."""
-        p = self.patterns.get(f)
-        return self.errors[f] + (f"[{p}]" if p else "")
-
-    def case_errors(self, values: dict[str, float]) -> dict[str, float | list[float]]:
-        """Case-JSON errors of error values keyed by error type: a factor's pattern is applied to its
-        error type's value; other error types keep their default instance."""
-        pat = {self.errors[f]: self.patterns.get(f) for f in self.names}
-        return {k: pattern_value(k, pat.get(k), float(v), self.z_pins) for k, v in values.items()}
-
-
-def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSet:
-    """Levels table (paper Table 5 by default) and the error type of each factor.
-
-    The error type comes from an ``error`` column, else from the paper's map (EA = pin_pitch,
-    EB = pin_circle_diameter, EC = pin_radius, ED = disc_hole_eccentricity), else from the factor
-    name itself when it is a Table 4 error key. A ``unit`` column must match the error's unit.
-    """
-    if levels_path is None:
-        df = paper.table5_levels()
-    else:
-        p = Path(levels_path)
-        if not p.is_file():
-            raise TableError(f"--levels file {str(p)!r} does not exist")
-        try:
-            df = pd.read_csv(p)
-        except Exception as exc:  # noqa: BLE001 - any parse problem is a bad option (messages on one line)
-            exc = " ".join(str(exc).split())
-            raise TableError(f"--levels file {str(p)!r} cannot be read as CSV: {exc}") from None
-    df.columns = [str(c).strip() for c in df.columns]
-    if "factor" not in df.columns:
-        raise TableError(f"--levels file needs a 'factor' column; columns are {list(df.columns)}")
-    try:
-        levels = rsm.Levels.from_frame(df)
-    except ValueError as exc:
-        raise TableError(f"--levels: {exc}") from None
-    names = levels.names if not factors else list(factors)
-    for f in names:
-        if f not in levels:
-            raise TableError(f"--factors {f!r} is not in the levels table; it lists {levels.names}")
-    if len(set(names)) != len(names):
-        raise TableError(f"--factors {names} lists a factor twice")
-    if not 3 <= len(names) <= 7:
-        raise TableError(f"--factors: the designs need 3 to 7 factors, got {len(names)} ({names})")
-    errors: dict[str, str] = {}
-    patterns: dict[str, str | None] = {}
-    for f in names:
-        row = df[df["factor"].astype(str).str.strip() == f].iloc[0]
-        key = str(row["error"]).strip() if "error" in df.columns and pd.notna(row.get("error")) else (
-            RSM_FACTORS.get(f, f))
-        m = re.fullmatch(r"([A-Za-z_]+)\s*\[\s*([A-Za-z_]+)\s*\]", key)
-        pattern = None
-        if m:
-            key, pattern = m.group(1), m.group(2)
-            if pattern not in PIN_PATTERNS:
-                raise TableError(f"--levels: factor {f!r} has pin pattern {pattern!r}; allowed: {list(PIN_PATTERNS)}")
-            if key in ERROR_TYPES and not ERROR_TYPES[key].pinwise:
-                raise TableError(f"--levels: factor {f!r}: a pin pattern needs a pin-wise error "
-                                 f"({sorted(k for k, e in ERROR_TYPES.items() if e.pinwise)}), not {key!r}")
-        patterns[f] = pattern
-        if key not in ERROR_TYPES:
-            raise TableError(f"--levels: factor {f!r} maps to no Table 4 error (error {key!r}); add an 'error' "
-                             f"column with one of {sorted(ERROR_TYPES)}")
-        unit = str(row["unit"]).strip() if "unit" in df.columns and pd.notna(row.get("unit")) else ""
-        if unit and unit != ERROR_TYPES[key].unit:
-            raise TableError(f"--levels: factor {f!r} ({key}) has unit {unit!r}; the error's unit is "
-                             f"{ERROR_TYPES[key].unit!r}")
-        lim = MAX_ABS[ERROR_TYPES[key].unit]
-        for lev in ("low", "center", "high"):
-            x = getattr(levels[f], lev)
-            if not (math.isfinite(x) and abs(x) <= lim):
-                raise TableError(f"--levels: factor {f!r} ({key}) {lev} {x!r} {ERROR_TYPES[key].unit} is out of range; allowed: a finite "
-                                 f"value with |value| <= {lim:g} {ERROR_TYPES[key].unit}", field=f"{f}.{lev}", value=x)
-        errors[f] = key
-    if len(set(errors.values())) != len(errors):
-        raise TableError(f"--levels: two factors map to the same error type ({errors})")
-    levels = levels.subset(names)
-    ptab = paper.table5_levels().set_index("factor")
-    is_paper = names == list(ptab.index) and all(
-        errors[f] == ptab.loc[f, "error"] and patterns[f] is None and levels[f].low == ptab.loc[f, "low"]
-        and levels[f].center == ptab.loc[f, "center"] and levels[f].high == ptab.loc[f, "high"] for f in names)
-    table = levels.to_frame()
-    table["error"] = [errors[f] for f in table["factor"]]
-    table["pattern"] = [patterns[f] or "default instance" for f in table["factor"]]
-    return FactorSet(names, errors, levels, table, is_paper, patterns)
-
 
 # ---------------------------------------------------------------------------------------------- results
 @dataclass
@@ -591,21 +473,68 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
         res.notes.append(f"--steps {cfg.steps} is below {n_min}: the TE has content at the input order "
                          f"{design.ratio:g} (one period per input turn), which needs two steps a period, so "
                          "peak-to-peak values are undersampled (the mean is less affected)")
+    # With more than one worker every stage's cases are submitted at once (the paper stages, the Table 6
+    # readings, the Monte Carlo draws and their fcl check, each from its own thread), so that no worker
+    # waits while this process fits a stage or builds the next stage's cases; the stages then read their
+    # results in the usual order (Runner.prefetch keeps them in memory, counted once).
+    bg = ThreadPoolExecutor(max_workers=6, thread_name_prefix="rv-stackup") if getattr(ex, "workers", 1) > 1 else None
+    pending: dict[str, Future] = {}
     try:
+        half = {f: fs.levels[f].half_range for f in fs.names if f in RSM_FACTORS and fs.errors[f] == RSM_FACTORS[f]
+                and fs.patterns.get(f) is None and fs.levels[f].center == 0}
+        if {"doe", "validation", "mc"} & set(cfg.stages):
+            coded, res.paper_order = _design(cfg, fs)
+            actual = fs.levels.coded_to_actual(coded[fs.names].to_numpy(float), fs.names)
+            doe_cases = _cases_for(fs, actual, "doe", cfg, base)
+        val_on = "validation" in cfg.stages and cfg.n_validation > 0
+        val_points = _validation_points(cfg, fs) if val_on else None
+        val_cases = _cases_for(fs, val_points[1], "validation", cfg, base) if val_on else []
+        readings_on = "readings" in cfg.stages and fs.is_paper
+        r_runners = ({ln: make_runner("analytic", min(cfg.steps, READINGS_STEPS),
+                                      law if ln == "impact" else ContactLaw(kind=ln)) for ln in READINGS_LAWS}
+                     if readings_on else {})
+        mc_runners: dict[str, Runner] = {}
+        if "mc" in cfg.stages:
+            mc_law = law if cfg.mc_contact == "impact" else ContactLaw(cfg.K, cfg.n, kind=cfg.mc_contact)
+            mc_runners["mc"] = make_runner("analytic", cfg.steps, mc_law)
+            if cfg.mc_check > 0:
+                import importlib.util
+
+                if importlib.util.find_spec("fcl") is None or importlib.util.find_spec("rvdyn.fcl_contacts") is None:
+                    res.notes.append("the fcl check of the Monte Carlo is skipped: python-fcl is not installed")
+                else:
+                    mc_runners["check"] = make_runner("fcl", cfg.steps, mc_law)
+        if bg is not None:
+            ahead: list[Case] = []
+            if "screen" in cfg.stages:
+                ahead += list(screen_cases(cfg.load_Nm, True, base)["case"])
+                ahead += list(sweep_cases(cfg.sweep_points, cfg.load_Nm, half or None, base)["case"])
+            if {"doe", "validation", "mc"} & set(cfg.stages):
+                ahead += doe_cases
+            ahead += val_cases
+            if ahead:
+                pending["paper"] = bg.submit(runner.prefetch, ahead, f"paper stages ({len(ahead)} cases)")
+            for ln, r in r_runners.items():
+                pending[ln] = bg.submit(r.prefetch, readings_cases(fs, cfg.load_Nm, ln),
+                                        f"Table 6 readings, {ln} law")
+            if mc_runners:
+                pending["mc"] = bg.submit(solve_full_mc, cfg, design, mc_runners, None, bg)
+
+        def ready(name: str) -> None:
+            if name in pending:
+                pending.pop(name).result()
+
         if "screen" in cfg.stages:
             t0 = time.perf_counter()
-            half = {f: fs.levels[f].half_range for f in fs.names if f in RSM_FACTORS and fs.errors[f] == RSM_FACTORS[f]
-                    and fs.patterns.get(f) is None and fs.levels[f].center == 0}
+            ready("paper")
             res.screen = run_screen(cfg.solver, cfg.steps, cfg.sweep_points, cfg.load_Nm, runner=runner,
                                     both_signs=True, half_range=half or None, progress=cfg.progress,
                                     sweeps="screen" in cfg.stages, base=base)
             res.timings["screen"] = time.perf_counter() - t0
         if {"doe", "validation", "mc"} & set(cfg.stages):
             t0 = time.perf_counter()
-            coded, res.paper_order = _design(cfg, fs)
-            actual = fs.levels.coded_to_actual(coded[fs.names].to_numpy(float), fs.names)
-            cases = _cases_for(fs, actual, "doe", cfg, base)
-            out = runner(cases, f"design ({cfg.design}, {len(cases)} runs)")
+            ready("paper")
+            out = runner(doe_cases, f"design ({cfg.design}, {len(doe_cases)} runs)")
             table = coded.copy()
             for j, f in enumerate(fs.names):
                 table[f"{f}_actual"] = [float(f"{v:.12g}") for v in actual[:, j]]
@@ -617,33 +546,32 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
             for resp in RESPONSES:
                 res.fits[resp] = _fit(res.design, fs, resp, cfg.alpha)
             res.timings["doe"] = time.perf_counter() - t0
-        if "validation" in cfg.stages and cfg.n_validation > 0:
+        if val_on:
             t0 = time.perf_counter()
-            res.validation = _validation(cfg, fs, runner, res, base)
+            ready("paper")
+            res.validation = _validation(cfg, fs, runner, res, val_points, val_cases)
             res.timings["validation"] = time.perf_counter() - t0
-        if "mc" in cfg.stages:
+        if readings_on:  # Table 6 as measurements (rvstudy.paper_readings)
             t0 = time.perf_counter()
-            mc_law = law if cfg.mc_contact == "impact" else ContactLaw(cfg.K, cfg.n, kind=cfg.mc_contact)
-            runners = {"te": make_runner("analytic", cfg.steps, mc_law),
-                       "play": make_runner("analytic", play_positions(design), mc_law)}
-            if cfg.mc_check > 0:
-                import importlib.util
-
-                if importlib.util.find_spec("fcl") is None or importlib.util.find_spec("rvdyn.fcl_contacts") is None:
-                    res.notes.append("the fcl check of the Monte Carlo is skipped: python-fcl is not installed")
-                else:
-                    runners["check"] = make_runner("fcl", cfg.steps, mc_law)
-            res.mc = run_full_mc(cfg, fs, design, runners, res.fits, res.notes, workers=getattr(ex, "workers", 1))
-            res.timings["mc"] = time.perf_counter() - t0
-        if "readings" in cfg.stages and fs.is_paper:  # Table 6 as measurements (rvstudy.paper_readings)
-            t0 = time.perf_counter()
+            for ln in r_runners:
+                ready(ln)
             res.readings = run_readings(fs, ex, cache, min(cfg.steps, READINGS_STEPS), cfg.load_Nm,
-                                        ContactLaw(cfg.K, cfg.n), progress=cfg.progress, **kw)
+                                        ContactLaw(cfg.K, cfg.n), progress=cfg.progress, runners=r_runners, **kw)
             res.notes.extend(res.readings.notes)
             res.timings["readings"] = time.perf_counter() - t0
+        if mc_runners:
+            t0 = time.perf_counter()
+            solved = pending.pop("mc").result() if "mc" in pending else None
+            res.mc = run_full_mc(cfg, fs, design, mc_runners, res.fits, res.notes, workers=getattr(ex, "workers", 1),
+                                 solved=solved)
+            res.timings["mc"] = res.mc["timing"]["wall_s"]
+            if bg is not None:  # the draws were solved beside the other stages
+                res.timings["mc_wait_and_analysis"] = time.perf_counter() - t0
     finally:
         if own:
             ex.close()
+        if bg is not None:
+            bg.shutdown(wait=True, cancel_futures=True)
     res.timings["total"] = time.perf_counter() - t_start
     res.counters = _merged_counters(made)
     res.cache_counters = cache.counters()
@@ -661,14 +589,20 @@ def _merged_counters(runners: list[Runner]) -> dict[str, Any]:
     return out
 
 
-def _validation(cfg: StudyConfig, fs: FactorSet, runner: Runner, res: StudyResult,
-                base: dict[str, Any] | None = None) -> pd.DataFrame:
-    """Random cases uniform in the coded box [-1, 1]^k (seed ``[seed, 1]``), simulated and predicted."""
+def _validation_points(cfg: StudyConfig, fs: FactorSet) -> tuple[np.ndarray, np.ndarray]:
+    """Coded and actual points of the validation: uniform in the coded box [-1, 1]^k (seed ``[seed, 1]``),
+    actual values rounded to 6 significant digits (and the coded ones recomputed from them)."""
     rng = np.random.default_rng([cfg.seed, 1])
     z = rng.uniform(-1.0, 1.0, (cfg.n_validation, len(fs.names)))
     actual = np.vectorize(lambda v: float(f"{v:.6g}"))(fs.levels.coded_to_actual(z, fs.names))
-    z = fs.levels.actual_to_coded(actual, fs.names)
-    out = runner(_cases_for(fs, actual, "validation", cfg, base), f"validation ({cfg.n_validation} cases)")
+    return fs.levels.actual_to_coded(actual, fs.names), actual
+
+
+def _validation(cfg: StudyConfig, fs: FactorSet, runner: Runner, res: StudyResult,
+                points: tuple[np.ndarray, np.ndarray], cases: list[Case]) -> pd.DataFrame:
+    """The validation cases (:func:`_validation_points`), simulated and predicted."""
+    z, actual = points
+    out = runner(cases, f"validation ({cfg.n_validation} cases)")
     df = pd.DataFrame({"case": np.arange(1, len(z) + 1)})
     for j, f in enumerate(fs.names):
         df[f] = z[:, j]

@@ -137,6 +137,13 @@ def test_sobol_from_design_and_reweighted_allocation():
     assert s.loc["a", "first_order"] == pytest.approx(1 / 6, abs=0.04)
     assert s.loc["b", "first_order"] == pytest.approx(4 / 6, abs=0.05)
     assert s.loc["a", "total"] == pytest.approx(2 / 6, abs=0.04) and s.loc["b", "total"] == pytest.approx(5 / 6, abs=0.05)
+    # a response far from zero (mean 100, sigma 2.4): the centred first-order estimate stays as accurate
+    # (uncentred its standard error would be ~100/2.4 times larger: about 1 at n = 400)
+    m = 400
+    s = sobol_from_design(f(A[:m]) + 100, f(B[:m]) + 100, {g: f(mm[:m]) + 100 for g, mm in AB.items()},
+                          n_boot=50).set_index("tolerance")
+    assert s.loc["a", "first_order"] == pytest.approx(1 / 6, abs=0.15)
+    assert s.loc["b", "first_order"] == pytest.approx(4 / 6, abs=0.15)
     # re-weighting: |x| <= 1 with x ~ N(0, 1): tightening sigma to 0.8 gives P(|z| <= 1.25)
     X = pd.DataFrame({"x": rng.normal(0, 1, 20000)})
     al = allocation(X, {"pin_radius": ["x"]}, {"pin_radius": Tolerance("pin_radius", "normal", (1.0,))},
@@ -199,3 +206,36 @@ def test_play_and_rigidity_equal_rvdyn_stiffness_at_a_locked_input():
     # torque, 0.09 N m at 3 % here) moves the mid-width points: the proxy is the friction-free reading
     assert play[0] == pytest.approx(h.figures["lost_motion_arcmin"], rel=1e-3)
     assert play.max() >= play[0] and np.all(play > 0)
+
+
+def test_grouped_draw_solves_equal_single_solves_and_share_the_cache(tmp_path):
+    """The five solves of a draw in one worker task (rvdyn.runner group -> rvdyn.te.run_te_many) equal the
+    separate solves within the solver tolerance, keep one cache entry each, and a prefetched batch is
+    counted once."""
+    import dataclasses
+
+    from rvdyn.runner import Runner
+
+    c = Case.from_dict({"errors": {"pin_radius": [0.5 * ((-1) ** i) for i in range(40)], "pin_pitch": 0.004}})
+    cases = [c] + [dataclasses.replace(c, load_Nm=L, direction=d) for L, d in ((5.0, 1), (5.0, -1), (167.0, 1),
+                                                                               (167.0, -1))]
+    steps = [STEPS, 7, 7, 7, 7]
+    single = Runner(None, None, "analytic", STEPS)(cases, "single", steps=steps)
+    grouped_runner = Runner(None, tmp_path / "cache", "analytic", STEPS)
+    grouped = grouped_runner(cases, "grouped", steps=steps, group=[0] * 5)
+    assert grouped_runner.computed == 5 and grouped_runner.worker_seconds > 0
+    for a, b in zip(single, grouped):
+        assert a["key"] == b["key"] and b["status"] == "ok"
+        np.testing.assert_allclose(b["te_arcsec"], a["te_arcsec"], rtol=0, atol=1e-4)  # run_te_many's bound
+        assert not np.array_equal(b["te_arcsec"], np.zeros_like(b["te_arcsec"]))
+    again = Runner(None, tmp_path / "cache", "analytic", STEPS)
+    assert [r["key"] for r in again(cases, "from the cache", steps=steps)] == [r["key"] for r in single]
+    assert again.computed == 0 and again.reused == 5
+    other = dataclasses.replace(c, raw_errors={"pin_pitch": 0.004})
+    with pytest.raises(ValueError, match="must differ only in load and direction"):
+        Runner(None, None, "analytic", STEPS)([c, other], "bad group", group=[1, 1])
+    pre = Runner(None, None, "analytic", STEPS)
+    pre.prefetch(cases[:2], "ahead", steps=steps[:2], group=[0, 0])
+    out = pre(cases[:2], "read", steps=steps[:2])
+    assert pre.computed == 2 and pre.reused == 0
+    np.testing.assert_array_equal(out[1]["te_arcsec"], grouped[1]["te_arcsec"])
