@@ -198,7 +198,7 @@ class Fitting(Screening):
                     angle, se, params, a.iteration, float(a.info.get("explained_fraction", float("nan"))),
                     float(a.info.get("F", float("nan"))), float(a.info.get("p_value", float("nan"))),
                     float(a.info.get("delta_bic", float("nan"))), list(a.info.get("alternatives", [])),
-                    declared, total))
+                    declared, total, dict(a.info.get("selection", {"method": "greedy"}))))
             if rho > 0.2:
                 self.notes.append(f"the final residual is autocorrelated (lag-1 {rho:.2f}): the confidence intervals "
                                   f"are widened by {infl:.2f}")

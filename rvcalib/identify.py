@@ -36,6 +36,9 @@ Algorithm (:func:`calibrate`)
 5. Estimation: all added parameters are re-fitted jointly through the full nonlinear model
    solved exactly at every reading (``least_squares``; empirical terms are projected out linearly) and
    the F test and BIC are confirmed on all samples.
+   With ``joint`` (default) every step that would add a term is first put to the joint selection
+   of :mod:`rvcalib.joint` (a best subset of a shortlist re-solved at the current state, with
+   swaps), which replaces the greedy choice when it differs and is confirmed.
 6. Repeat until nothing passes; then confidence intervals from the Jacobian (forward differences)
    and the residual variance, widened by ``sqrt((1 + rho) / (1 - rho))`` for a lag-1 residual
    autocorrelation ``rho > 0`` (the residual is then not white and the plain interval too narrow).
@@ -56,6 +59,7 @@ from rvcalib.results import (Active, CalibrationResult, Candidate, EmpiricalTerm
                              Unexplained, Validated)
 from rvcalib.screening import coarse_values
 from rvcalib.groups import Groups
+from rvcalib.joint import JointSelection
 
 __all__ = ["Calibrator", "calibrate", "CalibrationResult", "FittedEffect", "Unexplained", "EmpiricalTerm",
            "Active", "Candidate", "HarmonicCandidate", "Validated"]
@@ -70,7 +74,7 @@ RAMP_NOISE_FACTOR = 3.0
 HARMONIC_BIC_MARGIN = 2.0
 
 
-class Calibrator(Groups):
+class Calibrator(JointSelection, Groups):
     """The loop on one dataset (see the module docstring and :class:`rvcalib.model.LoopModel` for the
     parameters)."""
 
@@ -104,6 +108,11 @@ class Calibrator(Groups):
                 break
             it += 1
             t_it = time.perf_counter()
+            if self.rescreen_every and self.rescreen_due >= self.rescreen_every:
+                n_sol = self.solve_signatures([e for e in self.lib.templates() if not e.expensive], self._pairs())
+                self.rescreen_due = 0
+                self.log(f"screening signatures re-solved at the current state ({n_sol} solves) in "
+                         f"{time.perf_counter() - t_it:.1f} s")
             p_cur = self._p_cur()
             # the residual at the readings (the model solved there) taken to the coarse grid: where the
             # readings are off the grid only this smooth remainder is interpolated, not the TE's kinks
@@ -184,18 +193,27 @@ class Calibrator(Groups):
                 dec = "physical"
             elif sig_h:
                 dec = "empirical"
-            if dec == "physical":
+            got = None
+            if self.joint and dec in ("physical", "empirical"):
+                got = self.joint_step(ranking, best if dec == "physical" else None,
+                                      hbest.term if dec == "empirical" else None, rc, rc_cat, Ec, r_full, it, log,
+                                      harms)
+                if got is not None:
+                    log["decision"] = got[1]
+                    self.rescreen_due += 1
+            if got is None and dec == "physical":
                 ok, msg = self._add_physical(best, ranking, r_full, it, log, harms)
+                self.rescreen_due += int(ok)
                 log["decision"] = msg
                 if not ok:
                     tried.add(best.effect.name)
                     dec = "retry" if len(tried) < 3 else "stop"
-            elif dec == "empirical":
+            elif got is None and dec == "empirical":
                 ok, msg = self._add_empirical(hbest.term, it, log)
                 log["decision"] = msg
                 if not ok:
                     dec = "stop"
-            else:
+            elif got is None:
                 log["decision"] = "stop: no candidate passes the F test and the BIC"
             r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
             self.rss_full = float(r_full @ r_full)
@@ -279,7 +297,8 @@ class Calibrator(Groups):
 
 def calibrate(dataset: MeasuredDataset, steps: int | None = None, alpha: float = 0.01, max_terms: int = 6,
               top_k: int = 4, log: Callable[[str], None] | None = None,
-              screen_points: int | None = None, time_budget_s: float | None = None) -> CalibrationResult:
+              screen_points: int | None = None, time_budget_s: float | None = None, joint: bool = True,
+              joint_new: int = 6, rescreen_every: int = 0) -> CalibrationResult:
     """Close the loop on a measured dataset (see the module docstring).
 
     Parameters
@@ -303,10 +322,19 @@ def calibrate(dataset: MeasuredDataset, steps: int | None = None, alpha: float =
         An explicit screening grid (refused unless it resolves the orders that matter).
     time_budget_s : float or None
         Stop adding terms after this many seconds (the verdict and ``stopped_by`` say so).
+    joint : bool
+        Joint selection over a shortlist at the current state (:mod:`rvcalib.joint`); False: greedy
+        forward selection only (the loop before issue 10 item 1).
+    joint_new : int
+        New candidates in the joint shortlist (one per family).
+    rescreen_every : int
+        Re-solve the whole library's screening signatures at the current state after every this many
+        accepted joint changes (0: only the shortlist's families, at every joint step).
 
     Returns
     -------
     CalibrationResult
     """
     return Calibrator(dataset, steps=steps, alpha=alpha, max_terms=max_terms, top_k=top_k, log=log,
-                      screen_points=screen_points, time_budget_s=time_budget_s).run()
+                      screen_points=screen_points, time_budget_s=time_budget_s, joint=joint, joint_new=joint_new,
+                      rescreen_every=rescreen_every).run()

@@ -49,19 +49,34 @@ class LoopModel:
         An explicit screening grid (refused unless it resolves the orders that matter).
     time_budget_s : float or None
         Stop adding terms once this many seconds have passed (the result says so).
+    joint : bool
+        Select jointly among a shortlist at the current state (:mod:`rvcalib.joint`); False: the
+        greedy forward selection alone.
+    joint_new : int
+        New candidates in the joint shortlist (one per family).
+    rescreen_every : int
+        Re-solve the whole library's screening signatures at the current state after every this
+        many accepted changes (0: never; the shortlist's families are re-solved at every joint step).
     """
 
     def __init__(self, dataset: MeasuredDataset, steps: int | None = None, alpha: float = 0.01,
                  max_terms: int = 6, top_k: int = 4, library: Library | None = None,
                  log: Callable[[str], None] | None = None, screen_points: int | None = None,
-                 time_budget_s: float | None = None) -> None:
+                 time_budget_s: float | None = None, joint: bool = True, joint_new: int = 6,
+                 rescreen_every: int = 0) -> None:
         if not 0 < alpha < 1:
             raise ValueError(f"alpha {alpha!r} must lie in (0, 1)")
         if isinstance(max_terms, bool) or not isinstance(max_terms, (int, np.integer)) or max_terms < 1:
             raise ValueError(f"max_terms {max_terms!r} must be an integer >= 1")
         if time_budget_s is not None and not (np.isfinite(time_budget_s) and time_budget_s > 0):
             raise ValueError(f"time_budget_s {time_budget_s!r} must be a positive number of seconds")
+        for name, v in (("joint_new", joint_new), ("rescreen_every", rescreen_every)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise ValueError(f"{name} {v!r} must be an integer >= 0")
         self.time_budget_s = None if time_budget_s is None else float(time_budget_s)
+        self.joint = bool(joint)
+        self.joint_new = int(joint_new)
+        self.rescreen_every = int(rescreen_every)
         self.ds = dataset
         self.design = dataset.design
         self.ratio = float(dataset.ratio)
@@ -100,6 +115,10 @@ class LoopModel:
         self.empirical: list[EmpiricalTerm] = []
         self.emp_coef = np.zeros(0)
         self.sig: dict[str, list[list[np.ndarray] | None]] = {}
+        #: template -> number of physical effects in the state its signatures were solved at
+        self.sig_state: dict[str, int] = {}
+        #: accepted physical changes since the library's signatures were last solved
+        self.rescreen_due = 0
         self.notes: list[str] = list(self.lib.notes) + ([grid_note] if grid_note else [])
         self._emp_info: dict[EmpiricalTerm, tuple[int, float]] = {}
         self.fit_stats: list[dict] = []

@@ -180,6 +180,85 @@ class Validated:
     entry: Candidate
 
 
+@dataclass
+class PoolMember:
+    """A member of the joint selection's pool, linearised at the current state: a library effect or
+    an empirical term already in the model (which a subset may drop, giving its part back to the
+    residual for physical effects to explain).
+
+    Attributes
+    ----------
+    effect : Effect or None
+        None for an empirical term.
+    cols : ndarray
+        (n_coarse, k) columns of the TE change per unit of its coefficients at the current state
+        on the screening grid.
+    contribution : ndarray or None
+        For a member in the model: its present contribution to the model TE (for an effect the TE
+        of the state minus the TE of the state without it); None for a new candidate.
+    to_p : callable
+        Coefficients of ``cols`` -> the effect's parameters (for an effect in the model: its present
+        parameters plus the change).
+    active : Active or None
+        The model's record of it, if it is in the model.
+    entry : Candidate or None
+        Its screening record at the current state, if it is a new candidate.
+    """
+
+    effect: Effect | None
+    cols: np.ndarray
+    contribution: np.ndarray | None
+    to_p: Callable[[np.ndarray], np.ndarray]
+    active: "Active | None" = None
+    entry: Candidate | None = None
+    term: "EmpiricalTerm | None" = None
+
+    @property
+    def name(self) -> str:
+        """The effect's name or the empirical term's label."""
+        return self.effect.name if self.effect is not None else self.term.label
+
+    @property
+    def n_params(self) -> int:
+        """Parameters it holds (an effect's components or an empirical term's columns)."""
+        return self.effect.n_params if self.effect is not None else self.term.n_cols
+
+    @property
+    def in_model(self) -> bool:
+        """True for an effect or empirical term in the model now (a new empirical term has no
+        contribution yet)."""
+        return self.active is not None or (self.term is not None and self.contribution is not None)
+
+
+@dataclass
+class SubsetFit:
+    """One subset of the pool fitted jointly by linear least squares at the current state.
+
+    Attributes
+    ----------
+    members : tuple of int
+        Pool indices in the subset.
+    dropped : tuple of int
+        Pool indices of effects in the model that the subset leaves out (a swap when it also adds).
+    n_params : int
+        Parameters (effects' components and empirical columns).
+    rss : float
+        Residual sum of squares on the screening grid.
+    bic, aic : float
+        Information criteria on the screening grid.
+    coef : ndarray
+        Coefficients of the members' columns, concatenated.
+    """
+
+    members: tuple[int, ...]
+    dropped: tuple[int, ...]
+    n_params: int
+    rss: float
+    bic: float
+    aic: float
+    coef: np.ndarray
+
+
 # ---------------------------------------------------------------------------------------------
 # results
 @dataclass
@@ -215,6 +294,10 @@ class FittedEffect:
     implied_total : float or None
         The declared value plus the correction found (the magnitude for a two-component error,
         whose declared part lies along 0 deg).
+    selection : dict
+        How it was chosen: ``method`` (``joint best subset`` or ``greedy``); for a joint choice the
+        BIC and AIC inclusion weights (sum of the model weights of the subsets that held it, at the
+        step that chose it) and the effects chosen with it (see :mod:`rvcalib.joint`).
     """
 
     name: str
@@ -236,6 +319,7 @@ class FittedEffect:
     alternatives: list[dict] = field(default_factory=list)
     declared_value: float | None = None
     implied_total: float | None = None
+    selection: dict = field(default_factory=dict)
 
     @property
     def alternative_names(self) -> list[str]:
@@ -248,7 +332,8 @@ class FittedEffect:
              "ci_low": self.ci_low, "ci_high": self.ci_high, "std_err": self.std_err, "meaning": self.meaning,
              "params": self.params, "iteration": self.iteration, "explained_fraction": self.explained_fraction,
              "F": self.F, "p_value": self.p_value, "delta_bic": self.delta_bic, "alternatives": self.alternatives,
-             "declared_value": self.declared_value, "implied_total": self.implied_total}
+             "declared_value": self.declared_value, "implied_total": self.implied_total,
+             "selection": self.selection}
         if self.angle_deg is not None:
             d["angle_deg"] = self.angle_deg
         return d

@@ -80,18 +80,31 @@ class Screening(LoopModel):
         return ms if (ms < self.m and self.m % ms == 0 and ms % self.design.z_pins == 0) else self.m
 
     def screening_signatures(self) -> None:
-        """Solve every template candidate at its trial values on its screening grid, per condition
-        (one batch of the forward runner: :func:`rvcalib.forward.grid_te_many`)."""
+        """Solve every template candidate at its trial values on its screening grid, per condition,
+        at the declared model (one batch of the forward runner: :func:`rvcalib.forward.grid_te_many`)."""
         t0 = time.perf_counter()
-        todo = [e for e in self.lib.templates() if not e.expensive]  # expensive: on demand (_ensure_expensive)
-        self._solve_signatures(todo)
+        self.solve_signatures([e for e in self.lib.templates() if not e.expensive], [])  # expensive: on demand
         self.log(f"screening signatures: {len(self.sig)} candidates x {len(self.cond_base)} conditions on "
                  f"{self.m} points in {time.perf_counter() - t0:.1f} s")
 
-    def _solve_signatures(self, effects: list[Effect]) -> None:
+    def solve_signatures(self, templates: list[Effect], state: list[tuple[Effect, np.ndarray]]) -> int:
+        """Solve the screening signatures of ``templates`` at a model state (``state``: effects and
+        parameters in the model; empty = the declared model): for each trial value the change of
+        the model TE on the effect's screening grid, per condition. Stored in ``self.sig`` (the
+        ranking uses them from then on) with the state's size in ``self.sig_state``. Returns the
+        number of rvdyn trial solves asked for (cache hits included)."""
+        phys = [(e, p) for e, p in state if e.family != "measurement"]
+        self._solve_signatures(templates, phys)
+        for e in templates:
+            self.sig_state[e.name] = len(phys)
+        return sum(len(trial_points(e)) for e in templates) * len(self.cond_base)
+
+    def _solve_signatures(self, effects: list[Effect], phys: list[tuple[Effect, np.ndarray]] | None = None) -> None:
         """``self.sig[e.name]``: per trial value of each effect, per condition, the change of the model
-        TE on the effect's screening grid (None for a trial value rvdyn cannot evaluate). The base
-        cases and every trial case are solved in one batch."""
+        TE on the effect's screening grid (None for a trial value rvdyn cannot evaluate), at the declared
+        model plus the physical effects ``phys``. The base cases and every trial case are solved in one
+        batch."""
+        phys = list(phys or [])
         nc = len(self.cond_base)
         cases: list[dict] = []
         steps: list[int] = []
@@ -101,19 +114,19 @@ class Screening(LoopModel):
             ms = self._ms(e)
             if ms not in base_at:
                 base_at[ms] = len(cases)
-                cases += list(self.cond_base)
+                cases += list(self.cond_base) if not phys else [self._case(c, phys) for c in range(nc)]
                 steps += [ms] * nc
             firsts = []
             for p in trial_points(e):
                 firsts.append(len(cases))
-                cases += [self._case(c, [(e, p)]) for c in range(nc)]
+                cases += [self._case(c, phys + [(e, p)]) for c in range(nc)]
                 steps += [ms] * nc
             plan.append((e, ms, firsts))
         te = grid_te_many(cases, steps)
         for ms, i0 in base_at.items():
             for c in range(nc):
                 if isinstance(te[i0 + c], ModelEvaluationError):
-                    raise te[i0 + c]  # the declared model itself cannot be evaluated
+                    raise te[i0 + c]  # the model state itself cannot be evaluated
         for e, ms, firsts in plan:
             sigs: list[list[np.ndarray] | None] = []
             for i in firsts:
@@ -224,35 +237,42 @@ class Screening(LoopModel):
         for e in self.lib:
             if e.name in active_names:
                 continue
-            ms = self._ms(e)
-            if ms not in groups:
-                groups[ms] = self._group(ms, rc_cat, Ec)
-            r, Pg, rss0 = groups[ms]
-            if rss0 <= 0:
-                continue
-            meas = None
-            if e.screen == "analytic":
-                meas = self.meas_coarse(e, ms)
-                if r_full is not None:
-                    expl, c = self._analytic_full(e, r_full)
-                    cols = np.column_stack([Pg(meas[:, k]) for k in range(meas.shape[1])]) if ms == self.m else None
-                    out.append(Candidate(e, expl, c, cols, None if cols is None else cols @ c,
-                                         to_p=lambda b: np.asarray(b, dtype=float)))
-                    continue
-            best = None
-            for A, nonneg, to_p in self._options(e, meas):
-                A = np.column_stack([Pg(A[:, k]) for k in range(A.shape[1])])
-                rss, c = fit_option(r, A, nonneg)
-                if best is None or rss < best[0]:
-                    best = (rss, to_p(c), A, A @ c, to_p)
-            if best is None:
-                continue
-            out.append(Candidate(e, 1.0 - best[0] / rss0, best[1], best[2] if ms == self.m else None,
-                                 best[3] if ms == self.m else None, to_p=best[4]))
+            d = self.screen_effect(e, groups, rc_cat, Ec, r_full)
+            if d is not None:
+                out.append(d)
         # ties (e.g. pins 20 apart, whose TE signatures coincide) go to the library order
         order = {e.name: i for i, e in enumerate(self.lib)}
         out.sort(key=lambda d: (-round(d.explained, 6), order[d.effect.name]))
         return out
+
+    def screen_effect(self, e: Effect, groups: dict, rc_cat: np.ndarray, Ec: np.ndarray | None,
+                      r_full: np.ndarray | None = None) -> Candidate | None:
+        """One candidate's screening fit to the coarse residual (see :meth:`rank`; ``groups`` caches
+        the residual per screening grid)."""
+        ms = self._ms(e)
+        if ms not in groups:
+            groups[ms] = self._group(ms, rc_cat, Ec)
+        r, Pg, rss0 = groups[ms]
+        if rss0 <= 0:
+            return None
+        meas = None
+        if e.screen == "analytic":
+            meas = self.meas_coarse(e, ms)
+            if r_full is not None:
+                expl, c = self._analytic_full(e, r_full)
+                cols = np.column_stack([Pg(meas[:, k]) for k in range(meas.shape[1])]) if ms == self.m else None
+                return Candidate(e, expl, c, cols, None if cols is None else cols @ c,
+                                 to_p=lambda b: np.asarray(b, dtype=float))
+        best = None
+        for A, nonneg, to_p in self._options(e, meas):
+            A = np.column_stack([Pg(A[:, k]) for k in range(A.shape[1])])
+            rss, c = fit_option(r, A, nonneg)
+            if best is None or rss < best[0]:
+                best = (rss, to_p(c), A, A @ c, to_p)
+        if best is None:
+            return None
+        return Candidate(e, 1.0 - best[0] / rss0, best[1], best[2] if ms == self.m else None,
+                         best[3] if ms == self.m else None, to_p=best[4])
 
     def lookahead(self, ranking: list[Candidate], rc: np.ndarray, n_top: int = 12) -> list[Candidate]:
         """Re-order the ranking by what each candidate explains together with its best partner.

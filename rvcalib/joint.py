@@ -1,0 +1,361 @@
+"""Joint identification: best-subset selection over a shortlist at the current joint state.
+
+Greedy forward selection makes each choice at one state and never revisits it (backward elimination
+only removes). On a reducer with many errors at once the TE of the errors interact (the joint TE
+differs from the sum of single-error TEs by 6-17 arcsec RMS on the realistic draws of issue 10), so a
+first choice made at the declared model can be a stand-in for several others and stays in the model.
+This stage replaces the greedy addition by a joint choice:
+
+1. Shortlist: the ``joint_new`` best-ranked new candidates, one per screening family (instances that
+   share a template count once); half as many more ranked against the residual beyond the empirical
+   term the greedy step would absorb, and half as many ranked against the residual with the model's
+   empirical terms given back; plus every effect and empirical term already in the model.
+2. Re-solved signatures: the shortlisted families' screening signatures are solved again through rvdyn
+   at the *current* state (all effects in the model at their present sizes), stored for the ranking of
+   the next iterations, and each new candidate is re-screened with them. Effects in the model are
+   linearised there too: their contribution (TE of the state minus TE without them) and a secant
+   column per component. Only the shortlist is re-solved (bounded cost); the whole library optionally
+   every ``rescreen_every`` accepted changes.
+3. Best subset: every subset that keeps the model but for at most :data:`MAX_DROP` effects and adds at
+   most :data:`MAX_ADD` new ones (at most ``max_terms`` in all) is fitted by linear least squares on the
+   screening grid; an effect left out gives its contribution back to the residual. Each subset gets a
+   BIC and an AIC; the model weights ``w_S = exp(-Delta_S / 2) / sum`` (Akaike / Schwarz weights) and
+   each effect's inclusion weight (the sum of the weights of the subsets that hold it) are logged and
+   reported. The subset of lowest BIC whose every new member passes the F test of the loop (Bonferroni
+   level) against the same subset without it is chosen; a subset that drops an effect in the model and
+   adds another is a swap.
+4. Refit: the chosen subset is refitted through the full nonlinear model at every reading (the
+   loop's chord Gauss-Newton from the linearised estimates) and accepted when it lowers the BIC on all
+   samples and its added parameters pass the F test there. No backward elimination follows (the
+   subset search has just weighed dropping members, and does at every step); the loop's final
+   backward elimination checks every effect.
+
+When the chosen subset is the greedy choice (the model plus the best validated candidate) or within
+:data:`JOINT_BIC_MARGIN` of it, or nothing beats the present model, or the refit does not confirm
+it, the loop takes the greedy step as before:
+single-effect datasets behave as they did.
+
+Why BIC over subsets rather than a sparse (lasso) path or Bayesian model selection: the shortlist is
+small (at most ``joint_new`` + the model), so the subsets can be enumerated exactly; the loop's
+acceptance is already BIC + F test, so the joint choice and the acceptance use one criterion; BIC
+weights approximate posterior model probabilities under a unit-information prior (Kass and Raftery
+1995, J. Am. Stat. Assoc. 90:773), which the report gives beside the Akaike weights (Burnham and
+Anderson 2002, ch. 2.9). A lasso shrinks the sizes that are the answer here and needs its own
+refits; it would not use the full model's nonlinearity either.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from rvcalib.effects import Effect
+from rvcalib.forward import ModelEvaluationError
+from rvcalib.lsq import bic, ftest
+from rvcalib.results import (Active, Candidate, EmpiricalTerm, HarmonicCandidate, PoolMember, SubsetFit,
+                             Validated)
+from rvcalib.selection import Selection
+
+#: Most effects already in the model that one joint step may drop.
+MAX_DROP = 2
+#: Most new effects that one joint step may add.
+MAX_ADD = 3
+#: An effect in the model is linearised by the secant from zero to its size when that size is at
+#: least this fraction of its typical size; otherwise by a step of STEP_FRACTION of it.
+MIN_SECANT = 0.1
+STEP_FRACTION = 0.3
+#: The joint choice replaces the greedy one only when its BIC is lower by more than this (a BIC
+#: difference below 2 is "not worth more than a bare mention", Kass and Raftery 1995): ties, e.g.
+#: the members of an identifiability group (pin radius / pin circle diameter), keep the greedy choice.
+JOINT_BIC_MARGIN = 2.0
+
+
+def aic(rss: float, n: int, k: int) -> float:
+    """Akaike information criterion of a Gaussian least-squares fit: ``n ln(rss/n) + 2 k``."""
+    return n * math.log(max(rss, 1e-300) / n) + 2.0 * k
+
+
+def model_weights(values: np.ndarray) -> np.ndarray:
+    """Akaike / Schwarz model weights ``exp(-(v - min v) / 2)`` normalised to sum 1."""
+    v = np.asarray(values, dtype=float)
+    w = np.exp(-0.5 * (v - v.min()))
+    return w / w.sum()
+
+
+class JointSelection(Selection):
+    """The joint selection stage (methods on the loop; see the module docstring)."""
+
+    # ------------------------------------------------------------------ pool
+    def shortlist(self, ranking: list[Candidate], n: int | None = None,
+                  seen: set[str] | None = None) -> list[Candidate]:
+        """The best-ranked new candidates, one per family (not in ``seen``), solved on the full
+        screening grid and not expensive (at most ``n``, default ``joint_new``)."""
+        n = self.joint_new if n is None else n
+        active = {a.effect.name for a in self.active}
+        seen = set() if seen is None else seen
+        out: list[Candidate] = []
+        for d in ranking:
+            e = d.effect
+            if e.name in active or e.expensive or d.cols is None or d.explained <= 0 or d.family_key in seen:
+                continue
+            seen.add(d.family_key)
+            out.append(d)
+            if len(out) >= n:
+                break
+        return out
+
+    def _grid_cat(self, pairs: list[tuple[Effect, np.ndarray]]) -> np.ndarray:
+        return np.concatenate(self.predict_grid(pairs))
+
+    def active_members(self, Pc=lambda v: v) -> list[PoolMember]:
+        """The effects in the model linearised at the current state (see the module docstring);
+        ``Pc`` a projector applied to the columns (default none)."""
+        pairs = self._pairs()
+        base = self._grid_cat(pairs)
+        out: list[PoolMember] = []
+        for a in self.active:
+            e = a.effect
+            p = np.asarray(a.p, dtype=float)
+            if e.family == "measurement":
+                B = self.meas_coarse(e)
+                J = np.column_stack([Pc(B[:, k]) for k in range(B.shape[1])])
+                out.append(PoolMember(e, J, J @ p, lambda c, p=p: p + np.asarray(c, dtype=float), a))
+                continue
+            others = [(b.effect, b.p) for b in self.active if b is not a]
+            contrib = Pc(base - self._grid_cat(others))
+            mag = float(np.linalg.norm(p))
+
+            def step_col(direction: np.ndarray) -> tuple[np.ndarray, float]:
+                h = STEP_FRACTION * e.scale
+                q = np.clip(p + h * direction, e.lower, e.upper)
+                dq = float(np.dot(q - p, direction))
+                if abs(dq) < 1e-12:
+                    q, dq = np.clip(p - h * direction, e.lower, e.upper), -h
+                    dq = float(np.dot(q - p, direction))
+                return Pc(self._grid_cat(others + [(e, q)]) - base) / dq, dq
+
+            if e.n_params == 1:
+                if mag >= MIN_SECANT * e.scale:
+                    J = (contrib / p[0])[:, None]
+                else:
+                    J = step_col(np.array([1.0]))[0][:, None]
+                out.append(PoolMember(e, J, contrib, lambda c, p=p: p + np.asarray(c, dtype=float), a))
+                continue
+            if mag >= MIN_SECANT * e.scale:
+                u = p / mag
+                v = np.array([-u[1], u[0]])
+                J = np.column_stack([contrib / mag, step_col(v)[0]])
+            else:
+                u, v = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+                J = np.column_stack([step_col(u)[0], step_col(v)[0]])
+            basis = np.column_stack([u, v])
+            out.append(PoolMember(e, J, contrib, lambda c, p=p, B=basis: p + B @ np.asarray(c, dtype=float), a))
+        return out
+
+    # ------------------------------------------------------------------ subsets
+    def best_subsets(self, pool: list[PoolMember], rc: np.ndarray, max_members: int) -> list[SubsetFit]:
+        """Every subset of the pool within the limits of the module docstring, fitted linearly to the
+        coarse residual ``rc`` of the current model (a member in the model left out gives its
+        contribution back); at most ``max_members`` effects and empirical terms."""
+        act = [i for i, m in enumerate(pool) if m.in_model]
+        new = [i for i, m in enumerate(pool) if not m.in_model]
+        nc = rc.size
+        fits: list[SubsetFit] = []
+        for nd in range(0, min(MAX_DROP, len(act)) + 1):
+            for drop in itertools.combinations(act, nd):
+                t = rc + sum((pool[i].contribution for i in drop), np.zeros_like(rc))
+                keep = [i for i in act if i not in drop]
+                for na in range(0, min(MAX_ADD, len(new)) + 1):
+                    if len(keep) + na > max_members:
+                        break
+                    for add in itertools.combinations(new, na):
+                        S = tuple(keep) + add
+                        if S:
+                            A = np.column_stack([pool[i].cols for i in S])
+                            coef, *_ = np.linalg.lstsq(A, t, rcond=None)
+                            res = t - A @ coef
+                        else:
+                            coef, res = np.zeros(0), t
+                        rss = float(res @ res)
+                        k = sum(pool[i].n_params for i in S)
+                        fits.append(SubsetFit(S, tuple(drop), k, rss, bic(rss, nc, k), aic(rss, nc, k), coef))
+        return fits
+
+    def _coef_of(self, pool: list[PoolMember], fit: SubsetFit) -> dict[int, np.ndarray]:
+        out, j = {}, 0
+        for i in fit.members:
+            k = pool[i].cols.shape[1]
+            out[i] = fit.coef[j:j + k]
+            j += k
+        return out
+
+    def choose_subset(self, pool: list[PoolMember], fits: list[SubsetFit], nc: int,
+                      current: tuple[int, ...]) -> SubsetFit | None:
+        """The subset of lowest BIC whose new members each pass the F test against the same subset
+        without them; None if the present model (re-linearised) comes first."""
+        by_key = {(frozenset(f.members), f.dropped): f for f in fits}
+        cur = frozenset(current)
+        for f in sorted(fits, key=lambda f: f.bic):
+            S = frozenset(f.members)
+            if S == cur:
+                return None
+            added = [i for i in f.members if not pool[i].in_model]
+            ok = True
+            for i in added:
+                g = by_key.get((S - {i}, f.dropped))
+                if g is None:
+                    ok = False
+                    break
+                _, pv = ftest(g.rss, f.rss, pool[i].n_params, nc, f.n_params)
+                if not pv < self.thr:
+                    ok = False
+                    break
+            if ok:
+                return f
+        return None
+
+    # ------------------------------------------------------------------ the step
+    def joint_step(self, ranking: list[Candidate], best: Validated | None, hterm: EmpiricalTerm | None,
+                   rc: np.ndarray, rc_cat: np.ndarray, Ec: np.ndarray | None, r_full: np.ndarray, it: int,
+                   log: dict, harms: list[HarmonicCandidate] | None = None) -> tuple[bool, str] | None:
+        """One joint selection step (see the module docstring). ``best`` is the greedy step's physical
+        choice, or ``hterm`` its empirical one (then a pool member too, so that physical effects that
+        explain its part jointly can win over it). Returns (accepted, message), or None when the
+        greedy step is to be taken instead (same choice, nothing better, or not confirmed)."""
+        t0 = time.perf_counter()
+        short = self.shortlist(ranking)
+        if best is not None and best.effect.name not in {d.effect.name for d in short} \
+                and not best.effect.expensive:
+            short = [best.entry] + short[:max(0, self.joint_new - 1)]
+        if hterm is not None and self.joint_new:
+            # what is left beyond the empirical term the greedy step would absorb (its own next step)
+            th = np.radians(self.coarse_out_deg)
+            Eh = np.vstack([hterm.columns(th, r.direction, r.load_Nm) for r in self.runs])
+            after = self.rank(rc_cat, Eh if Ec is None else np.column_stack([Ec, Eh]), None)
+            short += self.shortlist(after, max(1, self.joint_new // 2), {d.family_key for d in short})
+        if self.empirical and self.joint_new:
+            # candidates that explain what the empirical terms absorbed: ranked against the residual
+            # with the empirical terms' parts given back (half as many more)
+            raw = [d for d in self.rank(rc_cat, None, None) if d.effect.family != "measurement"]
+            short += self.shortlist(raw, max(1, self.joint_new // 2), {d.family_key for d in short})
+        temps = {}
+        for d in short:
+            if d.effect.screen != "analytic":
+                t = self.lib.by_name(d.effect.template or d.effect.name)
+                temps[t.name] = t
+        n_solves = self.solve_signatures(list(temps.values()), self._pairs())
+        # everything on the screening grid without projection: the empirical terms are pool members
+        # (a subset may drop one and let physical effects explain its part)
+        ce = np.zeros(0)
+        if Ec is not None:
+            ce, *_ = np.linalg.lstsq(Ec, rc_cat, rcond=None)
+        groups: dict[int, tuple] = {}
+        fresh = [self.screen_effect(d.effect, groups, rc, None) for d in short]
+        jl: dict[str, Any] = {"shortlist": [d.effect.name for d in short], "resolved_templates": sorted(temps),
+                              "signature_solves": n_solves, "seconds_signatures": time.perf_counter() - t0}
+        log["joint"] = jl
+        pool = self.active_members()
+        j = 0
+        for t in self.empirical:
+            E = Ec[:, j:j + t.n_cols]
+            c = ce[j:j + t.n_cols]
+            pool.append(PoolMember(None, E, E @ c, lambda d: np.asarray(d, dtype=float), None, None, t))
+            j += t.n_cols
+        current = tuple(range(len(pool)))
+        for d in fresh:
+            if d is not None and d.cols is not None:
+                pool.append(PoolMember(d.effect, d.cols, None, d.to_p, None, d))
+        if hterm is not None:
+            th = np.radians(self.coarse_out_deg)
+            E = np.vstack([hterm.columns(th, r.direction, r.load_Nm) for r in self.runs])
+            pool.append(PoolMember(None, E, None, lambda d: np.asarray(d, dtype=float), None, None, hterm))
+        jl["seconds_pool"] = time.perf_counter() - t0
+        fits = self.best_subsets(pool, rc, self.max_terms)
+        if not fits:
+            return None
+        nc = rc.size
+        wb = model_weights(np.array([f.bic for f in fits]))
+        wa = model_weights(np.array([f.aic for f in fits]))
+        incl = {pool[i].name: (float(sum(w for w, f in zip(wb, fits) if i in f.members)),
+                               float(sum(w for w, f in zip(wa, fits) if i in f.members)))
+                for i in range(len(pool))}
+        order = np.argsort([f.bic for f in fits])
+        bic_cur = next(f.bic for f in fits if f.members == current)
+        jl["subsets"] = len(fits)
+        jl["top_subsets"] = [{"members": [pool[i].name for i in fits[k].members],
+                              "delta_bic_vs_model": fits[k].bic - bic_cur, "weight_bic": float(wb[k]),
+                              "weight_aic": float(wa[k])} for k in order[:5]]
+        jl["inclusion_weights"] = {k: {"bic": v[0], "aic": v[1]} for k, v in incl.items()}
+        choice = self.choose_subset(pool, fits, nc, current)
+        greedy_name = best.effect.name if best is not None else (hterm.label if hterm is not None else None)
+        greedy = frozenset(current) | {next((i for i, m in enumerate(pool) if not m.in_model
+                                             and m.name == greedy_name), -1)}
+        g_fit = next((f for f in fits if frozenset(f.members) == greedy and not f.dropped), None)
+        if choice is None or (frozenset(choice.members) == greedy and not choice.dropped) or \
+                (g_fit is not None and g_fit.bic - choice.bic <= JOINT_BIC_MARGIN):
+            jl["chosen"] = "greedy" if choice is not None else "none better than the model"
+            return None
+        added = [i for i in choice.members if not pool[i].in_model]
+        jl["chosen"] = [pool[i].name for i in choice.members]
+        jl["dropped"] = [pool[i].name for i in choice.dropped]
+        coefs = self._coef_of(pool, choice)
+        phys = [i for i in choice.members if pool[i].effect is not None]
+        terms = [pool[i].term for i in choice.members if pool[i].term is not None]
+        effects = [pool[i].effect for i in phys]
+        p0 = [np.clip(pool[i].to_p(coefs[i]), pool[i].effect.lower, pool[i].effect.upper) for i in phys]
+        t_fit = time.perf_counter()
+        try:
+            if effects:
+                params, rss1, _, _, _ = self.fit_full(effects, p0, terms)
+            else:
+                params = []
+                r1 = self.full_residual([], terms)[0]
+                rss1 = float(r1 @ r1)
+        except ModelEvaluationError as exc:
+            jl["full_fit_error"] = str(exc)
+            return None
+        jl["seconds_full_fit"] = time.perf_counter() - t_fit
+        p_cur = self._p_cur()
+        k_new = choice.n_params
+        dbic = bic(rss1, self.n, k_new) - bic(self.rss_full, self.n, p_cur)
+        F, pv = ftest(self.rss_full, rss1, k_new - p_cur, self.n, k_new) if k_new > p_cur else (float("nan"), 0.0)
+        jl["full"] = {"F": F, "p": pv, "delta_bic": dbic, "rss": rss1}
+        if not (dbic < 0 and pv < self.thr and rss1 < self.rss_full):
+            jl["chosen_rejected"] = f"not confirmed on all samples (p {pv:.3g}, dBIC {dbic:.3g})"
+            return None
+        sigma2 = self._noise2(r_full)
+        new_active: list[Active] = []
+        for i, p in zip(phys, params):
+            m = pool[i]
+            if m.active is not None:
+                m.active.p = p
+                new_active.append(m.active)
+                continue
+            d = m.entry
+            fit = m.cols @ coefs[i]
+            v = Validated(m.effect, d.explained, p, d.explained, d.explained, None, d.cols, fit, d)
+            info = {"explained_fraction": 1.0 - rss1 / self.rss_full, "F": F, "p_value": pv, "delta_bic": dbic,
+                    "alternatives": self._alternatives(v, ranking, sigma2, rss1, harms),
+                    "selection": {"method": "joint best subset", "iteration": it,
+                                  "inclusion_weight_bic": incl[m.name][0],
+                                  "inclusion_weight_aic": incl[m.name][1],
+                                  "chosen_with": [pool[k].name for k in choice.members if k != i],
+                                  "swapped_out": [pool[k].name for k in choice.dropped]}}
+            new_active.append(Active(m.effect, p, it, info=info))
+        self.active = new_active
+        for k in choice.dropped:
+            if pool[k].term is not None:
+                self._emp_info.pop(pool[k].term, None)
+        for k in added:
+            if pool[k].term is not None:
+                self._emp_info[pool[k].term] = (it, 1.0 - rss1 / self.rss_full)
+        self.empirical = terms
+        msg = "joint: added " + ", ".join(pool[i].name for i in added)
+        if choice.dropped:
+            msg += "; swapped out " + ", ".join(pool[i].name for i in choice.dropped)
+        # no backward elimination here: the subset search has just weighed dropping members at this
+        # state (the next joint step does again), and the loop's final backward elimination checks all
+        return True, msg
