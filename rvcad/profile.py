@@ -43,6 +43,23 @@ def _up(a: np.ndarray) -> np.ndarray:
     return np.stack([-np.sin(a), np.cos(a)], axis=-1)
 
 
+def _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, px, py, max_step):
+    """One Newton step (clipped to ``max_step``) of the foot-point condition (b(t) - p) . b'(t) = 0 of the
+    boundary b(t) = R (cos t, sin t) - e (cos(Z t + phi), sin(Z t + phi)), from the trig terms at t;
+    returns the step and |b'(t)|^2 (a concave point, f' <= 0, steps along the gradient instead)."""
+    dx = R * c1 - e * c2 - px
+    dy = R * s1 - e * s2 - py
+    d1x = -R * s1 + eZ * s2
+    d1y = R * c1 - eZ * c2
+    d2x = -R * c1 + eZ2 * c2
+    d2y = -R * s1 + eZ2 * s2
+    sp2 = d1x * d1x + d1y * d1y
+    f = dx * d1x + dy * d1y
+    fp = sp2 + dx * d2x + dy * d2y
+    fp = np.where(fp > 0, fp, sp2)
+    return np.clip(f / fp, -max_step, max_step), sp2
+
+
 def _sin_cos_small(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """sin x and cos x for |x| <= 0.05 by their Taylor series, with as many terms as the largest |x| needs
     for remainders below 1e-19 (to x^9 and x^8 at 0.05; to x^3 and x^2 below 2e-5)."""
@@ -331,17 +348,7 @@ class CycloidProfile:
             c1, s1 = np.cos(t), np.sin(t)
             a2 = Z * t + ph
             c2, s2 = np.cos(a2), np.sin(a2)
-            dx = R * c1 - e * c2 - px
-            dy = R * s1 - e * s2 - py
-            d1x = -R * s1 + eZ * s2
-            d1y = R * c1 - eZ * c2
-            d2x = -R * c1 + eZ2 * c2
-            d2y = -R * s1 + eZ2 * s2
-            sp2 = d1x * d1x + d1y * d1y
-            f = dx * d1x + dy * d1y
-            fp = sp2 + dx * d2x + dy * d2y
-            fp = np.where(fp > 0, fp, sp2)
-            step = np.clip(f / fp, -max_step, max_step)
+            step, sp2 = _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, px, py, max_step)
             t -= step
             if np.all(np.abs(step) * np.sqrt(sp2) < self.tol.foot_point_mm):
                 break
@@ -366,17 +373,7 @@ class CycloidProfile:
         act = None                                   # indices still iterating (None: all)
         px, py = P[:, 0], P[:, 1]
         for _ in range(self.tol.foot_point_max_iter):
-            dx = R * c1 - e * c2 - px
-            dy = R * s1 - e * s2 - py
-            d1x = -R * s1 + eZ * s2
-            d1y = R * c1 - eZ * c2
-            d2x = -R * c1 + eZ2 * c2
-            d2y = -R * s1 + eZ2 * s2
-            sp2 = d1x * d1x + d1y * d1y
-            f = dx * d1x + dy * d1y
-            fp = sp2 + dx * d2x + dy * d2y
-            fp = np.where(fp > 0, fp, sp2)
-            step = np.clip(f / fp, -max_step, max_step)
+            step, sp2 = _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, px, py, max_step)
             t = t - step
             zs = Z * step
             sa, ca = _sin_cos_small(step)
