@@ -63,6 +63,17 @@ def study_cases(seed: int = 1) -> list[tuple[Case, int]]:
     return out
 
 
+def best_of(fn, repeat: int) -> tuple[list, float, float]:
+    """Run ``fn`` ``repeat`` times: its last result, the best wall time and the best CPU time, s."""
+    best = cpu = np.inf
+    for _ in range(repeat):
+        t, c = time.perf_counter(), time.process_time()
+        out = fn()
+        best = min(best, time.perf_counter() - t)
+        cpu = min(cpu, time.process_time() - c)
+    return out, best, cpu
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--steps", type=int, default=360)
@@ -84,12 +95,7 @@ def main() -> None:
     def solve_all() -> list:
         return [run_te(c, "analytic", n) for c, n in runs]
 
-    best = cpu = np.inf
-    for _ in range(a.repeat):
-        t, c = time.perf_counter(), time.process_time()
-        rs = solve_all()
-        best = min(best, time.perf_counter() - t)
-        cpu = min(cpu, time.process_time() - c)
+    rs, best, cpu = best_of(solve_all, a.repeat)
     print(f"MC draw ({a.case}: {len(runs)} analytic solves, steps {[n for _, n in runs]}): {best:.3f} s wall, "
           f"{cpu:.3f} s CPU (best of {a.repeat})")
     for (c, n), r in zip(runs, rs):
@@ -104,12 +110,7 @@ def main() -> None:
             "all 5 runs as one run_te_many": lambda: run_te_many(
                 runs[0][0], "analytic", [n for _, n in runs], loads=pairs)}
         for name, fn in batches.items():
-            bw = bc = np.inf
-            for _ in range(a.repeat):
-                t, c = time.perf_counter(), time.process_time()
-                rb = fn()
-                bw = min(bw, time.perf_counter() - t)
-                bc = min(bc, time.process_time() - c)
+            rb, bw, bc = best_of(fn, a.repeat)
             d = max(float(np.abs(x.table["te_arcsec"].to_numpy() - y.table["te_arcsec"].to_numpy()).max())
                     for x, y in zip(rs, rb))
             print(f"MC draw, {name}: {bw:.3f} s wall, {bc:.3f} s CPU (best of {a.repeat}); "

@@ -133,6 +133,17 @@ class Groups(Selection):
         conds = [(L, d) for L in loads for d in (1, -1) if (L, d) not in have]
         out = []
         base_cache: dict[tuple, np.ndarray | None] = {}
+
+        def base_te(cond: dict) -> np.ndarray | None:
+            """The model TE of a run condition on the recommendation grid, once per condition (None when
+            rvdyn cannot evaluate it)."""
+            key = (json_key(cond),)
+            if key not in base_cache:
+                try:
+                    base_cache[key] = grid_te(cond, self._rec_m)
+                except ModelEvaluationError:
+                    base_cache[key] = None
+            return base_cache[key]
         for gi, g in enumerate(groups):
             members = [m for m in g["members"] if isinstance(m.get("value"), (int, float)) and m["value"] != 0][:MAX_MEMBERS]
             if len(members) < 2:
@@ -143,13 +154,7 @@ class Groups(Selection):
             for m in members:
                 cols = []
                 for c in self.cond_base:
-                    key = (json_key(c),)
-                    if key not in base_cache:
-                        try:
-                            base_cache[key] = grid_te(c, self._rec_m)
-                        except ModelEvaluationError:
-                            base_cache[key] = None
-                    b = base_cache[key]
+                    b = base_te(c)
                     s = None if b is None else self._member_signature(m["name"], m["value"], c, b)
                     if s is None:
                         ok = False
@@ -170,13 +175,7 @@ class Groups(Selection):
             best = None
             for L, d in conds:
                 cond = dict(template, load_Nm=L, direction=d)
-                key = (json_key(cond),)
-                if key not in base_cache:
-                    try:
-                        base_cache[key] = grid_te(cond, self._rec_m)
-                    except ModelEvaluationError:
-                        base_cache[key] = None
-                b = base_cache[key]
+                b = base_te(cond)
                 if b is None:
                     continue
                 cols = [self._member_signature(m["name"], m["value"], cond, b) for m in members]
