@@ -1,13 +1,19 @@
 """Identifiability groups and the extra runs that would split them.
 
-A group is a set of candidates that the given runs cannot tell apart: a found effect and its
-alternatives (candidates whose signature reproduces its fitted signature within the noise, each at
-its own size and sign), effects whose joint-fit estimates are correlated beyond
-:data:`CORRELATION_LIMIT`, and an unexplained empirical term with the library effects that could
-produce it. Every member is reported with its size and the RMS it would leave.
+A group is a set of candidates that the given runs cannot tell apart. At the final state
+(:meth:`Groups.final_state_groups`, see docs/calibration.md "Groups and honest intervals"): each
+effect in the model with the library candidates that take its place within the noise (chi-square(1)
+95 %) when every other effect and empirical term is refitted, each at its own size and sign with the
+RMS it would leave. Twins of the same error type (kind ``instances``) leave the effect named with an
+interval that covers every member's size; a member of another error type (kind ``unsplit``) means
+the effect is not named (it leaves ``effects``; the group gives every member's size). Beside them:
+effects whose joint-fit estimates are correlated beyond :data:`CORRELATION_LIMIT`, and an
+unexplained empirical term with the library effects that could produce it.
 
-An effect whose group holds members of its own unit at other sizes does not get a tight interval:
-its interval is widened to cover those sizes (the data do not say which member is right).
+Honest intervals: the interval of each named effect is the union of its plain interval and its
+intervals in the linearised model augmented by any one library candidate left out, at the size the
+data give that candidate (Frisch-Waugh), so that an error left out (too small for the F test, or in
+a group) cannot leave a tight interval that misses the truth.
 
 Recommended runs (D-optimal design): for the members of a group, their sensitivities (the change
 of the model TE when each is set to its fitted size, on the screening grid) are solved at candidate
