@@ -34,6 +34,7 @@ import time
 import numpy as np
 from scipy import stats
 
+from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
 from rvcalib.screening import coarse_values
@@ -51,6 +52,10 @@ REC_POINTS_PER_PIN = 2
 #: 95 % point of chi-square with one degree of freedom: a candidate that takes an effect's place and
 #: raises the residual sum of squares by less than this many noise variances fits as well.
 CHI2_95 = 3.841
+#: At the final state the signatures of the candidates within this many times the chi-square limit of
+#: replacing an effect (judged with their stored signatures, solved at earlier states) and of the
+#: effects' own families are solved again before the groups are decided.
+RESOLVE_FACTOR = 25.0
 
 
 class Groups(JointSelection):
@@ -96,8 +101,6 @@ class Groups(JointSelection):
             return fitted, []
         t0 = time.perf_counter()
         pairs = self._pairs()
-        if resolve:
-            self.solve_signatures([e for e in self.lib.templates() if not e.expensive], pairs)
         rc_raw = [coarse_values(r, y - q, self.m, self.period)
                   for r, y, q in zip(self.runs, self.y, self.predict(pairs))]
         rc_cat = np.concatenate(rc_raw)
@@ -120,40 +123,63 @@ class Groups(JointSelection):
         tq = float(stats.t.ppf(0.975, max(1, self.n - k_tot)))
         by_name = {f.name: f for f in fitted}
         named_active = {a.effect.name for a in self.active}
-        cache: dict[int, tuple] = {}
         groups: list[dict] = []
         unsplit: set[str] = set()
         alt_names: dict[str, set[str]] = {}
         rms_model = math.sqrt(self.rss_full / self.n)
-        # 1. alternatives: candidates that take an effect's place within the noise, the others refitted
-        for i, (a, m) in enumerate(zip(self.active, members)):
-            f = by_name.get(a.effect.name)
-            if f is None:
-                continue
-            others = np.column_stack([blocks[j] for j in range(len(blocks)) if j != i]) if len(blocks) > 1 else None
-            t = r_fin + m.cols @ (coef[col0[i]:col0[i + 1]]) + (m.contribution if m.contribution is not None
-                                                                 else m.cols @ np.asarray(a.p, dtype=float))
-            groups_i: dict[int, tuple] = {}
-            alts = []
-            r0 = self._group(self.m, t, others)[2]  # the residual without it, the others refitted
-            if (r0 - rss_grid) * w / s2 < CHI2_95:
-                continue  # not supported by the data: anything "replaces" it (the final elimination decides)
+
+        def replacements(t: np.ndarray, others: np.ndarray | None, limit: float) -> list[tuple[dict, Effect]]:
+            """Library candidates (not in the model) that fitted to ``t`` with ``others`` refitted leave a
+            residual sum of squares within ``limit`` noise variances of the model's."""
+            cache_t: dict[int, tuple] = {}
+            out = []
             for e in self.lib:
                 if e.name in named_active or e.expensive:
                     continue
-                d = self.screen_effect(e, groups_i, t, others)
+                d = self.screen_effect(e, cache_t, t, others)
                 if d is None or d.cols is None:
                     continue
-                r0 = groups_i[self._ms(e)][2]
-                rss_c = r0 * (1.0 - d.explained)
+                rss_c = cache_t[self._ms(e)][2] * (1.0 - d.explained)
                 miss = max(0.0, rss_c - rss_grid) * w
-                if miss / s2 < CHI2_95:
+                if miss / s2 < limit:
                     p = np.asarray(d.p, dtype=float)
                     ent = {"name": e.name, "key": e.key, "value": float(e.value(p)), "unit": e.unit,
                            "rms_after_arcsec": float(math.sqrt((self.rss_full + miss) / self.n)), "found": False}
                     if e.polar:
                         ent["angle_deg"] = float(e.magnitude_angle(p)[1])
-                    alts.append(ent)
+                    out.append((ent, e))
+            return out
+
+        def target(i: int) -> tuple[np.ndarray, np.ndarray | None]:
+            """An effect's contribution plus the final residual, and the other members' columns."""
+            m, a = members[i], self.active[i]
+            others = np.column_stack([blocks[j] for j in range(len(blocks)) if j != i]) if len(blocks) > 1 else None
+            t = r_fin + m.cols @ (coef[col0[i]:col0[i + 1]]) + (m.contribution if m.contribution is not None
+                                                                 else m.cols @ np.asarray(a.p, dtype=float))
+            return t, others
+
+        if resolve:
+            # the signatures of the candidates near an alternative (stored ones: solved at earlier states)
+            # and of the effects' own families are solved again at the final state
+            temps = {}
+            for i, a in enumerate(self.active):
+                near = [e for _, e in replacements(*target(i), RESOLVE_FACTOR * CHI2_95)] + [a.effect]
+                for e in near:
+                    if e.screen != "analytic" and not e.expensive:
+                        tt = self.lib.by_name(e.template or e.name)
+                        temps[tt.name] = tt
+            if temps:
+                self.solve_signatures(list(temps.values()), pairs)
+        # 1. alternatives: candidates that take an effect's place within the noise, the others refitted
+        for i, (a, m) in enumerate(zip(self.active, members)):
+            f = by_name.get(a.effect.name)
+            if f is None:
+                continue
+            t, others = target(i)
+            r0 = self._group(self.m, t, others)[2]  # the residual without it, the others refitted
+            if (r0 - rss_grid) * w / s2 < CHI2_95:
+                continue  # not supported by the data: anything "replaces" it (the final elimination decides)
+            alts = [ent for ent, _ in replacements(t, others, CHI2_95)]
             if not alts:
                 continue
             alts.sort(key=lambda x: x["rms_after_arcsec"])
