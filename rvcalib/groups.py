@@ -196,7 +196,9 @@ class Groups(JointSelection):
                                        "within the noise of the model's); the model holds the first, which is "
                                        "therefore not named as an effect"})
                 continue
-            same = [x["value"] for x in alts if x["unit"] == f.unit]
+            # the size of the error type each twin gives (a twin may need the opposite sign in its own
+            # instance's frame: its magnitude, with the sign of the named instance)
+            same = [math.copysign(abs(x["value"]), f.value) for x in alts if x["unit"] == f.unit]
             lo, hi = min([f.ci_low] + same), max([f.ci_high] + same)
             if lo < f.ci_low or hi > f.ci_high:
                 f.ci_low, f.ci_high = float(lo), float(hi)
