@@ -3,7 +3,16 @@ shared study runs, and the grouping of the tests for two worker processes (``pyt
 pytest-xdist; see :func:`pytest_collection_modifyitems`)."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+# One BLAS thread per process: the suite runs in two xdist worker processes on two cores, and OpenBLAS's
+# own threads (two per process by default, spinning between calls) oversubscribe them: rvcalib's pinv
+# and lstsq calls then take seconds of wall time each under load. Set before numpy is first imported
+# (pytest loads this file before it collects a test, in the controller and in each worker; workers and
+# subprocesses inherit it); a user's own setting is kept.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import pytest
 
