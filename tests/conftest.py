@@ -35,18 +35,19 @@ SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a
 #: long unit late in the queue would leave the other worker idle at the end. The rest follow in
 #: collection order (all below ~15 CPU-s). CPU-s of each unit measured on this 2-core machine at load 5-13
-#: (2026-11-23, one module at a time, each solve from an empty cache; shared fixtures counted once):
-#: calib-declared 113 (19 + 94; the declared model's own screening), the off-grid, two-effect and
-#: zero-offset scenarios ~100 each (the three with the pin scenario: 489 CPU-s with a 900 s limit hit),
-#: the single-pin scenario 64 (with the screening of the loop's three run conditions, 19), study ~45,
-#: screening grid ~45, rvcad export 41, scale error ~30, fcl vs analytic 27, joint 20, ratio-81 18. The
-#: first two are loop scenarios on different screenings, so the screening of the loop's run conditions
-#: (made by the second) is on disk (:func:`calib_forward_cache`) before either worker starts another.
-HEAVY_FIRST = ("calib-declared", "test_off_grid_readings_two_revolutions", "test_two_effects_at_once",
+#: (2026-11-23, one module at a time, each solve from an empty cache; shared fixtures counted once): the
+#: off-grid scenario over 180 (3 x 1000 readings solved exactly at each trial), calib-declared 113
+#: (19 + 94; the declared model's own screening), the two-effect and zero-offset scenarios ~100 each,
+#: the single-pin scenario 64 (with the screening of the loop's three run conditions, 19), study ~70
+#: (small_study ~30), stackup Monte Carlo 40, screening grid ~45, rvcad export 41, scale error ~30,
+#: fcl vs analytic 27, joint 20, ratio-81 18. The first makes the screening of the loop's three run
+#: conditions (280 points) as it starts, the second screens its declared model, so every later scenario
+#: on either worker reads that screening from disk (:func:`calib_forward_cache`).
+HEAVY_FIRST = ("test_off_grid_readings_two_revolutions", "calib-declared", "test_two_effects_at_once",
                "test_encoder_zero_offset_is_not_disguised_as_physics",
                "test_table4_error_single_pin_with_transient_and_duplicates", "study",
-               "test_screening_grid_does_not_alias_whatever_the_steps", "test_rvcad_export",
-               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_mc", "test_fcl_vs_analytic",
+               "test_screening_grid_does_not_alias_whatever_the_steps", "test_rvcad_export", "test_stackup_mc",
+               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_fcl_vs_analytic",
                "test_load_dependent_effect", "test_direction_dependent_effect",
                "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_calib_joint", "test_calib_design",
                "calib-order3", "test_rvcad_parts", "test_stackup_reducer", "test_rsm_augment", "test_fuzz_loaders",
