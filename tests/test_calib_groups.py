@@ -59,7 +59,7 @@ def final_state(root, run_list, hidden) -> Calibrator:
     eff = [lib.by_name(CAM), lib.by_name(COMPLIANCE)]
     params, *_ = cal.fit_full(eff, [np.array([1.0]), np.array([0.1])], [])
     cal.active = [Active(e, p, 1) for e, p in zip(eff, params)]
-    r, cal.emp_coef = cal.full_residual(cal._pairs(), [])
+    r, cal.emp_coef = cal.full_residual([(a.effect, a.p) for a in cal.active], [])
     cal.rss_full = float(r @ r)
     return cal
 
