@@ -22,6 +22,7 @@ the reducer; they are added to the model TE here as reading errors, see :mod:`rv
 from __future__ import annotations
 
 import copy
+import json
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -178,7 +179,11 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
         u_run = u[::-1] if rev else u  # in the order of motion
         pts = u_run if u_run.size >= 2 else np.append(u_run, u_run + period / 2)
         todo.append((i, case, pts, inv, rev))
-    res = runner([t[1] for t in todo], "forward model", theta_in_deg=[t[2] for t in todo])
+    # the cases that differ only in load and direction are solved together (rvdyn.te.run_te_many: one
+    # linearisation and inner solve per outer iteration for all of them)
+    labels = [_group_label(case_dicts[t[0]]) for t in todo]
+    res = runner([t[1] for t in todo], "forward model", theta_in_deg=[t[2] for t in todo],
+                 group=labels if len(todo) > 1 else None)
     for (i, _, _, inv, rev), r in zip(todo, res):
         if r["status"] != "ok":
             out[i] = ModelEvaluationError(f"rvdyn could not evaluate the case: {r['error']}")
@@ -186,6 +191,12 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
         te = r["te_arcsec"][:int(inv.max()) + 1]  # without the padding angle of a single-angle request
         out[i] = (te[::-1] if rev else te)[inv]
     return out  # type: ignore[return-value]
+
+
+def _group_label(case_dict: dict[str, Any]) -> str:
+    """A case JSON without its load, direction and name (the cases of one label are one batch)."""
+    return json.dumps({k: v for k, v in case_dict.items() if k not in ("load_Nm", "direction", "name")},
+                      sort_keys=True, default=str)
 
 
 def merge_case(base: dict[str, Any], errors: list[tuple[str, dict]] | None = None,

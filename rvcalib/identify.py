@@ -80,7 +80,7 @@ class Calibrator(JointSelection, Groups):
 
     def run(self) -> CalibrationResult:
         """Run the loop and return the result."""
-        t_start = time.perf_counter()
+        t_start = self.t_start = time.perf_counter()
         try:
             r0 = [y - p for y, p in zip(self.y, self.predict([]))]
         except ModelEvaluationError as exc:
