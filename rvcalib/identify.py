@@ -102,9 +102,8 @@ class Calibrator(JointSelection, Groups):
                 self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search: the residual "
                                    "may hold more that a larger limit would name")
                 break
-            if self.time_budget_s is not None and time.perf_counter() - t_start > self.time_budget_s:
-                self.stopped_by = (f"the time budget ({self.time_budget_s:g} s) stopped the search after "
-                                   f"{time.perf_counter() - t_start:.0f} s: the residual may hold more")
+            if self.over_budget():
+                self.stopped_by = self.budget_stop("between iterations")
                 break
             it += 1
             t_it = time.perf_counter()
@@ -143,6 +142,12 @@ class Calibrator(JointSelection, Groups):
 
             refined = self._validate(ranking, rc_raw, Ec, lambda e: tests(e, 1)[0], thr, p_cur)
             log["seconds_validation"] = time.perf_counter() - t_it
+            if self.over_budget():  # nothing is changed by this iteration: its choice would not be refitted
+                self.stopped_by = self.budget_stop(f"in iteration {it} after the validation")
+                log["decision"] = "stop: " + self.stopped_by
+                log["seconds"] = time.perf_counter() - t_it
+                iterations.append(log)
+                break
             log["validated"] = [{"name": d.effect.name, "explained_fraction": d.explained,
                                  "pair_explained_fraction": d.pair, "partner": d.partner,
                                  "estimate": np.asarray(d.p).tolist()} for d in refined]
@@ -201,7 +206,11 @@ class Calibrator(JointSelection, Groups):
                 if got is not None:
                     log["decision"] = got[1]
                     self.rescreen_due += 1
-            if got is None and dec == "physical":
+            if got is None and dec in ("physical", "empirical") and self.over_budget():
+                self.stopped_by = self.budget_stop(f"in iteration {it} before the refit")
+                log["decision"] = "stop: " + self.stopped_by
+                dec = "stop"
+            elif got is None and dec == "physical":
                 ok, msg = self._add_physical(best, ranking, r_full, it, log, harms)
                 self.rescreen_due += int(ok)
                 log["decision"] = msg

@@ -137,6 +137,11 @@ class LoopModel:
         d = self._deadline()
         return d is not None and time.perf_counter() > d
 
+    def budget_stop(self, where: str) -> str:
+        """The ``stopped_by`` text of a time budget that ran out at ``where`` (a stage of the loop)."""
+        return (f"the time budget ({self.time_budget_s:g} s) stopped the search {where} after "
+                f"{time.perf_counter() - (self.t_start or 0.0):.0f} s: the residual may hold more")
+
     # ------------------------------------------------------------------ model
     def _case(self, i_cond: int, active: list[tuple[Effect, np.ndarray]]) -> dict:
         errs: list[tuple[str, dict]] = []
