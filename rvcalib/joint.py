@@ -252,6 +252,9 @@ class JointSelection(Selection):
         n_solves = self.solve_signatures(list(temps.values()), self._pairs())
         # everything on the screening grid without projection: the empirical terms are pool members
         # (a subset may drop one and let physical effects explain its part)
+        if self.over_budget():
+            log["joint"] = {"shortlist": [d.effect.name for d in short], "stopped": "time budget"}
+            return None
         ce = np.zeros(0)
         if Ec is not None:
             ce, *_ = np.linalg.lstsq(Ec, rc_cat, rcond=None)
