@@ -3,7 +3,16 @@ shared study runs, and the grouping of the tests for two worker processes (``pyt
 pytest-xdist; see :func:`pytest_collection_modifyitems`)."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+# One BLAS thread per process: the suite runs in two xdist worker processes on two cores, and OpenBLAS's
+# own threads (two per process by default, spinning between calls) oversubscribe them: rvcalib's pinv
+# and lstsq calls then take seconds of wall time each under load. Set before numpy is first imported
+# (pytest loads this file before it collects a test, in the controller and in each worker; workers and
+# subprocesses inherit it); a user's own setting is kept.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import pytest
 
@@ -22,18 +31,28 @@ SHARED_SESSION_FIXTURES = ("small_study", "doe_reference")
 #: module: their scenarios are independent and long, and the solves they share (the screening of the
 #: loop's run conditions) come from the forward runner's disk cache (:func:`calib_forward_cache`).
 SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
-#: Units handed out first, in this order (groups, modules or test names; longest first keeps both workers
-#: busy to the end); the rest follow in collection order. The first is a loop scenario, so the screening
-#: of the loop's run conditions is on disk before the other worker reaches its first loop scenario.
-HEAVY_FIRST = ("test_table4_error_single_pin_with_transient_and_duplicates", "study",
-               "test_screening_grid_does_not_alias_whatever_the_steps", "calib-declared", "test_stackup_mc",
-               "test_off_grid_readings_two_revolutions", "test_two_effects_at_once",
-               "test_scale_error_is_a_ramp_term_and_nothing_else",
-               "test_encoder_zero_offset_is_not_disguised_as_physics", "test_rvcad_export",
-               "test_load_dependent_effect", "test_calib_design", "calib-order3", "test_stackup_reducer",
-               "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_direction_dependent_effect",
-               "test_stackup_failures", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
-               "test_paper_readings")
+#: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
+#: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a
+#: long unit late in the queue would leave the other worker idle at the end. The rest follow in
+#: collection order (all below ~15 CPU-s). CPU-s of each unit measured on this 2-core machine at load 5-13
+#: (2026-11-23, one module at a time, each solve from an empty cache; shared fixtures counted once): the
+#: off-grid scenario over 180 (3 x 1000 readings solved exactly at each trial), calib-declared 113
+#: (19 + 94; the declared model's own screening), the two-effect and zero-offset scenarios ~100 each,
+#: the single-pin scenario 64 (with the screening of the loop's three run conditions, 19), study ~70
+#: (small_study ~30), stackup Monte Carlo 40, screening grid ~45, rvcad export 41, scale error ~30,
+#: fcl vs analytic 27, joint 20, ratio-81 18. The first makes the screening of the loop's three run
+#: conditions (280 points) as it starts, the second screens its declared model, so every later scenario
+#: on either worker reads that screening from disk (:func:`calib_forward_cache`).
+HEAVY_FIRST = ("test_off_grid_readings_two_revolutions", "calib-declared", "test_two_effects_at_once",
+               "test_encoder_zero_offset_is_not_disguised_as_physics",
+               "test_table4_error_single_pin_with_transient_and_duplicates", "study",
+               "test_screening_grid_does_not_alias_whatever_the_steps", "test_rvcad_export", "test_stackup_mc",
+               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_fcl_vs_analytic",
+               "test_load_dependent_effect", "test_direction_dependent_effect",
+               "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_calib_joint", "test_calib_design",
+               "calib-order3", "test_rvcad_parts", "test_stackup_reducer", "test_rsm_augment", "test_fuzz_loaders",
+               "test_stackup_failures", "test_rvcad_errors",
+               "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds", "test_paper_readings")
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -229,6 +229,21 @@ def _private_uses(path: Path) -> list[str]:
             head = base.split(".")[0]
             if head in aliases:
                 out.append(f"{aliases[head]}{base[len(head):]}.{n.attr}")
+        # by name: setattr/getattr/monkeypatch.setattr(module, "_name", ...) and monkeypatch.setattr("pkg.mod._name", ...)
+        if (isinstance(n, ast.Call) and n.args and (ast.unparse(n.func).split(".")[-1] in ("setattr", "getattr",
+                                                                                         "delattr", "hasattr"))):
+            a0 = n.args[0]
+            if (len(n.args) > 1 and isinstance(n.args[1], ast.Constant) and isinstance(n.args[1].value, str)
+                    and isinstance(a0, (ast.Name, ast.Attribute))):
+                base = ast.unparse(a0)
+                head = base.split(".")[0]
+                name = n.args[1].value
+                if head in aliases and name.startswith("_") and not name.startswith("__"):
+                    out.append(f"{aliases[head]}{base[len(head):]}.{name}")
+            elif isinstance(a0, ast.Constant) and isinstance(a0.value, str) and "." in a0.value:
+                parts = a0.value.split(".")
+                if parts[0] in PACKAGES and any(q.startswith("_") and not q.startswith("__") for q in parts[1:]):
+                    out.append(a0.value)
     return sorted(set(out))
 
 
@@ -237,11 +252,15 @@ def test_private_use_finder(tmp_path):
     probe.write_text("import rvdyn.runner as r\n"
                      "from rvcad.export import _atomic_write, export_case\n"
                      "from rvcad import parts\n"
-                     "r._hidden(); parts._Gear; export_case.__doc__; other._x\n")
-    assert _private_uses(probe) == ["rvcad.export._atomic_write", "rvcad.parts._Gear", "rvdyn.runner._hidden"]
+                     "r._hidden(); parts._Gear; export_case.__doc__; other._x\n"
+                     "monkeypatch.setattr(r, '_RUNNER', None); getattr(parts, 'public'); setattr(other, '_y', 1)\n"
+                     "monkeypatch.setattr('rvcalib.forward._RUNNER', None); monkeypatch.setattr('os.path._x', 1)\n")
+    assert _private_uses(probe) == ["rvcad.export._atomic_write", "rvcad.parts._Gear", "rvcalib.forward._RUNNER",
+                                    "rvdyn.runner._RUNNER", "rvdyn.runner._hidden"]
 
 
 def test_tests_use_public_names_only():
-    bad = {p.name: _private_uses(p) for p in sorted((ROOT / "tests").glob("test_*.py"))
+    """Every Python file of the tests (test modules, conftest.py and their helper modules)."""
+    bad = {p.name: _private_uses(p) for p in sorted((ROOT / "tests").glob("*.py"))
            if p.name not in PRIVATE_IMPORTS_PENDING}
     assert {k: v for k, v in bad.items() if v} == {}
