@@ -123,8 +123,8 @@ def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dic
     """Solve a group of job payloads whose cases differ only in load and direction (worker side).
 
     The case is read and its geometry built once for the group; the jobs of equal ``revolutions`` (each at
-    its steps or its given input angles), all under a load > 0, go to :func:`rvdyn.te.run_te_many` in one call (the analytic
-    provider solves their states together; each result equals :func:`rvdyn.te.run_te`'s within the
+    its steps or its given input angles), all under a load > 0, go to :func:`rvdyn.te.run_te_many` in one
+    call (the analytic provider solves their states together; each result equals :func:`rvdyn.te.run_te`'s within the
     solver tolerance; a pair that cannot be solved fails alone with its error, the others stand), the
     others to :func:`rvdyn.te.run_te` one after another on the shared geometry (the geometry does not
     depend on the load or the direction).
