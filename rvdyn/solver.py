@@ -154,7 +154,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
                 dstep = -np.linalg.solve(A, grad[:, :, None])[:, :, 0]
             else:                                     # supports inside the equilibrium (rvdyn.support_eq)
-                grad, dstep = self._chain_newton(x0[idx] + s, arms[idx], -np.matmul(f[:, None, :], Ji)[:, 0],
+                grad, dstep, sup_scale = self._chain_newton(x0[idx] + s, arms[idx], -np.matmul(f[:, None, :], Ji)[:, 0],
                                                  np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji), B[sel],
                                                  mu[idx], floor[idx])
             # backtracking on the (convex) potential: take the first step length that lowers it
@@ -186,6 +186,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             mu[idx] = np.where(accepted_full, np.maximum(mu[idx] / 10.0, 1e-12), np.minimum(mu[idx] * 10.0, 1e12))
             # stationarity of the potential relative to the forces in play, plus a settled step
             scale = bnorm[idx] + np.einsum("nm,nm->n", np.abs(f), Jnorm[idx])
+            if nj != D:
+                scale = scale + sup_scale
             done = (moved < tol_mm) & (np.linalg.norm(grad, axis=1) <= 1e-7 * scale)
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False

@@ -58,8 +58,9 @@ def radial_law(d: np.ndarray, K: float, p: float, c: float = 0.0, derivs: bool =
     fv = F[..., None] * u
     kr = K * p * t ** (p - 1.0) if p != 1.0 else np.where(t > 0, K, 0.0)
     kt = F / rs
-    if kfloor > 0.0:
-        kr, kt = np.maximum(kr, kfloor), np.maximum(kt, kfloor)
+    if kfloor > 0.0:                                  # not inside the clearance: there the bearing is free
+        eng = r >= c
+        kr, kt = np.where(eng, np.maximum(kr, kfloor), kr), np.where(eng, np.maximum(kt, kfloor), kt)
     uu = u[..., :, None] * u[..., None, :]
     H = (kr - kt)[..., None, None] * uu + kt[..., None, None] * np.eye(2)
     return E, fv, H
@@ -79,6 +80,8 @@ class SupportChain:
     def __init__(self, sup: Supports, nd: int, nc: int, clearance: float, base: int) -> None:
         self.sup, self.nd, self.nc, self.c, self.base = sup, nd, nc, clearance, base
         self.per_crank = 4 + 2 * nd
+        # rigid limit: with a clearance the play dominates and the contacts' penalty is rigid enough
+        self.rigid_K = ContactLaw.RIGID_K if clearance > 0.0 else RIGID_SUPPORT_K
         self.n_dof = nc * self.per_crank
         zA, zB = sup.z_journal
         self.lam = (np.asarray(sup.z_cams, dtype=float) - zA) / (zB - zA)       # (nd,)
@@ -122,9 +125,9 @@ class SupportChain:
         N = x.shape[0]
         s = self.sup
         if rigid:
-            Kc = Kj = RIGID_SUPPORT_K
+            Kc = Kj = self.rigid_K
             p = 1.0
-            Kb = RIGID_SUPPORT_K * np.eye(self.nd)
+            Kb = self.rigid_K * np.eye(self.nd)
         else:
             Kc, Kj, p, Kb = s.cam_K, s.journal_K, BEARING_EXP, self.Kb
         sl = x[:, self.base:self.base + self.n_dof].reshape(N, self.nc, self.per_crank)
@@ -286,8 +289,9 @@ class SupportMixin:
                 arms[:, o[4]:o[5]], arms[:, o[5]:o[6]].reshape(N, nq, nj))
 
     def _chain_newton(self, x: np.ndarray, raw: np.ndarray, g_con: np.ndarray, H_con: np.ndarray,
-                      b: np.ndarray, mu: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Gradient (N, ndof) of the potential and the damped Newton step (N, ndof) with the supports inside.
+                      b: np.ndarray, mu: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Gradient (N, ndof) of the potential, the damped Newton step (N, ndof) with the supports inside, and
+        the scale of the supports' forces (N,) N.
 
         ``g_con`` (N, nj), ``H_con`` (N, nj, nj): the contacts' gradient and Hessian in their coordinates; ``b``
         (N, ndof) the load vector; ``mu`` (N,) the Levenberg-Marquardt damping; ``floor`` (N, 1) its floor. The
@@ -319,7 +323,9 @@ class SupportMixin:
         corr = np.matmul(Aaq, Z.reshape(N, nc * pc, nj + 1))
         za = np.linalg.solve(Aaa - corr[:, :, :nj], (ga - corr[:, :, nj])[:, :, None])[:, :, 0]
         zq = Z[..., nj] - np.matmul(Z[..., :nj], za[:, None, :, None])[..., 0]
-        return grad, -np.concatenate([za, zq.reshape(N, -1)], axis=1)
+        # the forces in play in the supports (for the stationarity test: the gradient relative to them)
+        scale = (np.linalg.norm(gc, axis=-1)[..., None] * np.abs(Dm).sum(axis=-1)).sum(axis=(1, 2, 3)) + np.abs(gs).sum(1)
+        return grad, -np.concatenate([za, zq.reshape(N, -1)], axis=1), scale
 
     def _chain_recover(self, arms: np.ndarray, step: np.ndarray, tangent: bool = False) -> np.ndarray:
         """Step of the support coordinates (N, nq) that goes with the step ``step`` (N, nj) of the contacts'
@@ -392,5 +398,5 @@ class SupportMixin:
         """Forces of the cams on the discs (N, nd, nc, 2) N, fixed frame, at the states x."""
         rigid, dcam, _ = self._chain_unpack(x, self._chain_raw(th, x, law))
         ch = self.chain
-        K, p = (RIGID_SUPPORT_K, 1.0) if rigid else (ch.sup.cam_K, BEARING_EXP)
+        K, p = (ch.rigid_K, 1.0) if rigid else (ch.sup.cam_K, BEARING_EXP)
         return -radial_law(dcam, K, p, ch.c)[1]
