@@ -123,9 +123,7 @@ class ResultsMixin:
         parts: dict[str, np.ndarray] = {}
         warnings: list[str] = []
         cam_F = None
-        if not law.rigid and self.chain is not None:
-            cam_F = self.chain_cam_forces(th, x, law)
-        elif not law.rigid and not self.float_discs:
+        if not law.rigid and self.chain is None and not self.float_discs:
             cam_F = self.disc_cam_forces(th, x, F, nrm)
         if not law.rigid:
             te = te - direction * T * self.compliance_rad_per_Nmm
@@ -137,6 +135,8 @@ class ResultsMixin:
                     parts["crank_torsion"] = self.torsion_share * parts["gears"]
                     parts["gears"] = parts["gears"] - parts["crank_torsion"]
                     parts.update(self._chain_parts(th, x, dx, law))
+                    cam_F = self.chain_cam_forces(th, x, law)
+                    self._raw_last = None
         nan = law.rigid
         pressure = np.full(th.size, np.nan)
         if not nan:

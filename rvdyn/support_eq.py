@@ -214,14 +214,25 @@ class SupportMixin:
         rigid = law is not None and law.rigid
         self._spring_k = min(self.bearing_k, RIGID_LIMIT_SPRING_K) if rigid else self.bearing_k
         if self.chain is not None:
-            raw = self._chain_raw(th_in, x, law)
-            return self._condense(x, raw, 0.0) if exact else raw
+            if exact:                                     # the finishing of a solution: its three uses share one
+                raw = self._chain_raw(th_in, x, law)
+                self._raw_last = (th_in, x, raw)
+                return self._condense(x, raw, 0.0)
+            return self._chain_raw(th_in, x, law)
         to, ps, _, _ = self._unpack(th_in, x)
         _, ang = self.geom.disc_poses(to, ps)
         c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]        # (N, nd, 1)
         h = self.geom.disc_holes[None]                                    # (1, nd, nc, 2)
         hx, hy = h[..., 0], h[..., 1]
         return np.stack([c * hx - sn * hy, sn * hx + c * hy], axis=-1) / self.a
+
+    _raw_last: tuple | None = None
+
+    def _finish_raw(self, th: np.ndarray, x: np.ndarray, law: ContactLaw) -> np.ndarray:
+        """The chain's linearisation at a solution (the one the unit-load forces made, if at the same states)."""
+        if self._raw_last is not None and self._raw_last[0] is th and self._raw_last[1] is x:
+            return self._raw_last[2]
+        return self._chain_raw(th, x, law)
 
     def _chain_raw(self, th_in: np.ndarray, x: np.ndarray, law: ContactLaw | None) -> np.ndarray:
         """The bearing deflections linearised at x, ``d = c0 + D x`` (hole minus cam minus the crank's
@@ -390,13 +401,13 @@ class SupportMixin:
 
     def _chain_parts(self, th: np.ndarray, x: np.ndarray, dx: np.ndarray, law: ContactLaw) -> dict[str, np.ndarray]:
         """Wind-up of the supports at the solution per unit-load state derivative ``dx`` (N, ndof) = dx/dT."""
-        _, dcam, Dm = self._chain_unpack(x, self._chain_raw(th, x, law))
+        _, dcam, Dm = self._chain_unpack(x, self._finish_raw(th, x, law))
         ddcam = np.einsum("nkjad,nd->nkja", Dm, dx)
         return self.chain.parts(x, dx, dcam, ddcam, law.rigid)
 
     def chain_cam_forces(self, th: np.ndarray, x: np.ndarray, law: ContactLaw) -> np.ndarray:
         """Forces of the cams on the discs (N, nd, nc, 2) N, fixed frame, at the states x."""
-        rigid, dcam, _ = self._chain_unpack(x, self._chain_raw(th, x, law))
+        rigid, dcam, _ = self._chain_unpack(x, self._finish_raw(th, x, law))
         ch = self.chain
         K, p = (ch.rigid_K, 1.0) if rigid else (ch.sup.cam_K, BEARING_EXP)
         return -radial_law(dcam, K, p, ch.c)[1]
