@@ -55,13 +55,16 @@ class Fitting(Screening):
             x0 = np.clip(np.array([0.1]), lo, hi)
         for _ in range(4):
             try:
-                fun(x0)
+                f0 = fun(x0)
                 break
             except ModelEvaluationError:
                 x0 = x0 * 0.5
         else:
             return 0.0, p0
-        got = chord_fit(fun, x0, lo, hi, max_iter=3, h=0.02, xtol=1e-3)
+        # without the effect the model is the state's (the residual r0): the secant from there is the
+        # start's Jacobian of a one-parameter effect
+        got = chord_fit(fun, x0, lo, hi, max_iter=3, h=0.02, xtol=1e-3, r0=f0, ref=(np.zeros_like(x0), r0),
+                        deadline=self._deadline())
         if got is None:
             return 0.0, p0
         x, r, _, _ = got
@@ -103,7 +106,7 @@ class Fitting(Screening):
             r = fun(np.zeros(0))
             return [], float(r @ r), np.zeros(0), fun, np.zeros((r.size, 0))
         x0 = np.clip(np.concatenate([np.asarray(p, dtype=float) for p in p0]) / scales, lo, hi)
-        got = chord_fit(fun, x0, lo, hi)
+        got = chord_fit(fun, x0, lo, hi, deadline=self._deadline())
         if got is not None:
             x, r, J, nfev = got
             self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord", "nfev": nfev})

@@ -253,9 +253,15 @@ class JointSelection(Selection):
             if d.effect.screen != "analytic":
                 t = self.lib.by_name(d.effect.template or d.effect.name)
                 temps[t.name] = t
+        if self.over_budget():
+            log["joint"] = {"shortlist": [d.effect.name for d in short], "stopped": "time budget"}
+            return None
         n_solves = self.solve_signatures(list(temps.values()), self._pairs())
         # everything on the screening grid without projection: the empirical terms are pool members
         # (a subset may drop one and let physical effects explain its part)
+        if self.over_budget():
+            log["joint"] = {"shortlist": [d.effect.name for d in short], "stopped": "time budget"}
+            return None
         ce = np.zeros(0)
         if Ec is not None:
             ce, *_ = np.linalg.lstsq(Ec, rc_cat, rcond=None)
@@ -313,6 +319,9 @@ class JointSelection(Selection):
         terms = [pool[i].term for i in choice.members if pool[i].term is not None]
         effects = [pool[i].effect for i in phys]
         p0 = [np.clip(pool[i].to_p(coefs[i]), pool[i].effect.lower, pool[i].effect.upper) for i in phys]
+        if self.over_budget():
+            jl["stopped"] = "time budget"
+            return None
         t_fit = time.perf_counter()
         try:
             if effects:

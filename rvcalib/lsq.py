@@ -4,6 +4,7 @@ fit used for the nonlinear refits through rvdyn."""
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 from scipy import optimize, stats
@@ -82,46 +83,88 @@ def fd_jac(fun, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, h: float = 0.02,
     return np.column_stack(cols)
 
 
+def broyden_update(J: np.ndarray, s: np.ndarray, dr: np.ndarray) -> np.ndarray:
+    """Broyden's rank-one ("good") update of a residual Jacobian: the smallest change of ``J`` (Frobenius
+    norm) that reproduces the change ``dr`` of the residual over the step ``s`` (Dennis and Schnabel,
+    Numerical Methods for Unconstrained Optimization, 1983, sec. 8.1). A step of zero length returns J."""
+    ss = float(s @ s)
+    if ss <= 0.0:
+        return J
+    return J + np.outer(dr - J @ s, s) / ss
+
+
 def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int = 8,
-               h: float = 0.01, xtol: float = 1e-3):
-    """Gauss-Newton with a Jacobian kept while it predicts the decrease well (chord method):
-    the start is already the coarse-grid estimate, so a few full-grid solves suffice.
+              h: float = 0.01, xtol: float = 1e-3, r0: np.ndarray | None = None,
+              ref: tuple[np.ndarray, np.ndarray] | None = None, deadline: float | None = None):
+    """Gauss-Newton on a Jacobian kept up to date by Broyden's rank-one updates from every evaluation
+    (accepted steps and rejected trial points alike): the start is already the coarse-grid estimate,
+    so a few solves suffice and the Jacobian is differenced (forward, step ``h``) only at the start.
+
+    A trial point that does not lower the residual sum of squares updates the Jacobian and the step is
+    recomputed from it, at most half as long as the rejected one (five trials per iteration). The fit
+    stops when a step moves no parameter by more than ``xtol`` (scaled units) or lowers the sum of
+    squares by less than 1e-6 of it, after ``max_iter`` iterations, or (``deadline``, a
+    ``time.perf_counter()`` value) when the time is up.
+
+    Parameters
+    ----------
+    r0 : ndarray or None
+        ``fun(x0)`` if already known.
+    ref : (x, r) or None
+        Another point and its residual (e.g. the model without the fitted effect): for one parameter
+        the start's Jacobian is the secant through it when it lies at least ``h`` from ``x0``, which
+        saves the differencing solve.
+
     Returns (x, residual, Jacobian, solves) or None if no decrease could be made."""
     try:
-        r = fun(x0)
-        J = fd_jac(fun, x0, lo, hi, h=h, f0=r)
+        r = fun(x0) if r0 is None else r0
     except ModelEvaluationError:
         return None
-    nfev = 1 + x0.size
+    nfev = int(r0 is None)
+    J = None
+    if ref is not None and x0.size == 1:
+        d = float(x0[0] - ref[0][0])
+        if abs(d) >= h * max(1.0, abs(float(x0[0]))):
+            J = ((r - ref[1]) / d)[:, None]
+    if J is None:
+        try:
+            J = fd_jac(fun, x0, lo, hi, h=h, f0=r)
+        except ModelEvaluationError:
+            return None
+        nfev += x0.size
+    n_start = nfev
     x, rss = x0.copy(), float(r @ r)
     for _ in range(max_iter):
+        if deadline is not None and time.perf_counter() > deadline:
+            break
         dx, *_ = np.linalg.lstsq(J, -r, rcond=None)
-        pred = rss - float(np.sum((r + J @ dx) ** 2))
-        alpha, accepted = 1.0, False
+        accepted = False
         for _ in range(5):
-            xn = np.clip(x + alpha * dx, lo, hi)
+            xn = np.clip(x + dx, lo, hi)
+            s = xn - x
+            if not np.any(s):
+                break
             try:
                 rn = fun(xn)
                 nfev += 1
             except ModelEvaluationError:
-                alpha *= 0.5
+                dx = 0.5 * dx
                 continue
+            J = broyden_update(J, s, rn - r)
             rssn = float(rn @ rn)
             if rssn <= rss:
                 accepted = True
                 break
-            alpha *= 0.5
+            # rejected: a step from the updated linearisation, at most half as long
+            dn, *_ = np.linalg.lstsq(J, -r, rcond=None)
+            lim = 0.5 * float(np.linalg.norm(s))
+            nd = float(np.linalg.norm(dn))
+            dx = dn if nd <= lim else dn * (lim / max(nd, 1e-300))
         if not accepted:
-            return (x, r, J, nfev) if nfev > 1 + x0.size else None
+            return (x, r, J, nfev) if nfev > n_start else None
         step = float(np.max(np.abs(xn - x)))
         act = rss - rssn
         x, r, rss = xn, rn, rssn
         if step < xtol or act <= 1e-6 * rss:
             break
-        if act < 0.5 * alpha * pred:  # the linearisation is off: take a new Jacobian here
-            try:
-                J = fd_jac(fun, x, lo, hi, h=h, f0=r)
-            except ModelEvaluationError:
-                break
-            nfev += x.size
     return x, r, J, nfev

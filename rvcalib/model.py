@@ -4,6 +4,7 @@ the effects and empirical terms in the model, and the model TE at every reading
 from __future__ import annotations
 
 import json
+import time
 from typing import Callable
 
 import numpy as np
@@ -122,6 +123,24 @@ class LoopModel:
         self.notes: list[str] = list(self.lib.notes) + ([grid_note] if grid_note else [])
         self._emp_info: dict[EmpiricalTerm, tuple[int, float]] = {}
         self.fit_stats: list[dict] = []
+        #: ``time.perf_counter()`` at the start of the loop (set by the loop; the time budget counts from it)
+        self.t_start: float | None = None
+
+    def _deadline(self) -> float | None:
+        """``time.perf_counter()`` value at which the time budget runs out (None: no budget or not started)."""
+        if self.time_budget_s is None or self.t_start is None:
+            return None
+        return self.t_start + self.time_budget_s
+
+    def over_budget(self) -> bool:
+        """Whether the time budget has run out."""
+        d = self._deadline()
+        return d is not None and time.perf_counter() > d
+
+    def budget_stop(self, where: str) -> str:
+        """The ``stopped_by`` text of a time budget that ran out at ``where`` (a stage of the loop)."""
+        return (f"the time budget ({self.time_budget_s:g} s) stopped the search {where} after "
+                f"{time.perf_counter() - (self.t_start or 0.0):.0f} s: the residual may hold more")
 
     # ------------------------------------------------------------------ model
     def _case(self, i_cond: int, active: list[tuple[Effect, np.ndarray]]) -> dict:

@@ -37,7 +37,7 @@ class Selection(Fitting):
             fam = d.effect.template or d.effect.name
             if fam in seen:
                 continue
-            if len(refined) >= self.top_k:
+            if len(refined) >= self.top_k or (refined and self.over_budget()):
                 break
             if d.explained < 0.5 * best_expl and (d.pair_explained or 0.0) < best_expl:
                 continue

@@ -1,12 +1,9 @@
 """Compliance of the supports the torque passes through: cam and journal bearings, crankshafts.
 
-Series compliances after the contact equilibrium (docs/physics.md, section 8). The solver finds the
-pin and mesh loads with rigid supports; the loads on each bearing and crankshaft follow from the
-statics of the discs and cranks, and each part's deflection adds to the output wind-up by the
-unit-load (Castigliano) theorem: with every load proportional to the output torque T,
-``theta_part = sum(F . delta(F)) / T`` (complementary energy of a power law ``F = K delta^n`` is
-``n/(n+1) F delta``, its derivative in T is ``delta dF/dT = delta F / T``). The redistribution of the
-pin loads by the support deflections is neglected (second order; stated).
+The stiffness constants and influence coefficients of the supports (docs/physics.md, section 8); the
+solver holds them inside the equilibrium (rvdyn.support_eq). The statics helpers here (least-norm cam
+forces, lever-rule journal reactions, series wind-up) serve the friction of the stiffness sweep and the
+tests.
 
 Formulas and sources:
 

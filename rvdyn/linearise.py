@@ -3,7 +3,7 @@
 The state maps (scaled coordinates to output, crank and disc poses), the gaps of every contact and their
 Jacobians at a set of states (pin gaps from the contact provider with the chain rule through the disc
 poses; stage I gaps in closed form; the kinematic derivatives by central differences of all neighbouring
-states in one stacked evaluation), and the cam-bearing springs of floating discs. State lives on the solver.
+states in one stacked evaluation). State lives on the solver; the cam bearings are in rvdyn.support_eq.
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ class LinearisationMixin:
         ps = ps0 + x[:, 1:1 + self.nc] / self.e
         shift = turn = None
         if self.float_discs:
-            f = x[:, 1 + self.nc:].reshape(-1, self.nd, 3)
+            f = x[:, 1 + self.nc:1 + self.nc + 3 * self.nd].reshape(-1, self.nd, 3)
             shift = f[:, :, :2]
             turn = f[:, :, 2] / self.a
         return to, ps, shift, turn
@@ -67,7 +67,7 @@ class LinearisationMixin:
 
     def _pin_gaps(self, th_in: np.ndarray, x: np.ndarray, stacked=None,
                   jac: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Pin gaps (N, nd, Zp) mm and Jacobians (N, nd, Zp, ndof) mm/mm (written into ``jac`` if given).
+        """Pin gaps (N, nd, Zp) mm and Jacobians (N, nd, Zp, nj) mm/mm (written into ``jac`` if given).
 
         Disc poses are differentiated by central differences (cheap: N x nd values, all neighbours in
         one stacked evaluation, :meth:`_stacked`); the pins follow by the chain rule: p = R(-phi)(P - c),
@@ -78,8 +78,8 @@ class LinearisationMixin:
         TH, X = self._stacked(th_in, x) if stacked is None else stacked
         cen_all, ang_all = self._poses(TH, X)
         cen, ang = cen_all[:N], ang_all[:N]
-        dcen = np.zeros(cen.shape + (self.ndof,))
-        dang = np.zeros(ang.shape + (self.ndof,))
+        dcen = np.zeros(cen.shape + (self.nj,))
+        dang = np.zeros(ang.shape + (self.nj,))
         dcen[..., :nk] = self._central(cen_all, N)
         dang[..., :nk] = self._central(ang_all, N)
         if self.float_discs:
@@ -118,7 +118,7 @@ class LinearisationMixin:
         lever = nx * py - ny * px
         # -(mx dc_x + my dc_y) + lever dphi, evaluated in place (the same operations in the same order)
         if jac is None:
-            jac = np.empty((N, self.nd, self.zp, self.ndof))
+            jac = np.empty((N, self.nd, self.zp, self.nj))
         np.multiply(mx[..., None], dcen[:, :, None, 0, :], out=jac)
         jac += my[..., None] * dcen[:, :, None, 1, :]
         np.negative(jac, out=jac)
@@ -152,7 +152,8 @@ class LinearisationMixin:
         return self.geom.stage1_gaps(th_in, to, ps, direction)
 
     def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction) -> tuple[np.ndarray, np.ndarray]:
-        """Gaps (N, M) mm and their Jacobians (N, M, ndof) mm/mm at the states x.
+        """Gaps (N, M) mm and their Jacobians (N, M, nj) mm/mm at the states x (nj: the coordinates the
+        contacts depend on, the first nj of the state; the support coordinates follow them).
 
         Columns: the 2 x Zp pin gaps, then the stage I flank gaps of each planet, loaded flank
         (``direction``) first, coast flank (``-direction``, open by the stage I backlash) second.
@@ -165,8 +166,8 @@ class LinearisationMixin:
         dirs = np.broadcast_to(np.asarray(direction), (N,))
         stacked = self._stacked(th_in, x)
         n1 = self.nd * self.zp
-        J = np.empty((N, n1 + 2 * self.nc, self.ndof))
-        gaps, _ = self._pin_gaps(th_in, x, stacked, J[:, :n1].reshape(N, self.nd, self.zp, self.ndof))
+        J = np.empty((N, n1 + 2 * self.nc, self.nj))
+        gaps, _ = self._pin_gaps(th_in, x, stacked, J[:, :n1].reshape(N, self.nd, self.zp, self.nj))
         TH, X = stacked
         to, ps, _, _ = self._unpack(TH, X)
         analytic = isinstance(self.contacts, AnalyticContacts)
@@ -176,7 +177,7 @@ class LinearisationMixin:
             g_all = both[flank]
             # the provider's gap value (the analytic provider's is the closed form just evaluated)
             val[flank] = g_all[:N] if analytic else self.contacts.stage1_gaps(th_in, to[:N], ps[:N], flank)
-            j1 = np.zeros((N, self.nc, self.ndof))
+            j1 = np.zeros((N, self.nc, self.nj))
             j1[..., :nk] = self._central(g_all, N)
             der[flank] = j1
         up = (dirs == 1)[:, None]
@@ -186,50 +187,3 @@ class LinearisationMixin:
         G = np.concatenate([gaps.reshape(N, -1), g1], axis=1)
         J[:, n1:] = j1
         return G, J
-
-    # ------------------------------------------------------------------ bearings
-    def _hole_arms(self, th_in: np.ndarray, x: np.ndarray) -> np.ndarray | None:
-        """Disc holes relative to their disc's centre, turned with the disc at the states x, divided
-        by the turn lever ``a``: (N, nd, nc, 2), or None without floating discs.
-
-        The inner solve takes them at its linearisation point (like the contact gaps): the hole
-        direction turns by the disc's rotation, microradians within a step, and the outer iteration
-        re-evaluates them, so the converged state is exact."""
-        if not self.float_discs:
-            return None
-        to, ps, _, _ = self._unpack(th_in, x)
-        _, ang = self.geom.disc_poses(to, ps)
-        c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]        # (N, nd, 1)
-        h = self.geom.disc_holes[None]                                    # (1, nd, nc, 2)
-        hx, hy = h[..., 0], h[..., 1]
-        return np.stack([c * hx - sn * hy, sn * hx + c * hy], axis=-1) / self.a
-
-    def _bearing(self, x: np.ndarray, arms: np.ndarray | None,
-                 derivs: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """Energy (N,), gradient (N, ndof) and Gauss-Newton Hessian (N, ndof, ndof) of the cam bearings
-        (the derivatives None when ``derivs`` is False).
-
-        Each hole moves by ``s = shift + turn * (z x r) / a`` (disc shift and turn DOFs, r the hole's
-        arm of :meth:`_hole_arms`); its bearing is a spring ``bearing_k`` beyond the clearance."""
-        N = x.shape[0]
-        if arms is None:
-            return np.zeros(N), np.zeros((N, self.ndof)), np.zeros((N, self.ndof, self.ndof))
-        nd, nc, kb = self.nd, self.nc, self.bearing_k
-        blk = x[:, 1 + nc:].reshape(N, nd, 1, 3)                       # disc shift x, y and turn
-        perp = np.stack([-arms[..., 1], arms[..., 0]], axis=-1)        # d s / d turn, (N, nd, nc, 2)
-        s_ = blk[..., :2] + blk[..., 2:3] * perp
-        sn = np.sqrt(s_[..., 0] ** 2 + s_[..., 1] ** 2)
-        over = np.maximum(sn - self.clearance, 0.0)
-        E = 0.5 * kb * (over ** 2).sum(axis=(1, 2))
-        if not derivs:
-            return E, None, None
-        u = s_ / np.maximum(sn, 1e-300)[..., None]                     # over > 0 only where sn > 0
-        Ju = np.concatenate([u, (u * perp).sum(axis=-1, keepdims=True)], axis=-1)   # (N, nd, nc, 3)
-        g = np.zeros((N, self.ndof))
-        g[:, 1 + nc:] = ((kb * over)[..., None] * Ju).sum(axis=2).reshape(N, 3 * nd)
-        Hb = np.einsum("nkh,nkhi,nkhj->nkij", kb * (over > 0), Ju, Ju)
-        H = np.zeros((N, self.ndof, self.ndof))
-        for k in range(nd):
-            base = 1 + nc + 3 * k
-            H[:, base:base + 3, base:base + 3] = Hb[:, k]
-        return E, g, H

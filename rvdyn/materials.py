@@ -96,13 +96,20 @@ class LineContact:
         return self.A * P * (self.C - np.log(P))
 
     def _u(self, delta: np.ndarray, C: np.ndarray) -> np.ndarray:
-        d = np.maximum(delta, 1e-300)
-        rhs = np.log(self.A) + C - np.log(d)           # u - ln u = rhs  (u = C - ln P > 1)
+        """u = C - ln P at the penetrations delta (where delta <= 0: 2, a placeholder the callers mask)."""
+        delta = np.asarray(delta, dtype=float)
+        pos = delta > 0
+        Cb = np.broadcast_to(C, delta.shape)
+        out = np.full(delta.shape, 2.0)
+        if not pos.any():
+            return out
+        rhs = np.log(self.A) + Cb[pos] - np.log(delta[pos])  # u - ln u = rhs  (u = C - ln P > 1)
         rhs = np.maximum(rhs, 1.0 + 1e-12)             # delta beyond the law's maximum: clamp at u = 1
         u = rhs + np.log(rhs)                          # asymptotic start (relative force error < 1e-2),
         for _ in range(3):                             # then Newton: 3 steps reach machine precision
             u = u - (u - np.log(u) - rhs) / (1.0 - 1.0 / u)
-        return np.maximum(u, 1.0 + 1e-12)
+        out[pos] = np.maximum(u, 1.0 + 1e-12)
+        return out
 
     def force(self, delta: np.ndarray, C: np.ndarray | None = None) -> np.ndarray:
         """Force (N) at penetration delta (mm); zero where delta <= 0."""

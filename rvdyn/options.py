@@ -53,8 +53,12 @@ SOLVER_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
                 "friction torque at the output that always resists the motion (direction-dependent hysteresis)"),
     ModelOption("cam_bearing_clearance_um", "um", 0.0, 200.0, 0.0,
                 "radial clearance of every cam (crank) bearing between crank and disc (backlash)"),
-    ModelOption("cam_bearing_stiffness_N_per_um", "N/um", 1.0, 1.0e6, 1000.0,
-                "radial stiffness of a cam bearing once its clearance is taken up"),
+    ModelOption("cam_bearing_stiffness_N_per_um", "N/um", 1.0, 1.0e6, 1.0e6,
+                "radial stiffness of a cam bearing once its clearance is taken up, with rigid supports (contact "
+                "'impact', or supports 'rigid'); the default 1e6 N/um is the rigid limit's penalty (a rigid bearing: "
+                "the clearance is pure play, and clearance -> 0 is the model without it); a smaller value floats the "
+                "discs on linear springs at every clearance, zero included. With contact 'physical' and supports "
+                "'elastic' the needle-bearing law applies instead"),
 ]}
 
 MODEL_OPTIONS: dict[str, ModelOption] = {**SOLVER_OPTIONS, **GEOMETRY_OPTIONS}

@@ -15,7 +15,6 @@ from rvdyn.bearings import Supports
 from rvdyn.contacts import ContactLaw, PhysicalLaw
 from rvdyn.materials import (MATERIALS, LineContact, e_star, hertz_line_pressure, iso_mesh_stiffness,
                              iso_single_tooth_stiffness, transverse_contact_ratio)
-from rvdyn.options import model_choice
 
 
 class PhysicsMixin:
@@ -41,7 +40,7 @@ class PhysicsMixin:
         self.supports = None
         self.k_stage1 = self.k_mesh
         self.torsion_share = 0.0
-        if self.law.kind == "physical" and model_choice(m, "supports") == "elastic" and not self.float_discs:
+        if self.chain_on:
             self.supports = Supports.from_design(d)
             # crank torsion between planet and cams in series with the mesh, seen along the line of action
             k_t = self.supports.GJ / (self.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
@@ -83,20 +82,31 @@ class PhysicsMixin:
         relative radius R at the converged foot points (for either law: the force meets the real geometry)."""
         return hertz_line_pressure(F, self._R_all, self.pin_estar, self.face_width)
 
-    def _unit_load_forces(self, law, delta: np.ndarray, direction: int) -> np.ndarray:
-        """Contact forces per unit output torque, dF/dT (N, M) in N/(N mm), at the solution.
+    def _unit_load_forces(self, law, delta: np.ndarray, direction: int, th: np.ndarray,
+                          x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Contact forces per unit output torque, dF/dT (N, M) in N/(N mm), and the state's dx/dT (N, ndof)
+        in mm/(N mm), at the solution.
 
-        Equilibrium ``J^T F = b`` with ``F = F(-(G + J x))`` and ``db/dT = direction e0 / Rp`` gives
-        ``(J^T K J) dx/dT = -db/dT`` and ``dF/dT = -K J dx/dT`` (K: contact stiffnesses). With the loads
-        proportional to T this is F/T; with a preload (errors) it is the incremental load path the unit-load
-        method needs (docs/physics.md, section 8)."""
+        Equilibrium ``J^T F + g_sup = b`` with ``F = F(-(G + J x))`` and ``db/dT = direction e0 / Rp`` gives
+        ``(J^T K J + H_sup) dx/dT = -db/dT`` and ``dF/dT = -K J dx/dT`` (K: contact stiffnesses, H_sup: the
+        tangent stiffness of the supports inside the equilibrium). With the loads proportional to T this is
+        F/T; with a preload (errors) it is the incremental load path the unit-load method needs
+        (docs/physics.md, section 8)."""
         J = self._J_all
+        nj = J.shape[-1]
         _, k = law.force_stiffness(delta)
-        H = np.einsum("nmi,nm,nmj->nij", J, k, J) + 1e-12 * np.eye(self.ndof)[None]
-        db = np.zeros(self.ndof)
+        H = np.einsum("nmi,nm,nmj->nij", J, k, J) + 1e-12 * np.eye(nj)[None]
+        arms = self._hole_arms(th, x, law, exact=True) if self.float_discs else None
+        if arms is not None:
+            # the supports' exact tangent condensed onto the contacts' coordinates (option springs: their own)
+            H += self._condensed(arms)[3] if self.chain is not None else self._bearing(x, arms)[2]
+        db = np.zeros(nj)
         db[0] = direction / self.Rp
-        dx = -np.linalg.solve(H, np.broadcast_to(db, (J.shape[0], self.ndof))[..., None])[..., 0]
-        return -k * np.einsum("nmi,ni->nm", J, dx)
+        dx = -np.linalg.solve(H, np.broadcast_to(db, (J.shape[0], nj))[..., None])[..., 0]
+        f = -k * np.einsum("nmi,ni->nm", J, dx)
+        if self.chain is not None:
+            dx = np.concatenate([dx, self._chain_recover(arms, dx, tangent=True)], axis=1)
+        return f, dx
 
     def disc_cam_forces(self, th, x, F, nrm) -> np.ndarray:
         """Cam-bearing forces on the discs (N, nd, nc, 2) that balance the contact forces F (N, M)."""
@@ -110,11 +120,3 @@ class PhysicsMixin:
         M_disc = (r[..., 0] * fvec[..., 1] - r[..., 1] * fvec[..., 0]).sum(axis=2)
         cams = np.swapaxes(self.geom.cam_centers(to, ps), 1, 2)                # (N, nd, nc, 2)
         return Supports.cam_forces(F_disc, M_disc, cams - cen[:, :, None])
-
-    def _support_windup(self, th, x, F, f, nrm, B) -> dict[str, np.ndarray]:
-        """Series wind-up of the supports (rad per step): the deflections under the actual loads F
-        (cam forces B), weighted by the unit-load forces f (bearings.Supports.wind_up)."""
-        b = self.disc_cam_forces(th, x, f, nrm)
-        return self.supports.wind_up(B, b)
-
-

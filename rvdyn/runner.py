@@ -122,9 +122,9 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
 def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dict[str, Any]:
     """Solve a group of job payloads whose cases differ only in load and direction (worker side).
 
-    The case is read and its geometry built once for the group; the jobs of equal ``revolutions`` and no
-    given input angles, all under a load > 0, go to :func:`rvdyn.te.run_te_many` in one call (the analytic
-    provider solves their states together; each result equals :func:`rvdyn.te.run_te`'s within the
+    The case is read and its geometry built once for the group; the jobs of equal ``revolutions`` (each at
+    its steps or its given input angles), all under a load > 0, go to :func:`rvdyn.te.run_te_many` in one
+    call (the analytic provider solves their states together; each result equals :func:`rvdyn.te.run_te`'s within the
     solver tolerance; a pair that cannot be solved fails alone with its error, the others stand), the
     others to :func:`rvdyn.te.run_te` one after another on the shared geometry (the geometry does not
     depend on the load or the direction).
@@ -162,19 +162,18 @@ def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str,
     except _SOLVE_ERRORS:  # every job of the group shares the case: each fails as it would alone
         return {"key": payload["key"], "results": [solve_job(p) for p in jobs]}
     law = ContactLaw(**jobs[0]["law"])
-    runs: dict[tuple, list[int]] = {}  # jobs that one run_te_many call can take: same revolutions, no given angles
+    runs: dict[float, list[int]] = {}  # jobs that one run_te_many call can take: same revolutions
     for i, p in enumerate(jobs):
-        th = p.get("theta_in_deg")
-        runs.setdefault((float(p["revolutions"]), None if th is None else tuple(th), i if th is not None else -1),
-                        []).append(i)
-    for (revs, th, _), idx in runs.items():
+        runs.setdefault(float(p["revolutions"]), []).append(i)
+    for revs, idx in runs.items():
         loads = [(float(jobs[i]["case"].get("load_Nm", 20.0)), int(jobs[i]["case"].get("direction", 1))) for i in idx]
         steps = [int(jobs[i]["steps"]) for i in idx]
-        if len(idx) > 1 and th is None and all(load > 0 for load, _ in loads):
+        given = [jobs[i].get("theta_in_deg") for i in idx]
+        if len(idx) > 1 and all(load > 0 for load, _ in loads):
             t0 = time.perf_counter()
             try:  # a pair that cannot be solved comes back as its error, the others as results
                 rs = te.run_te_many(case, payload["solver"], steps, loads=loads, revolutions=revs, law=law, geom=geom,
-                                    errors="return")
+                                    errors="return", theta_in_deg=given)
             except _SOLVE_ERRORS:
                 rs = None  # solved job by job below
             if rs is not None:
@@ -183,11 +182,11 @@ def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str,
                     k = jobs[i]["key"]
                     results[i] = _failed(k, r, secs) if isinstance(r, BaseException) else _ok(k, r)
                 continue
-        theta = None if th is None else np.asarray(th, dtype=float)
-        for i, n, (load, d) in zip(idx, steps, loads):
+        for i, n, (load, d), th in zip(idx, steps, loads, given):
             t0 = time.perf_counter()
             try:
-                r = te.run_te(case, payload["solver"], n, revs, load, d, law, geom=geom, theta_in_deg=theta)
+                r = te.run_te(case, payload["solver"], n, revs, load, d, law, geom=geom,
+                              theta_in_deg=None if th is None else np.asarray(th, dtype=float))
             except _SOLVE_ERRORS as exc:
                 results[i] = _failed(jobs[i]["key"], exc, time.perf_counter() - t0)
                 continue

@@ -25,8 +25,6 @@ Internally the unknowns are scaled to mm of motion: ``x0 = Rp * (theta_out - the
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from rvcad.geometry import ReducerGeometry
@@ -35,14 +33,9 @@ from rvdyn.contacts import ContactLaw
 from rvdyn.linearise import LinearisationMixin
 from rvdyn.options import model_choice, model_value, parse_model
 from rvdyn.physical import PhysicsMixin
-
-ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
-
-#: Penetration (mm) beyond which an elastic solution is refused as an unresolvable interference.
-#: 0.1 mm covers the paper's largest pin pitch error (0.06 deg moves a pin 67 um into a zero-backlash
-#: disc; the equilibrium needs 50-59 um); a Hertz-type law at that depth is an extrapolation, which the
-#: report states. Both contact providers measure any depth (fcl: the outline window is a surface).
-MAX_ELASTIC_PENETRATION_MM = 0.1
+from rvdyn.results import (ARCSEC_PER_RAD, MAX_ELASTIC_PENETRATION_MM, InterferenceError,  # noqa: F401 (API)
+                           ResultsMixin, Solution)
+from rvdyn.support_eq import SupportChain, SupportMixin
 
 
 #: Largest change of a state coordinate (mm) in one outer iteration (trust region of the linearised gaps).
@@ -53,10 +46,6 @@ OUTER_TRUST_MM = 0.01
 MAX_TRUST_MM = 0.1
 
 
-class InterferenceError(ValueError):
-    """The case's interference cannot be resolved at the given stiffness."""
-
-
 def law_from_model(model: dict, rigid: bool = False) -> ContactLaw:
     """The contact law a case's ``model`` object asks for (default: ``rvdyn.options.DEFAULT_CONTACT``)."""
     m = parse_model(model)
@@ -64,51 +53,7 @@ def law_from_model(model: dict, rigid: bool = False) -> ContactLaw:
                       kind=model_choice(m, "contact"))
 
 
-@dataclass
-class Solution:
-    """Equilibrium states for a set of input angles.
-
-    Attributes
-    ----------
-    theta_in, theta_out : (N,) rad
-    psi : (N, n_cranks) rad
-    te_rad : (N,) rad, ``theta_out - theta_in / ratio`` including the torsional wind-up option
-    n_contacts : (N,) int, contacts carrying load (penetration > 0)
-    peak_force_N : (N,) N, largest contact force (NaN in the rigid limit)
-    max_penetration_mm : (N,) mm
-    stage1_force_N : (N, n_cranks) N (NaN in the rigid limit)
-    iterations : int, outer iterations used (largest over the chunks)
-    parts_rad : dict of (N,) rad
-        Output wind-up of each part kind at the step (unit-load method, section 8 of docs/physics.md):
-        ``pins`` and ``gears`` (contact deflections), and with the physical law and elastic supports
-        ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (series
-        compliance); empty in the rigid limit and with floating discs (cam-bearing clearance).
-    peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
-    warnings : list of str
-    pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
-    cam_force_N : (N, n_discs, n_cranks, 2) N or None, forces of the cams on the discs (fixed frame)
-    n_pin_contacts : (N,) int, pin-disc contacts (both discs) that touch (penetration > 0)
-    """
-
-    theta_in: np.ndarray
-    theta_out: np.ndarray
-    psi: np.ndarray
-    te_rad: np.ndarray
-    n_contacts: np.ndarray
-    peak_force_N: np.ndarray
-    max_penetration_mm: np.ndarray
-    stage1_force_N: np.ndarray
-    iterations: int = 0
-    x: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
-    parts_rad: dict = field(default_factory=dict)
-    peak_pressure_MPa: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    warnings: list = field(default_factory=list)
-    pin_force_N: np.ndarray | None = field(default=None, repr=False)
-    cam_force_N: np.ndarray | None = field(default=None, repr=False)
-    n_pin_contacts: np.ndarray | None = field(default=None, repr=False)
-
-
-class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
+class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsMixin):
     """Quasi-static equilibrium for one case geometry with one contact provider.
 
     Parameters
@@ -130,9 +75,16 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
         d = geom.design
         self.clearance = model_value(m, "cam_bearing_clearance_um") * 1e-3
         self.bearing_k = model_value(m, "cam_bearing_stiffness_N_per_um") * 1e3
-        self.float_discs = self.clearance > 0.0
+        self._spring_k = self.bearing_k
         self.nc, self.nd, self.zp = d.n_cranks, d.n_discs, d.z_pins
-        self.ndof = 1 + self.nc + (3 * self.nd if self.float_discs else 0)
+        # the physical law with elastic supports: bearings and cranks inside the equilibrium (floating discs
+        # and crank coordinates, rvdyn.support_eq); otherwise floating discs only with a cam-bearing clearance
+        self.chain_on = self.law.kind == "physical" and model_choice(m, "supports") == "elastic"
+        # a cam-bearing clearance, or a finite bearing stiffness, floats the discs (continuous in the clearance:
+        # the default stiffness is the rigid limit's penalty, so clearance -> 0 is the fixed-disc model)
+        self.float_discs = self.clearance > 0.0 or self.chain_on or self.bearing_k < ContactLaw.RIGID_K
+        self.nj = 1 + self.nc + (3 * self.nd if self.float_discs else 0)     # coordinates of the contacts
+        self.ndof = self.nj
         self.Rp = d.pin_circle_radius_mm
         self.e = d.eccentricity_mm
         self.a = d.center_distance_mm
@@ -140,6 +92,11 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
         self.compliance_rad_per_Nmm = model_value(m, "torsional_compliance_arcsec_per_Nm") / ARCSEC_PER_RAD * 1e-3
         self.pressure_limit = model_value(m, "contact_pressure_limit_MPa")
         self._setup_physical(d, m)
+        self.chain = None
+        if self.chain_on:
+            self.chain = SupportChain(self.supports, self.nd, self.nc, self.clearance, self.nj)
+            self.ndof = self.nj + self.chain.n_dof
+            self._Y = self.chain.y_matrix(self.ndof)
 
     # ------------------------------------------------------------------ solve
     def _load_Nmm(self, load_Nm: float) -> float:
@@ -161,7 +118,9 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
         ``floor_k`` (N,): the law's typical working stiffness per state (default ``law.floor_stiffness()``;
         the physical law's depends on the contacts of its own solve).
         """
-        N, M, D = J.shape
+        N, M, nj = J.shape                            # nj: the contacts' coordinates, the first of the state
+        D = self.ndof
+        arms = self._hole_arms(th_in, x0, law)
         B = np.broadcast_to(b, (N, D))
         step = np.zeros((N, D))
         # damping floor: about a quarter of the contacts at 1 um of penetration (typical working stiffness)
@@ -169,7 +128,6 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
         floor = (fk * max(1.0, M / 4.0))[:, None]
         eye = np.eye(D)
 
-        arms = self._hole_arms(th_in, x0)
         E0 = energy_sub(self, x0, G, J, B, law, step, arms)
         Jnorm = _row_norm(J)
         bnorm = np.linalg.norm(B, axis=1)
@@ -183,17 +141,22 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
             sel = slice(None) if every else idx
             s = step[sel]
             Gi, Ji = G[sel], J[sel]
-            delta = -(Gi + _jdot(Ji, s))
+            delta = -(Gi + _jdot(Ji, s[:, :nj]))
             f, k = law.force_stiffness(delta, idx)
-            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[sel]
-            H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
-            if arms is not None:
-                _, gb, Hb = self._bearing(x0[idx] + s, arms[idx])
-                grad = grad + gb
-                H = H + Hb
-            diag = np.einsum("ndd->nd", H) + floor[idx]
-            A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
-            dstep = -np.linalg.solve(A, grad[:, :, None])[:, :, 0]
+            if nj == D:
+                grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[sel]
+                H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
+                if arms is not None:
+                    _, gb, Hb = self._bearing(x0[idx] + s, arms[idx])
+                    grad = grad + gb
+                    H = H + Hb
+                diag = np.einsum("ndd->nd", H) + floor[idx]
+                A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
+                dstep = -np.linalg.solve(A, grad[:, :, None])[:, :, 0]
+            else:                                     # supports inside the equilibrium (rvdyn.support_eq)
+                grad, dstep, sup_scale = self._chain_newton(x0[idx] + s, arms[idx], -np.matmul(f[:, None, :], Ji)[:, 0],
+                                                 np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji), B[sel],
+                                                 mu[idx], floor[idx])
             # backtracking on the (convex) potential: take the first step length that lowers it
             best_E = E0[idx].copy()
             best_s = s.copy()
@@ -223,6 +186,8 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
             mu[idx] = np.where(accepted_full, np.maximum(mu[idx] / 10.0, 1e-12), np.minimum(mu[idx] * 10.0, 1e12))
             # stationarity of the potential relative to the forces in play, plus a settled step
             scale = bnorm[idx] + np.einsum("nm,nm->n", np.abs(f), Jnorm[idx])
+            if nj != D:
+                scale = scale + sup_scale
             done = (moved < tol_mm) & (np.linalg.norm(grad, axis=1) <= 1e-7 * scale)
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False
@@ -340,7 +305,7 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
     def _outputs(self, N: int) -> dict[str, np.ndarray]:
         """Arrays of the converged linearisation (gaps, normals, Jacobians, Johnson constants, radii)."""
         M = self.nd * self.zp + 2 * self.nc
-        return {"G": np.empty((N, M)), "nrm": np.empty((N, self.nd, self.zp, 2)), "J": np.empty((N, M, self.ndof)),
+        return {"G": np.empty((N, M)), "nrm": np.empty((N, self.nd, self.zp, 2)), "J": np.empty((N, M, self.nj)),
                 "C": np.empty((N, self.nd * self.zp)), "R": np.empty((N, self.nd * self.zp))}
 
     def _outer(self, th, x, dirs, B, law, bounds: list[tuple[int, int]], out: dict, offset: int,
@@ -390,6 +355,7 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
                 for lc in locs:
                     floor_k[lc] = self._step_law(law, C[lc]).floor_stiffness()
             mu = mu_all[rows]
+            self.newton_load(B[rows], it == 0)
             dx = self._inner(th[rows], xs, G, J, B[rows], step_law, mu, floor_k=floor_k)
             mu_all[rows] = np.minimum(mu, 1e-2)
             # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
@@ -400,7 +366,7 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
                 flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
                 trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
                 if expand:
-                    arms = self._hole_arms(th[rows], xs)
+                    arms = self._hole_arms(th[rows], xs, step_law)
                     zero = np.zeros_like(xs)
                     e_now = energy_sub(self, xs, G, J, B[rows], step_law, zero, arms) + np.einsum(
                         "nd,nd->n", last_dx[rows], B[rows])
@@ -410,7 +376,7 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
             big = np.abs(dx).max(axis=1)
             dx = dx * np.minimum(1.0, trust[rows] / np.maximum(big, 1e-300))[:, None]
             if expand:
-                arms = self._hole_arms(th[rows], xs)
+                arms = self._hole_arms(th[rows], xs, step_law)
                 cut[rows] = big > trust[rows]
                 e_old[rows] = energy_sub(self, xs, G, J, B[rows], step_law, np.zeros_like(xs), arms)
                 e_pred[rows] = energy_sub(self, xs, G, J, B[rows], step_law, dx, arms)
@@ -425,7 +391,7 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
                     # the step is below the tolerance: the linearised gaps at the new state are exact
                     # to O(dx^2 / rho), far below 1e-12 mm
                     o = slice(offset + bounds[g][0], offset + bounds[g][1])
-                    out["G"][o] = G[lc] + _jdot(J[lc], dx[lc])
+                    out["G"][o] = G[lc] + _jdot(J[lc], dx[lc][:, :self.nj])
                     out["nrm"][o] = self._nrm_last[lc]
                     out["J"][o] = J[lc]
                     out["C"][o], out["R"][o] = self._line_last(lc)
@@ -440,93 +406,6 @@ class QuasiStaticSolver(LinearisationMixin, PhysicsMixin):
             active = [g for g, _ in still]
         return used
 
-    def _unconverged(self, th, x, direction, law, load_Nm: float, change: float) -> Exception:
-        """The error of a solve that did not converge: the interference that is the usual cause (an
-        InterferenceError, see :meth:`_check_penetration`), else a RuntimeError."""
-        try:
-            self._check_penetration(th, x, direction, law, load_Nm=load_Nm)
-        except InterferenceError as err:
-            return err
-        return RuntimeError(f"quasi-static solver did not converge in {self.tol.solver_max_iter} outer iterations "
-                            f"(last change {change:.3e} mm)")
-
-    def _finish_rows(self, th, x, direction, load_Nm, law, iters, out: dict, rows: slice) -> Solution:
-        self._R_all = out["R"][rows]
-        self._J_all = out["J"][rows]
-        return self._finish(th, x, direction, load_Nm, self._step_law(law, out["C"][rows]), iters, out["G"][rows],
-                            out["nrm"][rows])
-
-    def _check_penetration(self, th, x, direction, law, G: np.ndarray | None = None,
-                           load_Nm: float = 0.0) -> np.ndarray:
-        """Gaps at the states x; raise InterferenceError if an overlap exceeds what the law allows.
-
-        The message names the likely cause: in the rigid limit the errors (the elastic law can take a
-        preload); with an elastic law and no errors the load; otherwise the errors or the load."""
-        if G is None:
-            G, _ = self._linearise(th, x, direction)
-        pen = np.maximum(-G, 0.0).max(axis=1)
-        limit = self.tol.interference_mm if law.rigid else MAX_ELASTIC_PENETRATION_MM
-        if np.any(pen > limit):
-            i = int(np.argmax(pen))
-            head = (f"interference of {pen[i] * 1e3:.3f} um at input angle {math.degrees(th[i]):.3f} deg cannot be "
-                    f"resolved at {law.describe()} (allowed {limit * 1e3:g} um): ")
-            if law.rigid:
-                advice = ("the parts overlap; reduce the errors that close the clearance, or solve with an elastic "
-                          "contact law under load (load_Nm > 0, no --rigid) to take it as a preload")
-            elif not self.geom.case.errors:
-                advice = (f"the load {load_Nm:g} N m presses the contacts deeper than an elastic contact law "
-                          "holds; reduce load_Nm")
-            else:
-                advice = (f"the parts overlap by more than an elastic contact law holds at load {load_Nm:g} N m; "
-                          "reduce the errors that close the clearance (or the load)")
-            raise InterferenceError(head + advice)
-        return G
-
-    def _finish(self, th, x, direction, load_Nm, law, iters, G: np.ndarray, nrm: np.ndarray) -> Solution:
-        G = self._check_penetration(th, x, direction, law, G, load_Nm=load_Nm)
-        delta = -G
-        pen = np.maximum(delta, 0.0).max(axis=1)
-        to, ps, _, _ = self._unpack(th, x)
-        F = law.force(delta)
-        te = to - th / self.geom.ratio
-        T = load_Nm * 1e3 + self.friction_Nmm
-        n1 = self.nd * self.zp
-        parts: dict[str, np.ndarray] = {}
-        warnings: list[str] = []
-        cam_F = None
-        if not law.rigid and not self.float_discs:
-            cam_F = self.disc_cam_forces(th, x, F, nrm)
-        if not law.rigid:
-            te = te - direction * T * self.compliance_rad_per_Nmm
-            if not self.float_discs:
-                f = self._unit_load_forces(law, delta, direction)               # dF/dT, N per N mm
-                work = f * np.maximum(delta, 0.0)
-                parts = {"pins": work[:, :n1].sum(axis=1), "gears": work[:, n1:].sum(axis=1)}
-                if self.supports is not None and law.kind == "physical":
-                    parts["crank_torsion"] = self.torsion_share * parts["gears"]
-                    parts["gears"] = parts["gears"] - parts["crank_torsion"]
-                    sup = self._support_windup(th, x, F, f, nrm, cam_F)
-                    parts.update(sup)
-                    te = te - direction * sum(sup.values())
-        nan = law.rigid
-        pressure = np.full(th.size, np.nan)
-        if not nan:
-            pressure = self._pin_pressure(F[:, :n1], law).max(axis=1)
-            worst = float(np.nanmax(pressure)) if pressure.size else 0.0
-            if worst > self.pressure_limit:
-                warnings.append(
-                    f"peak pin-disc contact pressure {worst:.0f} MPa exceeds the stated limit "
-                    f"{self.pressure_limit:g} MPa (model.contact_pressure_limit_MPa): the materials would yield; "
-                    "the elastic result is an extrapolation")
-        return Solution(
-            theta_in=th, theta_out=to + (te - (to - th / self.geom.ratio)), psi=ps, te_rad=te,
-            n_contacts=(delta > (1e-12 if not law.rigid else 0.0)).sum(axis=1),
-            peak_force_N=np.full(th.size, np.nan) if nan else F.max(axis=1),
-            max_penetration_mm=pen,
-            stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:n1 + self.nc],
-            iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings,
-            pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F,
-            n_pin_contacts=(delta[:, :n1] > (1e-12 if not law.rigid else 0.0)).sum(axis=1))
 
 def _row_norm(J: np.ndarray) -> np.ndarray:
     """Euclidean norm over the last axis; for 3 columns written out (the same sum, in the same order, as
@@ -546,7 +425,7 @@ def energy_sub(solver: QuasiStaticSolver, x0, G, J, b, law: ContactLaw, s: np.nd
                arms: np.ndarray | None = None, rows=None) -> np.ndarray:
     """Linearised potential of the states x0 + s (N,), N mm (``b``: load vector (ndof,) or one per state
     (N, ndof); ``arms``: hole arms at x0, floating discs; ``rows``: the steps of the law's per-step constants)."""
-    delta = -(G + _jdot(J, s))
+    delta = -(G + _jdot(J, s[:, :J.shape[-1]]))
     work = s @ b if b.ndim == 1 else np.einsum("nd,nd->n", s, b)
     E = law.energy(delta, rows).sum(axis=1) + work
     return E if arms is None else E + solver._bearing(x0 + s, arms, derivs=False)[0]

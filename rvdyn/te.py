@@ -173,7 +173,7 @@ def _te_result(case: Case, solver: str, s: QuasiStaticSolver, sol, steps: int, r
 def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 720,
                 loads: list[tuple[float, int]] | None = None, revolutions: float = 1.0,
                 law: ContactLaw | None = None, geom: ReducerGeometry | None = None,
-                errors: str = "raise") -> list:
+                errors: str = "raise", theta_in_deg: list | None = None) -> list:
     """Quasi-static TE of one case under several (load, direction) pairs, solved as one batch.
 
     ``run_te_many(case, "analytic", 37, loads=[(5.01, 1), (5.01, -1), (167.0, 1), (167.0, -1)])`` returns
@@ -207,6 +207,9 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
         ``"raise"``: a pair that cannot be solved raises its error (``InterferenceError``, a ValueError, when
         the overlap exceeds what the law holds; RuntimeError when the solver does not converge), as ``run_te``
         does. ``"return"``: that pair's entry is the exception instance and the other pairs are returned.
+    theta_in_deg : list of (array or None), or None
+        Per pair, explicit input angles (deg, in the order of motion, at least 2) that replace that pair's
+        ``steps`` and ``revolutions``, as in ``run_te``; None (or a None entry): the steps.
 
     Returns
     -------
@@ -235,13 +238,28 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     counts = list(steps) if isinstance(steps, (list, tuple, np.ndarray)) else [steps] * len(pairs)
     if len(counts) != len(pairs):
         raise ValueError(f"steps has {len(counts)} entries for {len(pairs)} loads; give one count or one per load")
+    given = [None] * len(pairs) if theta_in_deg is None else list(theta_in_deg)
+    if len(given) != len(pairs):
+        raise ValueError(f"theta_in_deg has {len(given)} entries for {len(pairs)} loads")
     g = geom if geom is not None else ReducerGeometry(case)
-    ths = [input_angles(g.ratio, n, revolutions, d) for n, (_, d) in zip(counts, pairs)]
+    ths, revs = [], []
+    for i, (n, (_, d), a) in enumerate(zip(counts, pairs, given)):
+        if a is None:
+            ths.append(input_angles(g.ratio, n, revolutions, d))
+            revs.append(float(revolutions))
+            continue
+        th = np.radians(np.asarray(a, dtype=float))
+        if th.ndim != 1 or th.size < 2 or not np.all(np.isfinite(th)):
+            raise ValueError(f"theta_in_deg[{i}] must be a 1-D array of at least 2 finite angles (deg); got shape "
+                             f"{th.shape}")
+        ths.append(th)
+        counts[i] = int(th.size)
+        revs.append(float(abs(th[-1] - th[0]) / (2.0 * math.pi * g.ratio)))
     if solver != "analytic":
         out: list = []
-        for n, (L, d) in zip(counts, pairs):
+        for n, (L, d), a in zip(counts, pairs, given):
             try:
-                out.append(run_te(case, solver, n, revolutions, L, d, law, geom=g))
+                out.append(run_te(case, solver, n, revolutions, L, d, law, geom=g, theta_in_deg=a))
             except (InterferenceError, RuntimeError) as err:
                 if errors == "raise":
                     raise
@@ -251,8 +269,8 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     s = QuasiStaticSolver(g, AnalyticContacts(g, per_point=True), law)
     sols = s.solve_many(ths, [d for _, d in pairs], [L for L, _ in pairs], errors=errors)
     secs = (time.perf_counter() - t0) / len(pairs)
-    return [sol if isinstance(sol, Exception) else _te_result(case, solver, s, sol, n, revolutions, d, L, secs)
-            for sol, n, (L, d) in zip(sols, counts, pairs)]
+    return [sol if isinstance(sol, Exception) else _te_result(case, solver, s, sol, n, rv, d, L, secs)
+            for sol, n, rv, (L, d) in zip(sols, counts, revs, pairs)]
 
 
 def backlash(case: Case, solver: str = "analytic", steps: int = 720, load_Nm: float = LIGHT_LOAD_NM,

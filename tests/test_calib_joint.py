@@ -116,3 +116,23 @@ def test_best_subset_swaps_out_a_stand_in():
     assert [pool[i].effect.name for i in choice.dropped] == ["X"]
     coef = dict(zip([pool[i].effect.name for i in choice.members], choice.coef))
     assert coef["A"] == pytest.approx(1.0, abs=0.01) and coef["B"] == pytest.approx(1.0, abs=0.01)
+
+
+def test_time_budget_is_checked_inside_an_iteration(joint_case, monkeypatch):
+    """The budget runs out during iteration 1 (after its validation): the loop stops there, changes
+    nothing and says where in ``stopped_by`` and the verdict (the solves come from the memory cache)."""
+    res0, _ = joint_case
+    lib = Library([e for e in build_library(res0.dataset) if e.key in KEYS])
+    cal = Calibrator(res0.dataset, library=lib, time_budget_s=1e6)
+    calls = []
+
+    def over_budget() -> bool:  # in time at the check between iterations, out of it at the next check
+        calls.append(1)
+        return len(calls) > 1
+
+    monkeypatch.setattr(cal, "over_budget", over_budget)
+    res = cal.run()
+    assert res.stopped_by.startswith("the time budget (1e+06 s) stopped the search in iteration 1 after the "
+                                     "validation"), res.stopped_by
+    assert res.effects == [] and res.iterations[0]["decision"].startswith("stop: the time budget")
+    assert "Stopped early: the time budget" in res.verdict

@@ -17,12 +17,14 @@ import numpy as np
 import pytest
 
 from rvcad.params import Design
+from rvcad.tolerances import TOL
 from rvcalib.cli import main
 from rvcalib.dataset import read_dataset
 from rvcalib.forward import grid_angles_deg, grid_te, te_at
 from rvcalib.orders import period_deg
 from rvcalib.identify import calibrate
 from rvcalib.simulate import simulate_dataset
+from rvdyn.solver import ARCSEC_PER_RAD
 
 pytestmark = pytest.mark.usefixtures("calib_forward_cache")  # solves shared by the session
 
@@ -237,14 +239,17 @@ def test_forward_model_runs_on_the_rvdyn_runner_it_is_given(tmp_path):
     prev = forward.use_runner(disk)
     try:
         many = forward.grid_te_many(cases + [{"errors": {"no_such_error": 1.0}}], 80)
+        # the two directions of one case are one rvdyn batch (run_te_many): equal to the single solves
+        # within the solver's tolerance on the output angle
+        tol = TOL.solver_angle_rad * ARCSEC_PER_RAD
         for a, b in zip(one, many):
-            np.testing.assert_array_equal(a, b)
+            assert np.abs(a - b).max() < tol
         assert isinstance(many[2], forward.ModelEvaluationError) and "no_such_error" in str(many[2])
         np.testing.assert_array_equal(forward.te_at_many([cases[1]], [x])[0], at)
         assert forward.cache_stats()["solves"] == 3 and len(disk.cache.entries()) == 3
         forward.clear_cache()
         assert forward.cache_stats()["bytes"] == 0
-        np.testing.assert_array_equal(forward.grid_te(cases[0], 80), one[0])  # now from the disk
+        np.testing.assert_array_equal(forward.grid_te(cases[0], 80), many[0])  # now from the disk
         assert disk.cache.hits == 1 and disk.computed == 3
     finally:
         assert forward.use_runner(prev) is disk

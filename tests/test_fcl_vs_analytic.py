@@ -2,10 +2,9 @@
 
 Impact law (the paper's, named explicitly): TE curves agree within 0.5 arcsec RMS and 1 arcsec at any
 step, for the nominal case and each single Table 4 error at its paper value (default load 20 N m).
-Physical law (Hertz pins, ISO mesh, supports): the same bound holds for the nominal case and the errors
-whose preload the contacts carry without the supports' help; three that need the supports inside the
-equilibrium disagree (strict xfail, docs/physics.md section 8) and the paper's 0.1 deg disc phase is
-refused by both providers alike.
+Physical law (Hertz pins, ISO mesh, bearings and cranks inside the equilibrium): the same bound holds for
+the nominal case and every Table 4 error, the paper's 0.1 deg disc phase included (the supports take up its
+44 um misfit per disc); with rigid supports the pins alone cannot, and both providers refuse it alike.
 """
 from __future__ import annotations
 
@@ -20,8 +19,6 @@ from rvdyn.te import run_te
 
 STEPS = 96
 CASES = {"nominal": {}} | {k: {k: et.paper_value} for k, et in ERROR_TYPES.items()}
-PHYSICAL_DISAGREE = ("cam_eccentricity", "disc_hole_eccentricity", "pin_circle_offset")
-PHYSICAL_REFUSED = ("disc_phase",)
 
 
 def _compare(name: str, law: ContactLaw) -> None:
@@ -42,16 +39,14 @@ def test_fcl_matches_analytic(name: str) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [n if n not in PHYSICAL_DISAGREE else pytest.param(n, marks=pytest.mark.xfail(
-    strict=True, reason="preload shared as with rigid supports: stiff contacts amplify fcl's gap error"))
-    for n in CASES if n not in PHYSICAL_REFUSED])
+@pytest.mark.parametrize("name", list(CASES))
 def test_fcl_matches_analytic_physical(name: str) -> None:
     _compare(name, ContactLaw(kind="physical"))
 
 
 @pytest.mark.slow
-def test_physical_refuses_the_paper_disc_phase_in_both_providers() -> None:
-    case = Case.from_dict({"errors": {"disc_phase": 0.1}})
+def test_physical_rigid_supports_refuse_the_paper_disc_phase_in_both_providers() -> None:
+    case = Case.from_dict({"errors": {"disc_phase": 0.1}, "model": {"supports": "rigid"}})
     g = ReducerGeometry(case)
     for solver in ("analytic", "fcl"):
         with pytest.raises(InterferenceError, match="reduce the errors that close the clearance"):

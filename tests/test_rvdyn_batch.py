@@ -126,3 +126,28 @@ def test_a_failing_pair_raises_or_stands_in_its_place() -> None:
     assert np.abs(res[0].table["te_arcsec"].to_numpy() - one.table["te_arcsec"].to_numpy()).max() < SOLVER_TOL_ARCSEC
     with pytest.raises(ValueError, match=r"errors 'ignore' must be 'raise' or 'return'"):
         run_te_many(Case(), "analytic", 6, loads=loads, errors="ignore")
+
+
+def test_run_te_many_at_given_angles_equals_run_te(case: Case) -> None:
+    """Given input angles per pair (a test rig's readings, off any step grid; None: the steps) equal run_te at
+    those angles to the solver tolerance; the runner batches given-angle jobs of one case the same way."""
+    from rvdyn.runner import Runner
+
+    a = np.array([0.37, 11.0, 250.5, 3000.25, 7001.0])
+    pairs = [(10.0, 1), (30.0, -1), (20.0, 1)]
+    given = [a, a[::-1].copy(), None]
+    res = run_te_many(case, "analytic", [STEPS, STEPS, 7], loads=pairs, theta_in_deg=given)
+    assert [len(r.table) for r in res] == [5, 5, 7]
+    for r, (load, d), th in zip(res, pairs, given):
+        one = run_te(case, "analytic", 7, load_Nm=load, direction=d, theta_in_deg=th)
+        np.testing.assert_allclose(r.table["input_deg"], one.table["input_deg"], rtol=0, atol=1e-12)
+        assert np.abs(r.table["te_arcsec"].to_numpy() - one.table["te_arcsec"].to_numpy()).max() < SOLVER_TOL_ARCSEC
+        assert r.stats["revolutions"] == pytest.approx(one.stats["revolutions"])
+    cases = [Case.from_dict({**case.to_dict(), "load_Nm": L, "direction": d}) for L, d in pairs[:2]]
+    got = Runner(memory_bytes=2 ** 20)(cases, "given angles", theta_in_deg=given[:2], group=[0, 0])
+    for g, r in zip(got, res[:2]):
+        assert np.abs(g["te_arcsec"] - r.table["te_arcsec"].to_numpy()).max() < SOLVER_TOL_ARCSEC
+    with pytest.raises(ValueError, match=r"theta_in_deg has 1 entries for 3 loads"):
+        run_te_many(case, "analytic", 4, loads=pairs, theta_in_deg=[a])
+    with pytest.raises(ValueError, match=r"theta_in_deg\[0\] must be a 1-D array of at least 2"):
+        run_te_many(case, "analytic", 4, loads=pairs[:1], theta_in_deg=[a[:1]])

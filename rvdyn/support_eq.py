@@ -1,0 +1,413 @@
+"""The supports inside the equilibrium (a mixin of :class:`rvdyn.solver.QuasiStaticSolver`).
+
+Two models of the cam bearings of floating discs (docs/physics.md, sections 3 and 8):
+
+- ``option spring`` (the impact law, or ``supports = "rigid"``, with a cam-bearing clearance): each hole
+  sits on a linear spring ``model.cam_bearing_stiffness_N_per_um`` beyond the clearance; the cranks are rigid.
+- ``chain`` (the physical law with ``supports = "elastic"``): every disc floats (3 coordinates per disc) and
+  every crank has 4 + 2 nd more: the radial deflections of its two journal bearings and its bending
+  deflections at the cam planes. Each disc hole is held by a needle bearing (Palmgren line contact, radial
+  law ``F = K_c (|d| - c)^(10/9)`` beyond the clearance c, ``bearings.radial_bearing_K``) against its cam;
+  the cam moves with the crank: ``y_k = (1 - l_k) u_A + l_k u_B + w_k`` (journal deflections interpolated at
+  the cam plane, l_k its axial position between the journals, plus bending). Journals: the same law without
+  clearance; bending: ``w^T K_b w / 2`` with ``K_b`` the inverse of the simply-supported beam's influence
+  matrix at the cam planes (Roark, ``bearings.Supports.bending_deflections``). All of it is an exact
+  potential of the state: the equilibrium shares every preload between contacts and supports.
+
+The hole offsets ``d = hole - cam`` (fixed frame) are linearised at each outer iteration like the contact
+gaps (the float columns exactly, the kinematic ones by central differences of the rigid hole fit); the
+bearing, journal and bending energies are exact in the inner minimisation.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from rvdyn.bearings import BEARING_EXP, Supports
+from rvdyn.contacts import ContactLaw
+
+#: Step (mm of scaled state) of the central differences of the hole offsets.
+FD_STEP_MM = 1e-6
+
+#: Penalty (N/mm) of every support in the rigid limit (load 0): 1e3 times the contacts' ``ContactLaw.RIGID_K``,
+#: so that the supports (three springs in series per cam) add less to the rigid play than the contacts do
+#: (1e-15 rad under the vanishing load).
+RIGID_SUPPORT_K = 1.0e3 * ContactLaw.RIGID_K
+
+#: Cam-bearing spring (N/mm) of the option-spring model in the rigid limit, at most: the vanishing load
+#: (1 N mm) deflects it by < 1e-7 mm, and the floating solve stays as well conditioned as with the contacts'.
+RIGID_LIMIT_SPRING_K = 1.0e6
+
+#: Bearing load (N) whose tangent stiffness floors the bearings' Hessian in the Newton model of the supports
+#: (a 10/9 power law has no stiffness at zero deflection); the first outer iteration uses the load estimate
+#: of :meth:`SupportMixin.newton_load`.
+NEWTON_FORCE_N = 0.1
+
+
+def radial_law(d: np.ndarray, K: float, p: float, c: float = 0.0, derivs: bool = True, kfloor: float = 0.0):
+    """Energy (...), force vector (..., 2) and Hessian (..., 2, 2) of a radial spring ``F = K (|d| - c)^p``
+    along ``d`` beyond the clearance c (isotropic: the full Hessian ``F' u u^T + F/|d| (I - u u^T)``).
+    ``kfloor`` (N/mm): least stiffness of the Hessian (a Newton model only; the energy and force are exact)."""
+    r = np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2)
+    t = np.maximum(r - c, 0.0)
+    F = K * t ** p
+    E = F * t / (p + 1.0)
+    if not derivs:
+        return E, None, None
+    rs = np.maximum(r, 1e-300)
+    u = d / rs[..., None]
+    fv = F[..., None] * u
+    kr = K * p * t ** (p - 1.0) if p != 1.0 else np.where(t > 0, K, 0.0)
+    kt = F / rs
+    if kfloor > 0.0:                                  # not inside the clearance: there the bearing is free
+        eng = r >= c
+        kr, kt = np.where(eng, np.maximum(kr, kfloor), kr), np.where(eng, np.maximum(kt, kfloor), kt)
+    uu = u[..., :, None] * u[..., None, :]
+    H = (kr - kt)[..., None, None] * uu + kt[..., None, None] * np.eye(2)
+    return E, fv, H
+
+
+class SupportChain:
+    """Constants and coordinate layout of the supports inside the equilibrium.
+
+    Parameters
+    ----------
+    sup : Supports, stiffness constants of the design
+    nd, nc : discs and cranks
+    clearance : mm, radial clearance of the cam bearings
+    base : index of the first support coordinate in the state vector
+    """
+
+    def __init__(self, sup: Supports, nd: int, nc: int, clearance: float, base: int) -> None:
+        self.sup, self.nd, self.nc, self.c, self.base = sup, nd, nc, clearance, base
+        self.per_crank = 4 + 2 * nd
+        # rigid limit: with a clearance the play dominates and the contacts' penalty is rigid enough
+        self.rigid_K = ContactLaw.RIGID_K if clearance > 0.0 else RIGID_SUPPORT_K
+        self.n_dof = nc * self.per_crank
+        zA, zB = sup.z_journal
+        self.lam = (np.asarray(sup.z_cams, dtype=float) - zA) / (zB - zA)       # (nd,)
+        # bending: influence matrix at the cam planes (unit load at each plane), its inverse the stiffness
+        infl = np.empty((nd, nd))
+        for k in range(nd):
+            B = np.zeros((1, nd, 1, 2))
+            B[0, k, 0, 0] = -1.0                                                # crank receives +1 N in x at plane k
+            infl[:, k] = sup.bending_deflections(B)[0, 0, :, 0]
+        self.Kb = np.linalg.inv(infl)                                           # N/mm, (nd, nd)
+        # weights of the crank's nodes (journal A, journal B, bending at each cam plane) in its displacement
+        # at cam plane k: y_k = sum_r L[r, k] node_r
+        self.L = np.vstack([1.0 - self.lam, self.lam, np.eye(nd)])
+        self.LL = [np.outer(self.L[:, k], self.L[:, k]) for k in range(nd)]
+
+    def idx(self, j: int, what: str, k: int = 0) -> int:
+        """State index of crank j's coordinate ``uA``, ``uB`` or ``w`` (cam plane k); x and y follow."""
+        b = self.base + j * self.per_crank
+        return b + {"uA": 0, "uB": 2, "w": 4 + 2 * k}[what]
+
+    def y_matrix(self, ndof: int) -> np.ndarray:
+        """dy/dx (nd, nc, 2, ndof): the crank displacement at each cam plane from the support coordinates."""
+        Y = np.zeros((self.nd, self.nc, 2, ndof))
+        for k in range(self.nd):
+            for j in range(self.nc):
+                for a in range(2):
+                    Y[k, j, a, self.idx(j, "uA") + a] = 1.0 - self.lam[k]
+                    Y[k, j, a, self.idx(j, "uB") + a] = self.lam[k]
+                    Y[k, j, a, self.idx(j, "w", k) + a] = 1.0
+        return Y
+
+    def energy(self, x: np.ndarray, dcam: np.ndarray, rigid: bool, derivs: bool = True, newton: float = 0.0):
+        """Support energy (N,) N mm, its gradient (N, ndof) and Hessian (N, ndof, ndof) in the support
+        coordinates and the bearing deflections ``dcam`` (N, nd, nc, 2) (hole minus cam, mm): the
+        cam-bearing part of the gradient and Hessian is returned in ``dcam`` coordinates
+        (``g_cam`` (N, nd, nc, 2), ``H_cam`` (N, nd, nc, 2, 2)) for the caller's chain rule.
+
+        ``rigid``: the rigid limit, every support a linear penalty ``RIGID_SUPPORT_K``. ``newton`` > 0 (N):
+        the Hessian of a Newton model, each bearing's stiffness at least its tangent under that load (a power
+        law 10/9 has none at zero deflection); 0: the exact tangent (floored at 1e-9 of the one at 0.1 N)."""
+        N = x.shape[0]
+        s = self.sup
+        if rigid:
+            Kc = Kj = self.rigid_K
+            p = 1.0
+            Kb = self.rigid_K * np.eye(self.nd)
+        else:
+            Kc, Kj, p, Kb = s.cam_K, s.journal_K, BEARING_EXP, self.Kb
+        sl = x[:, self.base:self.base + self.n_dof].reshape(N, self.nc, self.per_crank)
+        u = sl[:, :, :4].reshape(N, self.nc, 2, 2)                              # journals A, B
+        w = sl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
+        scale, F = (1.0, newton) if newton > 0 else (1e-9, NEWTON_FORCE_N)
+        Ec, gc, Hc = radial_law(dcam, Kc, p, self.c, derivs, scale * Kc * p * (F / Kc) ** ((p - 1.0) / p))
+        Ej, gj, Hj = radial_law(u, Kj, p, 0.0, derivs, scale * Kj * p * (F / Kj) ** ((p - 1.0) / p))
+        Kw = np.matmul(Kb, w)                                                   # (N, nc, nd, 2)
+        E = Ec.sum(axis=(1, 2)) + Ej.sum(axis=(1, 2)) + 0.5 * (w * Kw).sum(axis=(1, 2, 3))
+        if not derivs:
+            return E, None, None, None, None
+        g = np.zeros((N, self.n_dof))
+        gv = g.reshape(N, self.nc, self.per_crank)
+        gv[:, :, :4] = gj.reshape(N, self.nc, 4)
+        gv[:, :, 4:] = Kw.reshape(N, self.nc, 2 * self.nd)
+        H = np.zeros((N, self.nc, self.per_crank, self.per_crank))
+        for a in range(2):
+            H[:, :, 2 * a:2 * a + 2, 2 * a:2 * a + 2] = Hj[:, :, a]
+        for k in range(self.nd):
+            for l in range(self.nd):
+                for a in range(2):
+                    H[:, :, 4 + 2 * k + a, 4 + 2 * l + a] = Kb[k, l]
+        return E, g, H, gc, Hc
+
+    def parts(self, x: np.ndarray, dx: np.ndarray, dcam: np.ndarray, ddcam: np.ndarray,
+              rigid: bool = False) -> dict[str, np.ndarray]:
+        """Unit-load wind-up of the supports (N,) rad: ``sum q . d`` with ``d`` each part's actual
+        deflection and ``q`` its force per unit output torque (tangent stiffness times ``dx = dx/dT``,
+        ``ddcam`` = d(dcam)/dT)."""
+        N = x.shape[0]
+        _, _, _, _, Hc = self.energy(x, dcam, rigid)
+        qc = np.einsum("nkjab,nkjb->nkja", Hc, ddcam)
+        cam = np.einsum("nkja,nkja->n", qc, dcam)
+        s = self.sup
+        p = BEARING_EXP
+        sl = x[:, self.base:self.base + self.n_dof].reshape(N, self.nc, self.per_crank)
+        dsl = dx[:, self.base:self.base + self.n_dof].reshape(N, self.nc, self.per_crank)
+        u = sl[:, :, :4].reshape(N, self.nc, 2, 2)
+        du = dsl[:, :, :4].reshape(N, self.nc, 2, 2)
+        _, _, Hj = radial_law(u, s.journal_K, p)
+        journal = np.einsum("njaxy,njay,njax->n", Hj, du, u)
+        w = sl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
+        dw = dsl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
+        bend = np.einsum("kl,njlx,njkx->n", self.Kb, dw, w)
+        return {"cam_bearings": cam, "journal_bearings": journal, "crank_bending": bend}
+
+
+class SupportMixin:
+    """Cam-bearing models of floating discs (state lives on the solver)."""
+
+    _newton_N = NEWTON_FORCE_N
+
+    def newton_load(self, B: np.ndarray, first: bool) -> None:
+        """Set the load (N) of the supports' Newton model: in the first outer iteration the bearing load the
+        output torque ``B[:, 0] Rp`` gives at the crank radius a shared by all cams (nc nd), an estimate that
+        only shapes the first step; then ``NEWTON_FORCE_N`` (the exact tangent wherever a bearing carries load)."""
+        if self.chain is None:
+            return
+        T = float(np.abs(B[:, 0]).max()) * self.Rp if B.size else 0.0
+        self._newton_N = max(T / (self.nc * self.nd * self.a), NEWTON_FORCE_N) if first else NEWTON_FORCE_N
+
+    def _hole_offsets(self, th_in: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Hole minus cam centre (N, nd, nc, 2) mm, fixed frame, at the states x (floats included)."""
+        to, ps, shift, turn = self._unpack(th_in, x)
+        cen, ang = self._poses(th_in, x)
+        c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]
+        h = self.geom.disc_holes[None]
+        holes = cen[:, :, None] + np.stack([c * h[..., 0] - sn * h[..., 1], sn * h[..., 0] + c * h[..., 1]], axis=-1)
+        return holes - np.swapaxes(self.geom.cam_centers(to, ps), 1, 2)
+
+    def _hole_arms(self, th_in: np.ndarray, x: np.ndarray, law: ContactLaw | None = None, exact: bool = False):
+        """The cam-bearing model at the states x, row by row (None without floating discs).
+
+        Option spring: the disc holes relative to their disc's centre, turned with the disc, divided by the
+        turn lever ``a`` (N, nd, nc, 2). Chain: the bearing deflections linearised in the state
+        (:meth:`_chain_raw`); with ``exact`` the supports' exact tangent condensed onto the contacts'
+        coordinates (:meth:`_condense`, for the unit-load forces).
+
+        The inner solve takes them at its linearisation point (like the contact gaps); the outer iteration
+        re-evaluates them, so the converged state is exact."""
+        if not self.float_discs:
+            return None
+        rigid = law is not None and law.rigid
+        self._spring_k = min(self.bearing_k, RIGID_LIMIT_SPRING_K) if rigid else self.bearing_k
+        if self.chain is not None:
+            if exact:                                     # the finishing of a solution: its three uses share one
+                raw = self._chain_raw(th_in, x, law)
+                self._raw_last = (th_in, x, raw)
+                return self._condense(x, raw, 0.0)
+            return self._chain_raw(th_in, x, law)
+        to, ps, _, _ = self._unpack(th_in, x)
+        _, ang = self.geom.disc_poses(to, ps)
+        c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]        # (N, nd, 1)
+        h = self.geom.disc_holes[None]                                    # (1, nd, nc, 2)
+        hx, hy = h[..., 0], h[..., 1]
+        return np.stack([c * hx - sn * hy, sn * hx + c * hy], axis=-1) / self.a
+
+    _raw_last: tuple | None = None
+
+    def _finish_raw(self, th: np.ndarray, x: np.ndarray, law: ContactLaw) -> np.ndarray:
+        """The chain's linearisation at a solution (the one the unit-load forces made, if at the same states)."""
+        if self._raw_last is not None and self._raw_last[0] is th and self._raw_last[1] is x:
+            return self._raw_last[2]
+        return self._chain_raw(th, x, law)
+
+    def _chain_raw(self, th_in: np.ndarray, x: np.ndarray, law: ContactLaw | None) -> np.ndarray:
+        """The bearing deflections linearised at x, ``d = c0 + D x`` (hole minus cam minus the crank's
+        displacement at the cam plane), packed per row: ``[rigid flag, c0 (nd nc 2), D (nd nc 2 ndof)]``."""
+        N, nd, nc, D = x.shape[0], self.nd, self.nc, self.ndof
+        nk = 1 + nc
+        to, ps, _, _ = self._unpack(th_in, x)
+        _, ang = self.geom.disc_poses(to, ps)
+        c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]
+        h = self.geom.disc_holes[None]
+        arms = np.stack([c * h[..., 0] - sn * h[..., 1], sn * h[..., 0] + c * h[..., 1]], axis=-1) / self.a
+        d0 = self._hole_offsets(th_in, x)
+        Dm = np.zeros((N, nd, nc, 2, D))
+        X = np.repeat(x[None], 2 * nk, axis=0)
+        for i in range(nk):
+            X[2 * i, :, i] += FD_STEP_MM
+            X[2 * i + 1, :, i] -= FD_STEP_MM
+        dd = self._hole_offsets(np.tile(th_in, 2 * nk), X.reshape(-1, D)).reshape(2 * nk, N, nd, nc, 2)
+        for i in range(nk):
+            Dm[..., i] = (dd[2 * i] - dd[2 * i + 1]) / (2 * FD_STEP_MM)
+        perp = np.stack([-arms[..., 1], arms[..., 0]], axis=-1)           # d d / d turn (scaled), (N, nd, nc, 2)
+        for k in range(nd):
+            b = 1 + nc + 3 * k
+            Dm[:, k, :, 0, b] = 1.0
+            Dm[:, k, :, 1, b + 1] = 1.0
+            Dm[:, k, :, :, b + 2] = perp[:, k]
+        Dm -= self._Y[None]
+        d0 = d0 - np.einsum("kjad,nd->nkja", self._Y, x)                  # bearing deflection: minus the crank's
+        c0 = d0 - np.einsum("nkjad,nd->nkja", Dm, x)
+        rigid = np.full((N, 1), 1.0 if (law is not None and law.rigid) else 0.0)
+        return np.concatenate([rigid, c0.reshape(N, -1), Dm.reshape(N, -1)], axis=1)
+
+    def _condense(self, x: np.ndarray, raw: np.ndarray, newton: float = 0.0) -> np.ndarray:
+        """Second-order model of the supports at x with their own coordinates q eliminated (static
+        condensation).
+
+        With the gradient ``(g_a, g_q)`` and Hessian blocks of the exact support energy at x (a: the contacts'
+        coordinates), ``dq = -H_qq^-1 (g_q + H_qa da)`` and the energy of a step da is
+        ``E - g_q H_qq^-1 g_q / 2 + (g_a - H_aq Z_g) da + da^T (H_aa - H_aq Z_a) da / 2`` with
+        ``Z_g = H_qq^-1 g_q``, ``Z_a = H_qq^-1 H_qa`` (H_qq is block-diagonal: one block per crank). Packed per row:
+        ``[x_a (nj), constant, gradient (nj), Hessian (nj nj), Z_g (nq), Z_a (nq nj)]``."""
+        N = x.shape[0]
+        nj, nc, pc = self.nj, self.nc, self.chain.per_crank
+        E, g, A = self._chain_energy(x, raw, True, newton)
+        Ass = np.empty((N, nc, pc, pc))
+        R = np.empty((N, nc, pc, nj + 1))
+        for j in range(nc):
+            b = nj + j * pc
+            Ass[:, j] = A[:, b:b + pc, b:b + pc]
+            R[:, j, :, :nj] = A[:, b:b + pc, :nj]
+            R[:, j, :, nj] = g[:, b:b + pc]
+        Z = np.linalg.solve(Ass, R).reshape(N, nc * pc, nj + 1)              # [Z_a | Z_g]
+        corr = np.matmul(A[:, :nj, nj:], Z)                                   # (N, nj, nj + 1)
+        Ha = A[:, :nj, :nj] - corr[:, :, :nj]
+        ga = g[:, :nj] - corr[:, :, nj]
+        const = E - 0.5 * np.einsum("nq,nq->n", g[:, nj:], Z[:, :, nj])
+        return np.concatenate([x[:, :nj], const[:, None], ga, Ha.reshape(N, -1), Z[:, :, nj],
+                               Z[:, :, :nj].reshape(N, -1)], axis=1)
+
+    def _condensed(self, arms: np.ndarray):
+        N, nj = arms.shape[0], self.nj
+        nq = self.chain.n_dof
+        o = np.cumsum([0, nj, 1, nj, nj * nj, nq, nq * nj])
+        return (arms[:, o[0]:o[1]], arms[:, o[1]], arms[:, o[2]:o[3]], arms[:, o[3]:o[4]].reshape(N, nj, nj),
+                arms[:, o[4]:o[5]], arms[:, o[5]:o[6]].reshape(N, nq, nj))
+
+    def _chain_newton(self, x: np.ndarray, raw: np.ndarray, g_con: np.ndarray, H_con: np.ndarray,
+                      b: np.ndarray, mu: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Gradient (N, ndof) of the potential, the damped Newton step (N, ndof) with the supports inside, and
+        the scale of the supports' forces (N,) N.
+
+        ``g_con`` (N, nj), ``H_con`` (N, nj, nj): the contacts' gradient and Hessian in their coordinates; ``b``
+        (N, ndof) the load vector; ``mu`` (N,) the Levenberg-Marquardt damping; ``floor`` (N, 1) its floor. The
+        Hessian is assembled by blocks (contacts' coordinates a, each crank's support coordinates q) and solved by
+        the Schur complement on a (the q blocks of different cranks do not couple)."""
+        ch = self.chain
+        N, nj, nc, nd, pc = x.shape[0], self.nj, self.nc, self.nd, ch.per_crank
+        rigid, dcam, Dm = self._chain_unpack(x, raw)
+        _, gs, Hs, gc, Hc = ch.energy(x, dcam, rigid, True, self._newton_N)
+        Da = Dm[..., :nj]                                                     # (N, nd, nc, 2, nj)
+        L = ch.L                                                              # (4, nd): node weights of each hole
+        HcDa = np.matmul(Hc, Da)
+        ga = g_con + np.matmul(gc.reshape(N, 1, -1), Da.reshape(N, -1, nj))[:, 0] + b[:, :nj]
+        Aaa = H_con + np.matmul(Da.reshape(N, -1, nj).transpose(0, 2, 1), HcDa.reshape(N, -1, nj))
+        # sums over the cam planes k of the node weights times each hole's terms (elementwise: nd is 2)
+        Aqa = -sum(L[None, None, :, k, None, None] * HcDa[:, k, :, None] for k in range(nd)).reshape(N, nc, pc, nj)
+        gq = (-sum(L[None, None, :, k, None] * gc[:, k, :, None] for k in range(nd)).reshape(N, nc, pc)
+              + gs.reshape(N, nc, pc) + b[:, nj:].reshape(N, nc, pc))
+        Aqq = sum(ch.LL[k][None, None, :, None, :, None] * Hc[:, k, :, None, :, None, :] for k in range(nd))
+        Aqq = Aqq.reshape(N, nc, pc, pc) + Hs
+        grad = np.concatenate([ga, gq.reshape(N, -1)], axis=1)
+        da = np.einsum("nii->ni", Aaa) + floor
+        dq = np.einsum("njii->nji", Aqq) + floor[:, :, None]
+        ia, iq = np.arange(nj), np.arange(pc)
+        Aaa[:, ia, ia] += mu[:, None] * da
+        Aqq[:, :, iq, iq] += mu[:, None, None] * dq
+        Z = np.linalg.solve(Aqq, np.concatenate([Aqa, gq[..., None]], axis=-1))    # (N, nc, pc, nj + 1)
+        Aaq = Aqa.transpose(0, 3, 1, 2).reshape(N, nj, nc * pc)
+        corr = np.matmul(Aaq, Z.reshape(N, nc * pc, nj + 1))
+        za = np.linalg.solve(Aaa - corr[:, :, :nj], (ga - corr[:, :, nj])[:, :, None])[:, :, 0]
+        zq = Z[..., nj] - np.matmul(Z[..., :nj], za[:, None, :, None])[..., 0]
+        # the forces in play in the supports (for the stationarity test: the gradient relative to them)
+        scale = (np.linalg.norm(gc, axis=-1)[..., None] * np.abs(Dm).sum(axis=-1)).sum(axis=(1, 2, 3)) + np.abs(gs).sum(1)
+        return grad, -np.concatenate([za, zq.reshape(N, -1)], axis=1), scale
+
+    def _chain_recover(self, arms: np.ndarray, step: np.ndarray, tangent: bool = False) -> np.ndarray:
+        """Step of the support coordinates (N, nq) that goes with the step ``step`` (N, nj) of the contacts'
+        coordinates (``tangent``: the derivative only, without the Newton correction ``-Z_g``)."""
+        _, _, _, _, Zg, Za = self._condensed(arms)
+        dq = -np.matmul(Za, step[:, :, None])[:, :, 0]
+        return dq if tangent else dq - Zg
+
+    def _bearing(self, x: np.ndarray, arms: np.ndarray | None,
+                 derivs: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Energy (N,), gradient (N, ndof) and Hessian (N, ndof, ndof) of the cam-bearing model (the
+        derivatives None when ``derivs`` is False)."""
+        N = x.shape[0]
+        if arms is None:
+            return np.zeros(N), np.zeros((N, self.ndof)), np.zeros((N, self.ndof, self.ndof))
+        if self.chain is not None:
+            return self._chain_energy(x, arms, derivs, self._newton_N)
+        nd, nc, kb = self.nd, self.nc, self._spring_k
+        blk = x[:, 1 + nc:1 + nc + 3 * nd].reshape(N, nd, 1, 3)                       # disc shift x, y and turn
+        perp = np.stack([-arms[..., 1], arms[..., 0]], axis=-1)        # d s / d turn, (N, nd, nc, 2)
+        s_ = blk[..., :2] + blk[..., 2:3] * perp
+        sn = np.sqrt(s_[..., 0] ** 2 + s_[..., 1] ** 2)
+        over = np.maximum(sn - self.clearance, 0.0)
+        E = 0.5 * kb * (over ** 2).sum(axis=(1, 2))
+        if not derivs:
+            return E, None, None
+        u = s_ / np.maximum(sn, 1e-300)[..., None]                     # over > 0 only where sn > 0
+        Ju = np.concatenate([u, (u * perp).sum(axis=-1, keepdims=True)], axis=-1)   # (N, nd, nc, 3)
+        g = np.zeros((N, self.ndof))
+        g[:, 1 + nc:] = ((kb * over)[..., None] * Ju).sum(axis=2).reshape(N, 3 * nd)
+        Hb = np.einsum("nkh,nkhi,nkhj->nkij", kb * (over > 0), Ju, Ju)
+        H = np.zeros((N, self.ndof, self.ndof))
+        for k in range(nd):
+            base = 1 + nc + 3 * k
+            H[:, base:base + 3, base:base + 3] = Hb[:, k]
+        return E, g, H
+
+    def _chain_unpack(self, x: np.ndarray, arms: np.ndarray):
+        N, nd, nc, D = x.shape[0], self.nd, self.nc, self.ndof
+        n8 = nd * nc * 2
+        rigid = bool(arms[0, 0] > 0.5) if N else False
+        c0 = arms[:, 1:1 + n8].reshape(N, nd, nc, 2)
+        Dm = arms[:, 1 + n8:].reshape(N, nd, nc, 2, D)
+        return rigid, c0 + np.matmul(Dm.reshape(N, -1, D), x[:, :, None]).reshape(N, nd, nc, 2), Dm
+
+    def _chain_energy(self, x: np.ndarray, arms: np.ndarray, derivs: bool, newton: float = 0.0):
+        rigid, dcam, Dm = self._chain_unpack(x, arms)
+        ch = self.chain
+        E, g, H, gc, Hc = ch.energy(x, dcam, rigid, derivs, newton)
+        if not derivs:
+            return E, None, None
+        N, D = x.shape[0], self.ndof
+        D2 = Dm.reshape(N, -1, D)                                             # (N, nd nc 2, ndof)
+        G = np.matmul(gc.reshape(N, 1, -1), D2)[:, 0]
+        G[:, ch.base:] += g
+        A = np.matmul(Hc, Dm).reshape(N, -1, D)                               # H_cam D, per hole
+        Ht = np.matmul(D2.transpose(0, 2, 1), A)
+        for j in range(self.nc):
+            b = ch.base + j * ch.per_crank
+            Ht[:, b:b + ch.per_crank, b:b + ch.per_crank] += H[:, j]
+        return E, G, Ht
+
+    def _chain_parts(self, th: np.ndarray, x: np.ndarray, dx: np.ndarray, law: ContactLaw) -> dict[str, np.ndarray]:
+        """Wind-up of the supports at the solution per unit-load state derivative ``dx`` (N, ndof) = dx/dT."""
+        _, dcam, Dm = self._chain_unpack(x, self._finish_raw(th, x, law))
+        ddcam = np.einsum("nkjad,nd->nkja", Dm, dx)
+        return self.chain.parts(x, dx, dcam, ddcam, law.rigid)
+
+    def chain_cam_forces(self, th: np.ndarray, x: np.ndarray, law: ContactLaw) -> np.ndarray:
+        """Forces of the cams on the discs (N, nd, nc, 2) N, fixed frame, at the states x."""
+        rigid, dcam, _ = self._chain_unpack(x, self._finish_raw(th, x, law))
+        ch = self.chain
+        K, p = (ch.rigid_K, 1.0) if rigid else (ch.sup.cam_K, BEARING_EXP)
+        return -radial_law(dcam, K, p, ch.c)[1]
