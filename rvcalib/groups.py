@@ -1,13 +1,19 @@
 """Identifiability groups and the extra runs that would split them.
 
-A group is a set of candidates that the given runs cannot tell apart: a found effect and its
-alternatives (candidates whose signature reproduces its fitted signature within the noise, each at
-its own size and sign), effects whose joint-fit estimates are correlated beyond
-:data:`CORRELATION_LIMIT`, and an unexplained empirical term with the library effects that could
-produce it. Every member is reported with its size and the RMS it would leave.
+A group is a set of candidates that the given runs cannot tell apart. At the final state
+(:meth:`Groups.final_state_groups`, see docs/calibration.md "Groups and honest intervals"): each
+effect in the model with the library candidates that take its place within the noise (chi-square(1)
+95 %) when every other effect and empirical term is refitted, each at its own size and sign with the
+RMS it would leave. Twins of the same error type (kind ``instances``) leave the effect named with an
+interval that covers every member's size; a member of another error type (kind ``unsplit``) means
+the effect is not named (it leaves ``effects``; the group gives every member's size). Beside them:
+effects whose joint-fit estimates are correlated beyond :data:`CORRELATION_LIMIT`, and an
+unexplained empirical term with the library effects that could produce it.
 
-An effect whose group holds members of its own unit at other sizes does not get a tight interval:
-its interval is widened to cover those sizes (the data do not say which member is right).
+Honest intervals: the interval of each named effect is the union of its plain interval and its
+intervals in the linearised model augmented by any one library candidate left out, at the size the
+data give that candidate (Frisch-Waugh), so that an error left out (too small for the F test, or in
+a group) cannot leave a tight interval that misses the truth.
 
 Recommended runs (D-optimal design): for the members of a group, their sensitivities (the change
 of the model TE when each is set to its fitted size, on the screening grid) are solved at candidate
@@ -23,12 +29,16 @@ from __future__ import annotations
 
 import json
 import math
+import time
 
 import numpy as np
+from scipy import stats
 
+from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
-from rvcalib.selection import Selection
+from rvcalib.screening import coarse_values
+from rvcalib.joint import JointSelection
 
 #: Joint-fit correlation above which two effects are reported as one group.
 CORRELATION_LIMIT = 0.95
@@ -39,29 +49,22 @@ MAX_MEMBERS = 4
 #: The sensitivities of the recommendation are solved on a grid of this many points per pin (per
 #: output revolution: this times Zp); the criterion compares conditions, so a coarse grid serves.
 REC_POINTS_PER_PIN = 2
+#: 95 % point of chi-square with one degree of freedom: a candidate that takes an effect's place and
+#: raises the residual sum of squares by less than this many noise variances fits as well.
+CHI2_95 = 3.841
+#: At the final state the signatures of the candidates within this many times the chi-square limit of
+#: replacing an effect (judged with their stored signatures, solved at earlier states) and of the
+#: effects' own families are solved again before the groups are decided.
+RESOLVE_FACTOR = 25.0
 
 
-class Groups(Selection):
+class Groups(JointSelection):
     """Identifiability groups and recommended runs (methods on the loop)."""
 
     def identifiability_groups(self, fitted: list[FittedEffect], unexplained: list[Unexplained]) -> list[dict]:
         """Groups of candidates the data cannot tell apart (see the module docstring); widens the
         interval of a found effect whose group holds members of its unit at other sizes."""
         groups: list[dict] = []
-        for f in fitted:
-            if not f.alternatives:
-                continue
-            me = {"name": f.name, "value": f.value, "unit": f.unit,
-                  "rms_after_arcsec": math.sqrt(self.rss_full / self.n), "found": True}
-            members = [me] + [dict(a, found=False) for a in f.alternatives]
-            same = [a["value"] for a in f.alternatives if a["unit"] == f.unit]
-            if same:
-                lo, hi = min([f.ci_low] + same), max([f.ci_high] + same)
-                if lo < f.ci_low or hi > f.ci_high:
-                    f.ci_low, f.ci_high = float(lo), float(hi)
-            groups.append({"kind": "alternatives", "found": f.name, "members": members,
-                           "note": "these fit the data equally well (within the noise); the interval of the found "
-                                   "effect covers the sizes its alternatives of the same unit need"})
         corr = getattr(self, "_corr", None)
         if corr is not None:
             names = [a.effect.name for a in self.active]
@@ -69,9 +72,9 @@ class Groups(Selection):
             for i in range(len(names)):
                 for j in range(i + 1, len(names)):
                     c = max(abs(float(corr[p, q])) for p in idx[i] for q in idx[j])
-                    if c > CORRELATION_LIMIT:
-                        fi = next(f for f in fitted if f.name == names[i])
-                        fj = next(f for f in fitted if f.name == names[j])
+                    fi = next((f for f in fitted if f.name == names[i]), None)
+                    fj = next((f for f in fitted if f.name == names[j]), None)
+                    if c > CORRELATION_LIMIT and fi is not None and fj is not None:
                         groups.append({"kind": "correlated", "found": names[i], "correlation": c,
                                        "members": [{"name": f.name, "value": f.value, "unit": f.unit,
                                                     "ci_low": f.ci_low, "ci_high": f.ci_high, "found": True}
@@ -87,6 +90,160 @@ class Groups(Selection):
                            "note": "library effects that could produce this structure, with the size they would "
                                    "need; the loop did not name them because they do not explain it as well"})
         return groups
+
+    # ------------------------------------------------------------------ the final state
+    def final_state_groups(self, fitted: list[FittedEffect], resolve: bool = True) -> tuple[list[FittedEffect], list[dict]]:
+        """Identifiability at the final state (see the module docstring): the groups of each effect in
+        the model, the effects the data cannot tell from another error type (moved from ``fitted``
+        to a group of kind ``unsplit``), and honest intervals (profiled over every library candidate
+        not in the model). Returns (the effects still named, the groups)."""
+        if not self.active:
+            return fitted, []
+        t0 = time.perf_counter()
+        pairs = self._pairs()
+        rc_raw = [coarse_values(r, y - q, self.m, self.period)
+                  for r, y, q in zip(self.runs, self.y, self.predict(pairs))]
+        rc_cat = np.concatenate(rc_raw)
+        Ec = self._emp_matrix(self.empirical, coarse=True)
+        members = self.active_members()
+        blocks = [m.cols for m in members] + ([Ec] if Ec is not None else [])
+        X = np.column_stack(blocks)
+        col0 = np.cumsum([0] + [b.shape[1] for b in blocks])
+        w = self.n / self.nc                      # samples per screening-grid point
+        k_tot = X.shape[1]
+        s2 = self.rss_full / max(1, self.n - k_tot)  # noise variance per sample, arcsec^2
+        if s2 <= 0:
+            return fitted, []
+        coef, *_ = np.linalg.lstsq(X, rc_cat, rcond=None)
+        r_fin = rc_cat - X @ coef                 # the final residual on the grid (linear at the state)
+        rss_grid = float(r_fin @ r_fin)
+        Q, R = np.linalg.qr(X)
+        Rinv = np.linalg.pinv(R)
+        covX = (s2 / w) * (Rinv @ Rinv.T)         # covariance of the linearised coefficients
+        tq = float(stats.t.ppf(0.975, max(1, self.n - k_tot)))
+        by_name = {f.name: f for f in fitted}
+        named_active = {a.effect.name for a in self.active}
+        groups: list[dict] = []
+        unsplit: set[str] = set()
+        alt_names: dict[str, set[str]] = {}
+        rms_model = math.sqrt(self.rss_full / self.n)
+
+        def replacements(t: np.ndarray, others: np.ndarray | None, limit: float) -> list[tuple[dict, Effect]]:
+            """Library candidates (not in the model) that fitted to ``t`` with ``others`` refitted leave a
+            residual sum of squares within ``limit`` noise variances of the model's."""
+            cache_t: dict[int, tuple] = {}
+            out = []
+            for e in self.lib:
+                if e.name in named_active or e.expensive:
+                    continue
+                d = self.screen_effect(e, cache_t, t, others)
+                if d is None or d.cols is None:
+                    continue
+                rss_c = cache_t[self._ms(e)][2] * (1.0 - d.explained)
+                miss = max(0.0, rss_c - rss_grid) * w
+                if miss / s2 < limit:
+                    p = np.asarray(d.p, dtype=float)
+                    ent = {"name": e.name, "key": e.key, "value": float(e.value(p)), "unit": e.unit,
+                           "rms_after_arcsec": float(math.sqrt((self.rss_full + miss) / self.n)), "found": False}
+                    if e.polar:
+                        ent["angle_deg"] = float(e.magnitude_angle(p)[1])
+                    out.append((ent, e))
+            return out
+
+        def target(i: int) -> tuple[np.ndarray, np.ndarray | None]:
+            """An effect's contribution plus the final residual, and the other members' columns."""
+            m, a = members[i], self.active[i]
+            others = np.column_stack([blocks[j] for j in range(len(blocks)) if j != i]) if len(blocks) > 1 else None
+            t = r_fin + m.cols @ (coef[col0[i]:col0[i + 1]]) + (m.contribution if m.contribution is not None
+                                                                 else m.cols @ np.asarray(a.p, dtype=float))
+            return t, others
+
+        if resolve:
+            # the signatures of the candidates near an alternative (stored ones: solved at earlier states)
+            # and of the effects' own families are solved again at the final state
+            temps = {}
+            for i, a in enumerate(self.active):
+                near = [e for _, e in replacements(*target(i), RESOLVE_FACTOR * CHI2_95)] + [a.effect]
+                for e in near:
+                    if e.screen != "analytic" and not e.expensive:
+                        tt = self.lib.by_name(e.template or e.name)
+                        temps[tt.name] = tt
+            if temps:
+                self.solve_signatures(list(temps.values()), pairs)
+        # 1. alternatives: candidates that take an effect's place within the noise, the others refitted
+        for i, (a, m) in enumerate(zip(self.active, members)):
+            f = by_name.get(a.effect.name)
+            if f is None:
+                continue
+            t, others = target(i)
+            r0 = self._group(self.m, t, others)[2]  # the residual without it, the others refitted
+            if (r0 - rss_grid) * w / s2 < CHI2_95:
+                continue  # not supported by the data: anything "replaces" it (the final elimination decides)
+            alts = [ent for ent, _ in replacements(t, others, CHI2_95)]
+            if not alts:
+                continue
+            alts.sort(key=lambda x: x["rms_after_arcsec"])
+            alt_names[a.effect.name] = {x["name"] for x in alts}
+            me = {"name": f.name, "key": f.key, "value": f.value, "unit": f.unit, "rms_after_arcsec": rms_model,
+                  "found": True}
+            if f.angle_deg is not None:
+                me["angle_deg"] = f.angle_deg
+            other_types = sorted({x["key"] for x in alts if x["key"] != f.key})
+            if other_types:
+                unsplit.add(f.name)
+                groups.append({"kind": "unsplit", "found": f.name, "members": [me] + alts,
+                               "note": "the data cannot tell these apart (each, at its size, leaves the residual "
+                                       "within the noise of the model's); the model holds the first, which is "
+                                       "therefore not named as an effect"})
+                continue
+            # the size of the error type each twin gives (a twin may need the opposite sign in its own
+            # instance's frame: its magnitude, with the sign of the named instance)
+            same = [math.copysign(abs(x["value"]), f.value) for x in alts if x["unit"] == f.unit]
+            lo, hi = min([f.ci_low] + same), max([f.ci_high] + same)
+            if lo < f.ci_low or hi > f.ci_high:
+                f.ci_low, f.ci_high = float(lo), float(hi)
+            groups.append({"kind": "instances", "found": f.name, "members": [me] + alts,
+                           "note": "instances of the same error that the data cannot tell apart: the size is "
+                                   "identified, the instance is not; the interval covers every member's size"})
+        # 2. honest intervals: each named effect's interval in the model plus any one candidate left out
+        #    (profiled over the size the data give that candidate), the union over candidates
+        res_groups: dict[int, tuple] = {}
+        widen: dict[str, tuple[float, str]] = {}
+        for e in self.lib:
+            if e.name in named_active or e.expensive:
+                continue
+            d = self.screen_effect(e, res_groups, r_fin, None)
+            if d is None or d.cols is None:
+                continue
+            S = d.cols
+            G = Rinv @ (Q.T @ S)
+            U = S - X @ G
+            uu = U.T @ U
+            if not np.all(np.isfinite(uu)) or float(np.trace(uu)) <= 1e-12 * float(np.sum(S * S)):
+                continue
+            uu_inv = np.linalg.pinv(uu)
+            beta = uu_inv @ (U.T @ r_fin)
+            cov_b = (s2 / w) * uu_inv
+            shift = G @ beta
+            extra = np.einsum("ij,jk,ik->i", G, cov_b, G)
+            for i, a in enumerate(self.active):
+                f = by_name.get(a.effect.name)
+                if f is None or e.name in alt_names.get(f.name, ()):
+                    continue
+                j = col0[i]
+                half = tq * math.sqrt(max(covX[j, j] + extra[j], 0.0))
+                lo, hi = f.value - shift[j] - half, f.value - shift[j] + half
+                if lo < f.ci_low or hi > f.ci_high:
+                    gain = max(f.ci_low - lo, hi - f.ci_high)
+                    f.ci_low, f.ci_high = float(min(f.ci_low, lo)), float(max(f.ci_high, hi))
+                    if gain > widen.get(f.name, (0.0, ""))[0]:
+                        widen[f.name] = (gain, e.name)
+        for name, (_, cand) in widen.items():
+            by_name[name].selection["interval_widened_by"] = cand
+        kept = [f for f in fitted if f.name not in unsplit]
+        self.log(f"identifiability at the final state: {len(groups)} group(s), {len(unsplit)} effect(s) not named, "
+                 f"{time.perf_counter() - t0:.1f} s")
+        return kept, groups
 
     # ------------------------------------------------------------------ experiment design
     def _member_signature(self, name: str, value: float, cond: dict, base: np.ndarray) -> np.ndarray | None:

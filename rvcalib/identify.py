@@ -60,7 +60,6 @@ from rvcalib.results import (Active, CalibrationResult, Candidate, EmpiricalTerm
                              Unexplained, Validated)
 from rvcalib.screening import coarse_values
 from rvcalib.groups import Groups
-from rvcalib.joint import JointSelection
 
 __all__ = ["Calibrator", "calibrate", "CalibrationResult", "FittedEffect", "Unexplained", "EmpiricalTerm",
            "Active", "Candidate", "HarmonicCandidate", "Validated"]
@@ -75,7 +74,7 @@ RAMP_NOISE_FACTOR = 3.0
 HARMONIC_BIC_MARGIN = 2.0
 
 
-class Calibrator(JointSelection, Groups):
+class Calibrator(Groups):
     """The loop on one dataset (see the module docstring and :class:`rvcalib.model.LoopModel` for the
     parameters)."""
 
@@ -246,6 +245,7 @@ class Calibrator(JointSelection, Groups):
     # ------------------------------------------------------------------ wrap up
     def _finish(self, r0, before: Diagnostics, iterations: list[dict], t_start: float) -> CalibrationResult:
         fitted = self.intervals()
+        fitted, final_groups = self.final_state_groups(fitted)
         if not self.stopped_by.startswith("nothing"):
             self.notes.append(self.stopped_by)
         pairs = self._pairs()
@@ -297,7 +297,7 @@ class Calibrator(JointSelection, Groups):
                   "partly compensate it.")
         if not self.stopped_by.startswith("nothing"):
             verdict += " Stopped early: " + self.stopped_by + "."
-        groups = self.identifiability_groups(fitted, unexplained)
+        groups = final_groups + self.identifiability_groups(fitted, unexplained)
         recommended = self.recommend_runs(groups)
         return CalibrationResult(self.ds, fitted, unexplained, before, after, after_phys, r0, r_all, iterations,
                                  status, verdict, noise, self.steps, time.perf_counter() - t_start,
