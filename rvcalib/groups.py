@@ -128,17 +128,22 @@ class Groups(JointSelection):
         alt_names: dict[str, set[str]] = {}
         rms_model = math.sqrt(self.rss_full / self.n)
 
+        def screened(cache: dict, t: np.ndarray, others: np.ndarray | None):
+            """The library candidates not in the model (cheap ones) screened against ``t`` with ``others``
+            refitted: (effect, its screening record) for each that has signature columns."""
+            for e in self.lib:
+                if e.name in named_active or e.expensive:
+                    continue
+                d = self.screen_effect(e, cache, t, others)
+                if d is not None and d.cols is not None:
+                    yield e, d
+
         def replacements(t: np.ndarray, others: np.ndarray | None, limit: float) -> list[tuple[dict, Effect]]:
             """Library candidates (not in the model) that fitted to ``t`` with ``others`` refitted leave a
             residual sum of squares within ``limit`` noise variances of the model's."""
             cache_t: dict[int, tuple] = {}
             out = []
-            for e in self.lib:
-                if e.name in named_active or e.expensive:
-                    continue
-                d = self.screen_effect(e, cache_t, t, others)
-                if d is None or d.cols is None:
-                    continue
+            for e, d in screened(cache_t, t, others):
                 rss_c = cache_t[self._ms(e)][2] * (1.0 - d.explained)
                 miss = max(0.0, rss_c - rss_grid) * w
                 if miss / s2 < limit:
@@ -209,12 +214,7 @@ class Groups(JointSelection):
         #    (profiled over the size the data give that candidate), the union over candidates
         res_groups: dict[int, tuple] = {}
         widen: dict[str, tuple[float, str]] = {}
-        for e in self.lib:
-            if e.name in named_active or e.expensive:
-                continue
-            d = self.screen_effect(e, res_groups, r_fin, None)
-            if d is None or d.cols is None:
-                continue
+        for e, d in screened(res_groups, r_fin, None):
             S = d.cols
             G = Rinv @ (Q.T @ S)
             U = S - X @ G
