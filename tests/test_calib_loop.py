@@ -87,9 +87,10 @@ def test_table4_error_single_pin_with_transient_and_duplicates(workdir):
 
 def test_off_grid_readings_two_revolutions(workdir):
     """A rig's readings are on no model grid: 500 samples per output revolution from input angle
-    0.37 deg, two revolutions, model grid 360 (rv-calibrate's choice for such data). The model is
-    solved at the readings; interpolating the 360-point grid instead left 1.0 arcsec RMS here (the
-    single-pin TE has kinks and crank-order content), and a 1440-point grid still 0.18 arcsec."""
+    0.37 deg, two revolutions; the screening grid is the loop's default (280 points for ratio 121,
+    rvcalib.orders). The model is solved at the readings; interpolating a 360-point grid instead left
+    1.0 arcsec RMS here (the single-pin TE has kinks and crank-order content), and a 1440-point grid
+    still 0.18 arcsec."""
     res, ans, ds = run_scenario(workdir, "offgrid", {"errors": {"pin_pitch": {"value": 0.02, "pin": 12}}},
                                 samples_per_rev=500, start_deg=0.37, revolutions=2.0)
     assert all(r.n == 1000 for r in ds.runs)
