@@ -132,19 +132,23 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     if d not in (1, -1):
         raise ValueError(f"direction {direction!r} must be +1 or -1")
     g = geom if geom is not None else ReducerGeometry(case)
-    if theta_in_deg is None:
-        th = input_angles(g.ratio, steps, revolutions, d)
-    else:
-        th = np.radians(np.asarray(theta_in_deg, dtype=float))
-        if th.ndim != 1 or th.size < 2 or not np.all(np.isfinite(th)):
-            raise ValueError(f"theta_in_deg must be a 1-D array of at least 2 finite angles (deg); got shape "
-                             f"{th.shape}")
-        steps = int(th.size)
-        revolutions = float(abs(th[-1] - th[0]) / (2.0 * math.pi * g.ratio))
+    th, steps, revolutions = _angles(g, steps, revolutions, d, theta_in_deg)
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, make_contacts(g, solver), law)
     sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else FCL_CHUNK)
     return _te_result(case, solver, s, sol, steps, revolutions, d, load, time.perf_counter() - t0)
+
+
+def _angles(g: ReducerGeometry, steps: int, revolutions: float, d: int, theta_in_deg,
+            field: str = "theta_in_deg") -> tuple[np.ndarray, int, float]:
+    """Input angles (rad) of one solve with their step count and output revolutions: ``steps`` over
+    ``revolutions`` in direction ``d``, or the given angles (deg, checked; ``field`` names them in the error)."""
+    if theta_in_deg is None:
+        return input_angles(g.ratio, steps, revolutions, d), steps, revolutions
+    th = np.radians(np.asarray(theta_in_deg, dtype=float))
+    if th.ndim != 1 or th.size < 2 or not np.all(np.isfinite(th)):
+        raise ValueError(f"{field} must be a 1-D array of at least 2 finite angles (deg); got shape {th.shape}")
+    return th, int(th.size), float(abs(th[-1] - th[0]) / (2.0 * math.pi * g.ratio))
 
 
 def _te_result(case: Case, solver: str, s: QuasiStaticSolver, sol, steps: int, revolutions: float, d: int,
@@ -244,17 +248,9 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     g = geom if geom is not None else ReducerGeometry(case)
     ths, revs = [], []
     for i, (n, (_, d), a) in enumerate(zip(counts, pairs, given)):
-        if a is None:
-            ths.append(input_angles(g.ratio, n, revolutions, d))
-            revs.append(float(revolutions))
-            continue
-        th = np.radians(np.asarray(a, dtype=float))
-        if th.ndim != 1 or th.size < 2 or not np.all(np.isfinite(th)):
-            raise ValueError(f"theta_in_deg[{i}] must be a 1-D array of at least 2 finite angles (deg); got shape "
-                             f"{th.shape}")
+        th, counts[i], rv = _angles(g, n, revolutions, d, a, field=f"theta_in_deg[{i}]")
         ths.append(th)
-        counts[i] = int(th.size)
-        revs.append(float(abs(th[-1] - th[0]) / (2.0 * math.pi * g.ratio)))
+        revs.append(float(rv))
     if solver != "analytic":
         out: list = []
         for n, (L, d), a in zip(counts, pairs, given):
