@@ -167,24 +167,3 @@ class Supports:
     def torsion_lever_mm(self) -> float:
         """Length of crankshaft twisted by the planet torque: planet plane to the mean cam plane, mm."""
         return float(np.mean(self.z_cams) - self.z_planet)
-
-    # ------------------------------------------------------------------ wind-up
-    def wind_up(self, B: np.ndarray, b: np.ndarray) -> dict[str, np.ndarray]:
-        """Output wind-up of the cam and journal bearings and the crank bending (N,), rad (unit-load method:
-        theta = sum f . delta(F)).
-
-        ``B``: cam-bearing forces (N, nd, nc, 2), N; ``b``: the same per unit output torque (1/mm). Each
-        part deflects under its actual load (bearings ``delta = (F/K)^0.9`` along F, beams linearly). The
-        crank torsion is not here: it is a spring in series with the stage I mesh inside the equilibrium
-        (``QuasiStaticSolver.k_stage1``)."""
-        def bearing(Fv, fv, K):
-            fn = np.linalg.norm(Fv, axis=-1)
-            dvec = Fv * ((fn / K) ** (1.0 / BEARING_EXP) / np.maximum(fn, 1e-300))[..., None]
-            return np.einsum("...x,...x->...", fv, dvec)
-
-        cam = bearing(B, b, self.cam_K).sum(axis=(1, 2))
-        journal = bearing(self.journal_forces(B), self.journal_forces(b), self.journal_K).sum(axis=(1, 2))
-        y = self.bending_deflections(B)
-        q = -np.swapaxes(b, 1, 2)
-        bend = np.einsum("njkx,njkx->n", q, y)
-        return {"cam_bearings": cam, "journal_bearings": journal, "crank_bending": bend}
