@@ -34,8 +34,8 @@ SOLVER_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
                 "stiffness K of the impact law F = K delta^n (contact 'impact' only)"),
     ModelOption("contact_n", "", 1.0, 3.0, 1.5, "force exponent n of the impact law (contact 'impact' only)"),
     ModelOption("supports", "", 0.0, 0.0, "elastic",
-                "bearings and crankshafts with contact 'physical': 'elastic' (series compliance of the cam and "
-                "journal bearings and crankshaft bending/torsion) or 'rigid'", choices=("elastic", "rigid")),
+                "bearings and crankshafts with contact 'physical': 'elastic' (cam and journal bearings and "
+                "crankshaft bending inside the equilibrium, crank torsion in series with the mesh) or 'rigid'", choices=("elastic", "rigid")),
     ModelOption("pin_friction_coefficient", "", 0.0, 1.0, 0.05,
                 "Coulomb friction coefficient at the pin-disc contacts, used by the stiffness sweep (assumption "
                 "0.05: grease-lubricated hardened steel in boundary lubrication)"),

@@ -39,8 +39,9 @@ class Solution:
     parts_rad : dict of (N,) rad
         Output wind-up of each part kind at the step (unit-load method, section 8 of docs/physics.md):
         ``pins`` and ``gears`` (contact deflections), and with the physical law and elastic supports
-        ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (series
-        compliance); empty in the rigid limit and with floating discs (cam-bearing clearance).
+        ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (the supports inside
+        the equilibrium, rvdyn.support_eq); empty in the rigid limit and with the spring model of floating
+        discs (impact law or rigid supports with a cam-bearing clearance).
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
     warnings : list of str
     pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
