@@ -71,6 +71,18 @@ STEP_FRACTION = 0.3
 #: difference below 2 is "not worth more than a bare mention", Kass and Raftery 1995): ties, e.g.
 #: the members of an identifiability group (pin radius / pin circle diameter), keep the greedy choice.
 JOINT_BIC_MARGIN = 2.0
+#: When the best subset adds an empirical term (a constant, a harmonic) and the best subset without
+#: one adds physical effects only, both are refitted through the nonlinear model and the empirical one
+#: is taken only when its BIC on all samples is lower by more than this ("very strong" evidence,
+#: Kass and Raftery 1995): outside-the-library structure is named last.
+EMPIRICAL_BIC_MARGIN = 10.0
+#: ... unless the physical subset removes at least this share of the residual sum of squares that the
+#: empirical one removes (both refitted on all samples): then the physical subset is taken, and what it
+#: leaves of the empirical term's structure is screened again at the new state (an offset made by a
+#: disc phase and the pin circle diameter is not absorbed by a constant before they are tried).
+PHYSICAL_SHARE = 0.9
+#: Subsets whose BIC differ by less than this are ties (twin instances: float noise of ~1e-10).
+BIC_TIE = 1e-4
 
 
 def aic(rss: float, n: int, k: int) -> float:
@@ -198,7 +210,16 @@ class JointSelection(Selection):
         without them; None if the present model (re-linearised) comes first."""
         by_key = {(frozenset(f.members), f.dropped): f for f in fits}
         cur = frozenset(current)
-        for f in sorted(fits, key=lambda f: f.bic):
+        # twin instances give the same BIC up to float noise (1e-10): a tie within BIC_TIE goes to the
+        # subset whose members come first in the library (default instances first), so the path does
+        # not hang on rounding
+        lib_order = {e.name: k for k, e in enumerate(self.lib)}
+        big = len(lib_order)
+
+        def key(f: SubsetFit) -> tuple:
+            return (round(f.bic / BIC_TIE), tuple(sorted(lib_order.get(pool[i].name, big) for i in f.members)))
+
+        for f in sorted(fits, key=key):
             S = frozenset(f.members)
             if S == cur:
                 return None
@@ -216,6 +237,28 @@ class JointSelection(Selection):
             if ok:
                 return f
         return None
+
+    def _refit_subset(self, pool: list[PoolMember], choice: SubsetFit, jl: dict):
+        """The subset refitted through the full nonlinear model from its linearised estimates:
+        (params, rss, physical pool indices, empirical terms, linear coefficients), or None."""
+        coefs = self._coef_of(pool, choice)
+        phys = [i for i in choice.members if pool[i].effect is not None]
+        terms = [pool[i].term for i in choice.members if pool[i].term is not None]
+        effects = [pool[i].effect for i in phys]
+        p0 = [np.clip(pool[i].to_p(coefs[i]), pool[i].effect.lower, pool[i].effect.upper) for i in phys]
+        t_fit = time.perf_counter()
+        try:
+            if effects:
+                params, rss1, _, _, _ = self.fit_full(effects, p0, terms)
+            else:
+                params = []
+                r1 = self.full_residual([], terms)[0]
+                rss1 = float(r1 @ r1)
+        except ModelEvaluationError as exc:
+            jl["full_fit_error"] = str(exc)
+            return None
+        jl["seconds_full_fit"] = jl.get("seconds_full_fit", 0.0) + time.perf_counter() - t_fit
+        return params, rss1, phys, terms, coefs
 
     # ------------------------------------------------------------------ the step
     def joint_step(self, ranking: list[Candidate], best: Validated | None, hterm: EmpiricalTerm | None,
@@ -307,41 +350,64 @@ class JointSelection(Selection):
         greedy = frozenset(current) | {next((i for i, m in enumerate(pool) if not m.in_model
                                              and m.name == greedy_name), -1)}
         g_fit = next((f for f in fits if frozenset(f.members) == greedy and not f.dropped), None)
-        if choice is None or (frozenset(choice.members) == greedy and not choice.dropped) or \
-                (g_fit is not None and g_fit.bic - choice.bic <= JOINT_BIC_MARGIN):
+
+        def adds_empirical(f: SubsetFit) -> bool:
+            return any(pool[i].term is not None and not pool[i].in_model for i in f.members)
+
+        # an empirical term enters only after the physical subset that would explain the same structure
+        # was compared with it through the nonlinear model (the linear subset search favours an exact
+        # constant or harmonic over physical signatures linearised at a state that is still far off)
+        phys_alt = None
+        if choice is not None and adds_empirical(choice):
+            phys_alt = self.choose_subset(pool, [f for f in fits if not adds_empirical(f)], nc, current)
+        if phys_alt is None and (choice is None or (frozenset(choice.members) == greedy and not choice.dropped) or
+                                 (g_fit is not None and g_fit.bic - choice.bic <= JOINT_BIC_MARGIN)):
             jl["chosen"] = "greedy" if choice is not None else "none better than the model"
+            return None
+        p_cur = self._p_cur()
+        tried = []
+        for f in ([phys_alt] if phys_alt is not None else []) + [choice]:
+            if self.over_budget():
+                jl["stopped"] = "time budget"
+                break
+            got = self._refit_subset(pool, f, jl)
+            if got is None:
+                continue
+            rss1 = got[1]
+            dbic = bic(rss1, self.n, f.n_params) - bic(self.rss_full, self.n, p_cur)
+            F, pv = ftest(self.rss_full, rss1, f.n_params - p_cur, self.n, f.n_params) \
+                if f.n_params > p_cur else (float("nan"), 0.0)
+            ok = dbic < 0 and pv < self.thr and rss1 < self.rss_full
+            tried.append((f, got, dbic, F, pv, ok))
+        jl["refits"] = [{"members": [pool[i].name for i in t[0].members], "rss": t[1][1], "delta_bic": t[2],
+                         "p": t[4], "confirmed": t[5]} for t in tried]
+        okays = [t for t in tried if t[5]]
+        if not okays:
+            jl["chosen_rejected"] = "not confirmed on all samples" + (
+                f" (p {tried[-1][4]:.3g}, dBIC {tried[-1][2]:.3g})" if tried else "")
+            return None
+        pick = okays[0]
+        if phys_alt is not None and len(okays) == 2 and okays[0][0] is phys_alt:
+            # the physical subset goes first when it explains (nearly) all that the empirical one does:
+            # what is left of the empirical term's structure is screened again at the new state;
+            # otherwise the empirical subset must beat it by more than EMPIRICAL_BIC_MARGIN
+            gain_p = self.rss_full - okays[0][1][1]
+            gain_e = self.rss_full - okays[1][1][1]
+            if gain_p < PHYSICAL_SHARE * gain_e and okays[1][2] < okays[0][2] - EMPIRICAL_BIC_MARGIN:
+                pick = okays[1]
+        self.log("joint refits: " + "; ".join(
+            f"{'+'.join(pool[i].name for i in t[0].members if not pool[i].in_model)} RMS "
+            f"{math.sqrt(t[1][1] / self.n):.4g} dBIC {t[2]:.1f}{'' if t[5] else ' (not confirmed)'}" for t in tried)
+            + f" -> {'+'.join(pool[i].name for i in pick[0].members if not pool[i].in_model)}")
+        choice, (params, rss1, phys, terms, coefs), dbic, F, pv, _ = pick
+        if frozenset(choice.members) == greedy and not choice.dropped and not adds_empirical(choice) \
+                and phys_alt is None:
+            jl["chosen"] = "greedy"
             return None
         added = [i for i in choice.members if not pool[i].in_model]
         jl["chosen"] = [pool[i].name for i in choice.members]
         jl["dropped"] = [pool[i].name for i in choice.dropped]
-        coefs = self._coef_of(pool, choice)
-        phys = [i for i in choice.members if pool[i].effect is not None]
-        terms = [pool[i].term for i in choice.members if pool[i].term is not None]
-        effects = [pool[i].effect for i in phys]
-        p0 = [np.clip(pool[i].to_p(coefs[i]), pool[i].effect.lower, pool[i].effect.upper) for i in phys]
-        if self.over_budget():
-            jl["stopped"] = "time budget"
-            return None
-        t_fit = time.perf_counter()
-        try:
-            if effects:
-                params, rss1, _, _, _ = self.fit_full(effects, p0, terms)
-            else:
-                params = []
-                r1 = self.full_residual([], terms)[0]
-                rss1 = float(r1 @ r1)
-        except ModelEvaluationError as exc:
-            jl["full_fit_error"] = str(exc)
-            return None
-        jl["seconds_full_fit"] = time.perf_counter() - t_fit
-        p_cur = self._p_cur()
-        k_new = choice.n_params
-        dbic = bic(rss1, self.n, k_new) - bic(self.rss_full, self.n, p_cur)
-        F, pv = ftest(self.rss_full, rss1, k_new - p_cur, self.n, k_new) if k_new > p_cur else (float("nan"), 0.0)
         jl["full"] = {"F": F, "p": pv, "delta_bic": dbic, "rss": rss1}
-        if not (dbic < 0 and pv < self.thr and rss1 < self.rss_full):
-            jl["chosen_rejected"] = f"not confirmed on all samples (p {pv:.3g}, dBIC {dbic:.3g})"
-            return None
         sigma2 = self._noise2(r_full)
         new_active: list[Active] = []
         for i, p in zip(phys, params):
