@@ -110,8 +110,9 @@ class Calibrator(Groups):
                 # later effects made redundant), then allow swaps; stop only when neither helps
                 if self.active and not eliminated and not self.over_budget():
                     r_lim, _ = self.full_residual(self._pairs(), self.empirical)
+                    weak = self.removal_candidates()
                     gone = self._backward([a.effect for a in self.active], np.zeros(0), np.zeros((0, 0)),
-                                          float(r_lim @ r_lim), include_last=True)
+                                          float(r_lim @ r_lim), include_last=True, only=weak) if weak else []
                     eliminated = True
                     if gone:
                         r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)

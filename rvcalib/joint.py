@@ -57,6 +57,7 @@ from rvcalib.forward import ModelEvaluationError
 from rvcalib.lsq import bic, ftest
 from rvcalib.results import (Active, Candidate, EmpiricalTerm, HarmonicCandidate, PoolMember, SubsetFit,
                              Validated)
+from rvcalib.screening import coarse_values
 from rvcalib.selection import Selection
 
 #: Most effects already in the model that one joint step may drop.
@@ -81,6 +82,10 @@ EMPIRICAL_BIC_MARGIN = 10.0
 #: leaves of the empirical term's structure is screened again at the new state (an offset made by a
 #: disc phase and the pin circle diameter is not absorbed by a constant before they are tried).
 PHYSICAL_SHARE = 0.9
+#: At the term limit the backward elimination refits through rvdyn only the effects whose removal,
+#: linearised at the state with every other member refitted, costs less than this many times the
+#: critical F value (the others are clearly needed; the linearisation is good to well within this).
+LINEAR_DROP_FACTOR = 4.0
 #: Subsets whose BIC differ by less than this are ties (twin instances: float noise of ~1e-10).
 BIC_TIE = 1e-4
 
@@ -88,6 +93,25 @@ BIC_TIE = 1e-4
 def aic(rss: float, n: int, k: int) -> float:
     """Akaike information criterion of a Gaussian least-squares fit: ``n ln(rss/n) + 2 k``."""
     return n * math.log(max(rss, 1e-300) / n) + 2.0 * k
+
+
+def physical_first(rss_model: float, rss_phys: float, dbic_phys: float, rss_emp: float, dbic_emp: float) -> bool:
+    """Whether a physical subset goes before the subset with a new empirical term (both refitted through
+    the nonlinear model on all samples and confirmed): it does when it removes at least
+    :data:`PHYSICAL_SHARE` of the residual sum of squares the empirical one removes, or when the empirical
+    one is not better by more than :data:`EMPIRICAL_BIC_MARGIN` BIC units.
+
+    Parameters
+    ----------
+    rss_model : float
+        Residual sum of squares of the present model, arcsec^2.
+    rss_phys, rss_emp : float
+        Of the physical subset and of the subset with the empirical term, arcsec^2.
+    dbic_phys, dbic_emp : float
+        Their BIC change from the present model.
+    """
+    gain_p, gain_e = rss_model - rss_phys, rss_model - rss_emp
+    return gain_p >= PHYSICAL_SHARE * gain_e or dbic_emp >= dbic_phys - EMPIRICAL_BIC_MARGIN
 
 
 def model_weights(values: np.ndarray) -> np.ndarray:
@@ -167,6 +191,41 @@ class JointSelection(Selection):
             out.append(PoolMember(e, J, contrib, lambda c, p=p, B=basis: p + B @ np.asarray(c, dtype=float), a))
         return out
 
+    def removal_candidates(self, factor: float = LINEAR_DROP_FACTOR) -> set[str]:
+        """Names of the effects in the model whose removal (the others and the empirical terms refitted
+        linearly at the state, on the screening grid) costs less than ``factor`` times the critical F
+        value of the loop's test: the only ones worth a nonlinear elimination check."""
+        if not self.active:
+            return set()
+        from scipy import stats
+        members = self.active_members()
+        Ec = self._emp_matrix(self.empirical, coarse=True)
+        rc = np.concatenate([coarse_values(r, y - q, self.m, self.period)
+                             for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))])
+        blocks = [m.cols for m in members] + ([Ec] if Ec is not None else [])
+        X = np.column_stack(blocks)
+        coef, *_ = np.linalg.lstsq(X, rc, rcond=None)
+        r = rc - X @ coef
+        rss = float(r @ r)
+        w = self.n / self.nc
+        p_tot = self._p_cur()
+        s2 = self.rss_full / max(1, self.n - p_tot)
+        F_crit = float(stats.f.isf(self.thr, 1, max(1, self.n - p_tot)))
+        out: set[str] = set()
+        for i, (m, a) in enumerate(zip(members, self.active)):
+            t = rc + (m.contribution if m.contribution is not None else m.cols @ np.asarray(a.p, dtype=float))
+            rest = [b for j, b in enumerate(blocks) if j != i]
+            if rest:
+                Xo = np.column_stack(rest)
+                c, *_ = np.linalg.lstsq(Xo, t, rcond=None)
+                ri = t - Xo @ c
+            else:
+                ri = t
+            F = max(0.0, float(ri @ ri) - rss) * w / a.effect.n_params / s2
+            if F < factor * F_crit:
+                out.add(a.effect.name)
+        return out
+
     # ------------------------------------------------------------------ subsets
     def best_subsets(self, pool: list[PoolMember], rc: np.ndarray, max_members: int) -> list[SubsetFit]:
         """Every subset of the pool within the limits of the module docstring, fitted linearly to the
@@ -213,7 +272,7 @@ class JointSelection(Selection):
         # twin instances give the same BIC up to float noise (1e-10): a tie within BIC_TIE goes to the
         # subset whose members come first in the library (default instances first), so the path does
         # not hang on rounding
-        lib_order = {e.name: k for k, e in enumerate(self.lib)}
+        lib_order = {e.name: k for k, e in enumerate(getattr(self, "lib", None) or [])}
         big = len(lib_order)
 
         def key(f: SubsetFit) -> tuple:
@@ -391,9 +450,7 @@ class JointSelection(Selection):
             # the physical subset goes first when it explains (nearly) all that the empirical one does:
             # what is left of the empirical term's structure is screened again at the new state;
             # otherwise the empirical subset must beat it by more than EMPIRICAL_BIC_MARGIN
-            gain_p = self.rss_full - okays[0][1][1]
-            gain_e = self.rss_full - okays[1][1][1]
-            if gain_p < PHYSICAL_SHARE * gain_e and okays[1][2] < okays[0][2] - EMPIRICAL_BIC_MARGIN:
+            if not physical_first(self.rss_full, okays[0][1][1], okays[0][2], okays[1][1][1], okays[1][2]):
                 pick = okays[1]
         self.log("joint refits: " + "; ".join(
             f"{'+'.join(pool[i].name for i in t[0].members if not pool[i].in_model)} RMS "
