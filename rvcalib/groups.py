@@ -8,7 +8,9 @@ RMS it would leave. Twins of the same error type (kind ``instances``) leave the 
 interval that covers every member's size; a member of another error type (kind ``unsplit``) means
 the effect is not named (it leaves ``effects``; the group gives every member's size). Beside them:
 effects whose joint-fit estimates are correlated beyond :data:`CORRELATION_LIMIT`, and an
-unexplained empirical term with the library effects that could produce it.
+unexplained empirical term with the library effects that could produce it. Several instances of one
+error type in the model that one instance reproduces within the noise are named once, at the size of
+their combined effect (:meth:`Groups._instance_sets`; kind ``instances`` with ``combined``).
 
 Honest intervals: the interval of each named effect is the union of its plain interval and its
 intervals in the linearised model augmented by any one library candidate left out, at the size the
