@@ -188,3 +188,21 @@ def test_runner_without_a_law_solves_each_case_with_its_own():
     assert phys.stats["contact"] == "physical"
     np.testing.assert_array_equal(default["te_arcsec"], phys.table["te_arcsec"])
     assert np.max(np.abs(default["te_arcsec"] - paper["te_arcsec"])) > 0.1
+
+
+def test_cli_te_and_stiffness_default_to_the_physical_law(capsys):
+    """conventions.md: the quasi-static analysis is physical by default; the impact law is a named option,
+    and its --K/--n without --contact impact are refused naming the option."""
+    import json
+
+    from rvdyn.cli import main
+
+    assert main(["te", "--steps", "4", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["contact"] == "physical"
+    assert main(["te", "--steps", "4", "--json", "--contact", "impact", "--K", "2e5", "--n", "1.5"]) == 0
+    assert json.loads(capsys.readouterr().out)["contact"] == "impact"
+    assert main(["te", "--steps", "4", "--K", "2e5"]) == 2
+    assert "--K and --n set the impact law; they need --contact impact" in capsys.readouterr().err
+    assert main(["stiffness", "--points", "5", "--json"]) == 0
+    f = json.loads(capsys.readouterr().out)
+    assert f["contact"] == "physical" and {"carrier", "pin_seats"} <= set(f["budget"])
