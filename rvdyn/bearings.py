@@ -23,8 +23,8 @@ Formulas and sources:
   solid circle ``kappa = 6 (1 + nu)/(7 + 6 nu)``, Cowper 1966); the plate turns by ``phi`` relative to the
   flange against ``k_t = n_p k r_p^2`` (pillars on the circle r_p). The torque that takes this path is the
   share ``beta`` of the output torque carried by the far journals (lever rule of each crank, statically
-  determinate), so the output lags by ``beta^2 T / k_t`` (Castigliano; with the equilibrium's own split
-  fixed, an upper bound on this compliance).
+  determinate, with the discs sharing the torque equally: the mean position of the cam planes between the
+  journals), so the output lags by ``beta^2 T / k_t`` (Castigliano), in series after the equilibrium.
 - Pin seat: each pin lies in a housing groove of radius ``r_pin + clearance``; a conformal Hertz line contact
   (Johnson 1985, eq. 5.36 with a concave ``R2 = -(r_pin + clearance)``) in series with the pin-disc contact
   over the disc's face width. Both are ``delta = A_i P (C_i - ln P)`` in the same load per length ``P``, so
@@ -217,19 +217,12 @@ class Supports:
                     infl[i, k] = a * xx * (L * L - a * a - xx * xx) / (6.0 * self.EI * L)
         return np.einsum("ik,njkx->njix", infl, Q)
 
-    def far_journal_share(self, B: np.ndarray, axes: np.ndarray) -> np.ndarray:
-        """Share ``beta`` (N,) of the torque on the cranks that the far journals (carrier end plate) take,
-        from the cam forces on the discs ``B`` (N, nd, nc, 2) and the crank axes ``axes`` (N, nc, 2) mm
-        (lever rule, :meth:`journal_forces`); the mean lever-rule position of the cam planes where the cranks
-        carry no torque."""
-        R = self.journal_forces(B)                                              # (N, nc, 2, 2)
-        t = axes[:, :, None, 0] * R[..., 1] - axes[:, :, None, 1] * R[..., 0]  # (N, nc, 2) N mm
-        tA, tB = t[:, :, 0].sum(axis=1), t[:, :, 1].sum(axis=1)
-        tot = tA + tB
+    def far_journal_share(self) -> float:
+        """Share ``beta`` of the output torque that the far journals (carrier end plate) take: the lever rule of
+        each crank with the torque shared equally by the discs, the mean axial position of the cam planes
+        between the journals (1/2 for the default design)."""
         zA, zB = self.z_journal
-        lam = float(np.mean((np.asarray(self.z_cams) - zA) / (zB - zA)))
-        ok = np.abs(tot) > 1e-9 * (np.abs(tA) + np.abs(tB) + 1e-300)
-        return np.where(ok, tB / np.where(ok, tot, 1.0), lam)
+        return float(np.mean((np.asarray(self.z_cams) - zA) / (zB - zA)))
 
     def torsion_lever_mm(self) -> float:
         """Length of crankshaft twisted by the planet torque: planet plane to the mean cam plane, mm."""

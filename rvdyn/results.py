@@ -143,7 +143,7 @@ class ResultsMixin:
                     cam_F = self.chain_cam_forces(th, x, law)
                     self._raw_last = None
                     # the carrier end plate turning against the flange: in series (docs/physics.md, section 8)
-                    parts["carrier"] = self._carrier_twist(th, x, cam_F, T)
+                    parts["carrier"] = self._carrier_twist(th.size, T)
                     te = te - direction * parts["carrier"]
         nan = law.rigid
         pressure = np.full(th.size, np.nan)
