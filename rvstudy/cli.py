@@ -96,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="LSL of the torsional rigidity, N m/arcmin (default 49, the RV-20E datasheet figure)")
     p.add_argument("--mc-contact", choices=ContactLaw.KINDS, default=DEFAULT_MC_CONTACT,
                    help=f"contact law of the Monte Carlo solves: physical (Hertz, ISO 6336, elastic supports; default "
-                        f"{DEFAULT_MC_CONTACT}, about 3.7x the cost of a draw) or impact (paper Eq. 1, --K/--n, as every "
+                        f"{DEFAULT_MC_CONTACT}, about 3.5x the cost of a draw) or impact (paper Eq. 1, --K/--n, as every "
                         "paper-reproduction section uses)")
     p.add_argument("--yield-target", type=float, default=0.9973,
                    help="yield the tolerance allocation aims at (default 0.9973)")

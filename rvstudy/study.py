@@ -77,7 +77,8 @@ PHYSICAL_LAW_TEXT = ("physical: Hertz line contact at the pins (local profile cu
 #: Contact law of the Monte Carlo by default (``--mc-contact``): physical, the full physics of the mission. Its
 #: responses (TE peak-to-peak, play at +-3 % rated, torsional rigidity) are set against datasheet limits, which
 #: only the physical law computes (the impact law's rigidity follows the draw's preload, not the parts'
-#: compliance). Measured cost: 1.45 s a draw against 0.39 s with the impact law (30 draws, one worker, README).
+#: compliance). Measured cost: about 1.5 CPU-s a draw against 0.44 with the impact law (30 draws, one worker;
+#: README "Cost, measured").
 DEFAULT_MC_CONTACT = "physical"
 #: Default steps per output revolution (see README: 360 resolves every single-pin event; 240 and
 #: fewer alias the peak-to-peak TE of several Table 4 errors by up to a factor 3).
