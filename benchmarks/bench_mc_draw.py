@@ -103,7 +103,8 @@ def main() -> None:
         return [run_te(c, "analytic", n, law=law) for c, n in runs]
 
     rs, best, cpu = best_of(solve_all, a.repeat)
-    print(f"MC draw ({a.case}, {a.contact} law: {len(runs)} analytic solves, steps {[n for _, n in runs]}): {best:.3f} s wall, "
+    print(f"MC draw ({a.case}, {a.contact} law: {len(runs)} analytic solves, steps {[n for _, n in runs]}): "
+          f"{best:.3f} s wall, "
           f"{cpu:.3f} s CPU (best of {a.repeat})")
     for (c, n), r in zip(runs, rs):
         print(f"  {c.name} load {c.load_Nm:g} N m dir {c.direction:+d}: pp {r.stats['pp']:.6f} arcsec  "

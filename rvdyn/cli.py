@@ -58,7 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="contact law: physical (Hertz line contact, ISO 6336 mesh stiffness, bearing and crankshaft "
                          "compliance) or impact (paper Eq. 1, F = K delta^n, to reproduce the paper); default: the "
                          "case's model.contact, else physical")
-    te.add_argument("--K", type=float, default=None, help="impact-law stiffness, N/mm^n (default 2e5; needs --contact impact or the case's "
+    te.add_argument("--K", type=float, default=None,
+                    help="impact-law stiffness, N/mm^n (default 2e5; needs --contact impact or the case's "
                          "model.contact impact)")
     te.add_argument("--n", type=float, default=None, help="impact-law force exponent (default 1.5)")
     te.add_argument("--rigid", action="store_true", help="rigid single-flank limit (K -> infinity)")

@@ -8,8 +8,8 @@ the solver, so every command that solves a case reports a bad option naming the 
 
 Contact laws (docs/physics.md, section 7):
 
-- ``"physical"`` (the default, conventions.md): pin-disc Hertzian line contact with the local profile curvature, involute mesh
-  stiffness per ISO 6336-1 with the contact ratio, and (``supports = "elastic"``) the compliance of
+- ``"physical"`` (the default, conventions.md): pin-disc Hertzian line contact with the local profile
+  curvature, involute mesh stiffness per ISO 6336-1 with the contact ratio, and (``supports = "elastic"``) the compliance of
   the cam and crank journal bearings, the crankshafts, the pin seats and the carrier (materials of paper
   Table 2).
 - ``"impact"``: the paper's ADAMS impact force ``F = K delta**n`` (Eq. 1 without damping) at every
@@ -39,8 +39,9 @@ SOLVER_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
     ModelOption("contact_n", "", 1.0, 3.0, 1.5, "force exponent n of the impact law (contact 'impact' only)"),
     ModelOption("supports", "", 0.0, 0.0, "elastic",
                 "bearings, crankshafts, pin seats and carrier with contact 'physical': 'elastic' (cam and journal "
-                "bearings, crankshaft bending and the pins' seats in their housing grooves inside the equilibrium, crank "
-                "torsion in series with the mesh, the carrier's pillars in series after it) or 'rigid'", choices=("elastic", "rigid")),
+                "bearings, crankshaft bending and the pins' seats in their housing grooves inside the equilibrium, "
+                "crank torsion in series with the mesh, the carrier's pillars in series after it) or 'rigid'",
+                choices=("elastic", "rigid")),
     ModelOption("pin_friction_coefficient", "", 0.0, 1.0, 0.05,
                 "Coulomb friction coefficient at the pin-disc contacts, used by the stiffness sweep (assumption "
                 "0.05: grease-lubricated hardened steel in boundary lubrication)"),

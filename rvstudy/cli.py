@@ -58,7 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, default=DEFAULT_STEPS,
                    help=f"steps per output revolution (default {DEFAULT_STEPS})")
     p.add_argument("--load-Nm", dest="load_Nm", type=float, default=20.0, help="output load torque, N m (default 20)")
-    p.add_argument("--K", type=float, default=ContactLaw.K, help="stiffness of the paper's impact law used by the paper-reproduction sections (and the "
+    p.add_argument("--K", type=float, default=ContactLaw.K,
+                   help="stiffness of the paper's impact law used by the paper-reproduction sections (and the "
                         "Monte Carlo with --mc-contact impact), N/mm^n (default 2e5)")
     p.add_argument("--n", type=float, default=ContactLaw.n, help="force exponent of that impact law (default 1.5)")
     p.add_argument("--design", choices=DESIGNS, default="bbd", help="response-surface design (default bbd)")
@@ -96,8 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="LSL of the torsional rigidity, N m/arcmin (default 49, the RV-20E datasheet figure)")
     p.add_argument("--mc-contact", choices=ContactLaw.KINDS, default=DEFAULT_MC_CONTACT,
                    help=f"contact law of the Monte Carlo solves: physical (Hertz, ISO 6336, elastic supports; default "
-                        f"{DEFAULT_MC_CONTACT}, about 3.5x the cost of a draw) or impact (paper Eq. 1, --K/--n, as every "
-                        "paper-reproduction section uses)")
+                        f"{DEFAULT_MC_CONTACT}, about 3.5x the cost of a draw) or impact (paper Eq. 1, --K/--n, "
+                        "as every paper-reproduction section uses)")
     p.add_argument("--yield-target", type=float, default=0.9973,
                    help="yield the tolerance allocation aims at (default 0.9973)")
     p.add_argument("--reducer", default=None, metavar="DESIGN.json",

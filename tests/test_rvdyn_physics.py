@@ -331,8 +331,9 @@ def physical_nominal():
 def test_physical_budget_is_the_wind_up(physical_nominal) -> None:
     """Virtual work: the TE is the sum of every part's deflection work per unit torque (to 1e-3): with
     rigid supports the pins' and the gears', with elastic supports also the bearings', the crank bending,
-    the pin seats (in series with the pins), the carrier (series, after the equilibrium) and the crank torsion (a spring in series with the mesh, inside the
-    equilibrium: its share of the stage I deflection is c_torsion / (c_mesh + c_torsion)). The supports
+    the pin seats (in series with the pins), the carrier (series, after the equilibrium) and the crank torsion
+    (a spring in series with the mesh, inside the equilibrium: its share of the stage I deflection is
+    c_torsion / (c_mesh + c_torsion)). The supports
     and the Hertz contact make the wind-up grow slightly less than linearly with the load."""
     for sup, parts in (("rigid", {"pins", "gears"}),
                        ("elastic", {"pins", "pin_seats", "gears", "cam_bearings", "journal_bearings",
