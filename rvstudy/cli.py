@@ -281,12 +281,15 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def useful(res: Any) -> bool:
-    """Whether the run produced anything to read: a screen, a fitted surface or Monte Carlo statistics."""
+    """Whether the run produced anything to read: a screen, a fitted surface, Monte Carlo statistics or the
+    Table 6 readings."""
     fitted = any(b.results is not None for b in res.fits.values())
+    rr = getattr(res, "readings", None)
+    readings_ok = rr is not None and bool(rr.table["r"].notna().any())
     mc_ok = bool(res.mc) and any(c.get("n_failed", 0) < c.get("n_solver_draws", 0)
                                  for c in res.mc.get("responses", {}).values())
     screen_ok = res.screen is not None and bool(res.screen.screen["pp_arcsec"].notna().any())
-    return fitted or mc_ok or screen_ok
+    return fitted or mc_ok or screen_ok or readings_ok
 
 
 if __name__ == "__main__":  # pragma: no cover
