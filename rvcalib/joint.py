@@ -86,6 +86,9 @@ PHYSICAL_SHARE = 0.9
 #: linearised at the state with every other member refitted, costs less than this many times the
 #: critical F value (the others are clearly needed; the linearisation is good to well within this).
 LINEAR_DROP_FACTOR = 4.0
+#: The physical-first share applies while the empirical subset leaves an RMS above this many times
+#: the noise (second differences of the residual).
+EMPIRICAL_LEAVES_NOISE = 2.0
 #: Refits of a subset retried from half the new members' linear estimates when rvdyn cannot evaluate
 #: a trial point (interference beyond the contact law).
 REFIT_RETRIES = 2
@@ -462,7 +465,12 @@ class JointSelection(Selection):
             # the physical subset goes first when it explains (nearly) all that the empirical one does:
             # what is left of the empirical term's structure is screened again at the new state;
             # otherwise the empirical subset must beat it by more than EMPIRICAL_BIC_MARGIN
-            if not physical_first(self.rss_full, okays[0][1][1], okays[0][2], okays[1][1][1], okays[1][2]):
+            # only while the empirical subset itself leaves structure well above the noise (the search
+            # goes on either way); a subset that explains the data to the noise (an encoder zero offset
+            # beside a compliance) is judged by the BIC margin alone
+            left = okays[1][1][1] / self.n > EMPIRICAL_LEAVES_NOISE ** 2 * self._noise2(r_full)
+            if not (physical_first(self.rss_full, okays[0][1][1], okays[0][2], okays[1][1][1], okays[1][2])
+                    if left else okays[1][2] >= okays[0][2] - EMPIRICAL_BIC_MARGIN):
                 pick = okays[1]
         self.log("joint refits: " + "; ".join(
             f"{'+'.join(pool[i].name for i in t[0].members if not pool[i].in_model)} RMS "
