@@ -43,9 +43,9 @@ SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: fcl vs analytic 27, joint 20, ratio-81 18. The first makes the screening of the loop's three run
 #: conditions (280 points) as it starts, the second screens its declared model, so every later scenario
 #: on either worker reads that screening from disk (:func:`calib_forward_cache`).
-HEAVY_FIRST = ("test_off_grid_readings_two_revolutions", "calib-declared", "test_two_effects_at_once",
+HEAVY_FIRST = ("calib-pin-offgrid", "calib-declared", "test_two_effects_at_once",
                "test_encoder_zero_offset_is_not_disguised_as_physics",
-               "test_table4_error_single_pin_with_transient_and_duplicates", "study",
+               "study",
                "test_screening_grid_does_not_alias_whatever_the_steps", "test_rvcad_export", "test_stackup_mc",
                "test_scale_error_is_a_ramp_term_and_nothing_else", "test_fcl_vs_analytic",
                "test_load_dependent_effect", "test_direction_dependent_effect",
