@@ -80,7 +80,7 @@ def main() -> None:
         if k not in ref:
             continue
         d = float(np.abs(v - ref[k]).max())
-        grp = "|".join(k.split("|")[:2])
+        grp = "|".join(k.split("|")[:2]) + (" (rigid limit)" if k.endswith("load 0") else "")
         worst[grp] = max(worst.get(grp, 0.0), d)
         print(f"  {k:60s} max |dTE| {d:.3e} arcsec")
     for g, d in worst.items():

@@ -125,15 +125,19 @@ class LinearisationMixin:
         jac += lever[..., None] * dang[:, :, None, :]
         return gaps, jac
 
-    def _line_last(self, rows: slice | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def _line_last(self, rows: slice | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Johnson constants C and relative radii R (N, nd Zp) of the pin contacts of the last linearisation
-        (``rows``: of those rows only; row by row, so the same numbers as the rows of the whole)."""
+        (``rows``: of those rows only, a slice or an index array; row by row, so the same numbers as the rows of
+        the whole)."""
         if self._C_last is not None:
             return (self._C_last, self._R_last) if rows is None else (self._C_last[rows], self._R_last[rows])
         Cs, Rs = [], []
         for k, (pts, tk, foot) in enumerate(self._feet_last):
             if rows is not None:
-                sub = slice(rows.start * self.zp, rows.stop * self.zp)
+                if isinstance(rows, slice):
+                    sub = slice(rows.start * self.zp, rows.stop * self.zp)
+                else:
+                    sub = (np.asarray(rows)[:, None] * self.zp + np.arange(self.zp)).ravel()
                 pts, tk, foot = pts[sub], tk[sub], None if foot is None else foot[sub]
             r_pin = np.broadcast_to(self.geom.pin_radii[None], (len(tk) // self.zp, self.zp)).ravel()
             Ck, Rk = self._line_C(k, pts, tk, r_pin, foot)

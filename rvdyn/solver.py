@@ -359,10 +359,20 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         active = list(range(len(bounds)))
         prev_rows = None
         dx = np.zeros((0, self.ndof))
+        # one solve with the supports inside: each state leaves the outer loop at its own convergence (the
+        # damping floor of the inner loop fixed at the first linearisation's), so a few slow states do not keep
+        # the others iterating, and no state's result depends on the others'
+        per_row = len(bounds) == 1 and self.chain is not None
+        row_on = np.zeros(N, dtype=bool)
+        row_on[bounds[0][0]:bounds[0][1]] = True
+        fk0 = None
         for it in range(self.tol.solver_max_iter):
             if not active:
                 break
-            if len(active) == len(bounds) and len(bounds) == 1:
+            if per_row and not row_on[bounds[0][0]:bounds[0][1]].all():
+                rows = np.nonzero(row_on)[0]
+                n_rows = rows.size
+            elif len(active) == len(bounds) and len(bounds) == 1:
                 rows = slice(bounds[0][0], bounds[0][1])
                 n_rows = bounds[0][1] - bounds[0][0]
             else:
@@ -381,6 +391,9 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             C = self._line_last()[0] if law.physical else None
             step_law = self._step_law(law, C)
             floor_k = None
+            if per_row and C is not None:
+                fk0 = step_law.floor_stiffness() if fk0 is None else fk0
+                floor_k = np.full(n_rows, fk0)
             if C is not None and len(bounds) > 1:
                 floor_k = np.empty(n_rows)
                 for lc in locs:
@@ -415,6 +428,27 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             xs += dx
             x[rows] = xs
             still = []
+            if per_row:
+                ch = np.abs(dx).max(axis=1)
+                conv = (ch < tol_mm) | ((it >= self.tol.solver_max_iter // 3) & (ch < 10 * tol_mm))
+                used[0] = it + 1
+                if conv.any():
+                    rr = np.arange(N)[rows][conv]
+                    o = offset + rr
+                    out["G"][o] = G[conv] + _jdot(J[conv], dx[conv][:, :self.nj])
+                    out["nrm"][o] = self._nrm_last[conv]
+                    out["J"][o] = J[conv]
+                    out["C"][o], out["R"][o] = self._line_last(np.nonzero(conv)[0])
+                    row_on[rr] = False
+                if row_on.any():
+                    still.append((0, locs[0]))
+                    if it + 1 == self.tol.solver_max_iter:
+                        a, b = bounds[0]
+                        used[0] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[0], float(ch.max()))
+                        if not collect:
+                            raise used[0]
+                active = [g for g, _ in still]
+                continue
             for g, lc in zip(active, locs):
                 used[g] = it + 1
                 change = np.abs(dx[lc]).max()
