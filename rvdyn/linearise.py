@@ -77,6 +77,8 @@ class LinearisationMixin:
         nk = 1 + self.nc
         TH, X = self._stacked(th_in, x) if stacked is None else stacked
         cen_all, ang_all = self._poses(TH, X)
+        # the poses of the stacked states, for the chain's hole offsets at the same states (rvdyn.support_eq)
+        self._stack_poses = (np.array(th_in, dtype=float), np.array(x, dtype=float), TH, X, cen_all, ang_all)
         cen, ang = cen_all[:N], ang_all[:N]
         dcen = np.zeros(cen.shape + (self.nj,))
         dang = np.zeros(ang.shape + (self.nj,))
@@ -116,13 +118,23 @@ class LinearisationMixin:
         self._C_last = self._R_last = None
         self._nrm_last = np.stack([mx, my], axis=-1)                            # fixed frame, (N, nd, Zp, 2)
         lever = nx * py - ny * px
-        # -(mx dc_x + my dc_y) + lever dphi, evaluated in place (the same operations in the same order)
+        # -(mx dc_x + my dc_y) + lever dphi, evaluated in place (the same operations in the same order) on the
+        # kinematic columns; a floating disc's own columns are -mx, -my and lever / a (its shift and turn move
+        # its centre by 1 and its angle by 1 / a), the other disc's 0
         if jac is None:
             jac = np.empty((N, self.nd, self.zp, self.nj))
-        np.multiply(mx[..., None], dcen[:, :, None, 0, :], out=jac)
-        jac += my[..., None] * dcen[:, :, None, 1, :]
-        np.negative(jac, out=jac)
-        jac += lever[..., None] * dang[:, :, None, :]
+        jk = jac[..., :nk]
+        np.multiply(mx[..., None], dcen[:, :, None, 0, :nk], out=jk)
+        jk += my[..., None] * dcen[:, :, None, 1, :nk]
+        np.negative(jk, out=jk)
+        jk += lever[..., None] * dang[:, :, None, :nk]
+        if self.float_discs:
+            jac[..., nk:] = 0.0
+            for k in range(self.nd):
+                b = 1 + self.nc + 3 * k
+                np.negative(mx[:, k], out=jac[:, k, :, b])
+                np.negative(my[:, k], out=jac[:, k, :, b + 1])
+                np.multiply(lever[:, k], 1.0 / self.a, out=jac[:, k, :, b + 2])
         return gaps, jac
 
     def _line_last(self, rows: slice | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
