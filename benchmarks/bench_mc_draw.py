@@ -1,6 +1,8 @@
 """Benchmark of one Monte Carlo draw case of the full solver (analytic contacts, one revolution).
 
-Run: ``python benchmarks/bench_mc_draw.py [--case study|pins] [--steps 360] [--repeat 2] [--profile]``.
+Run: ``python benchmarks/bench_mc_draw.py [--case study|pins] [--steps 360] [--repeat 2] [--contact physical|impact]
+[--profile]``. ``--contact``: the contact law of every solve (default physical, rvdyn's and the study's Monte Carlo
+default; impact = the paper's law).
 ``study`` (default): one draw of the default stack-up study (``rvstudy.features``), solved as
 ``rvstudy.stackup.responses_of`` does: the TE run (360 steps) and the four play/rigidity runs; then the same
 draw with the four play runs as one ``rvdyn.te.run_te_many`` batch, and with all five runs as one batch
@@ -29,6 +31,7 @@ import numpy as np  # noqa: E402
 
 from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
 from rvcad.params import Design  # noqa: E402
+from rvdyn.contacts import ContactLaw  # noqa: E402
 from rvdyn.te import run_te, run_te_many  # noqa: E402
 
 
@@ -79,6 +82,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=360)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--profile", action="store_true", help="print the top cProfile entries")
+    ap.add_argument("--contact", choices=ContactLaw.KINDS, default="physical",
+                    help="contact law of every solve (default physical; impact = the paper's law)")
     ap.add_argument("--case", choices=["pins", "study", "equidistant"], default="study",
                     help="pins: pin-wise lists + disc phase; study: one draw of the default stack-up study; "
                          "equidistant: the pins-case errors on a disc with a 0.1 mm equidistant modification "
@@ -92,11 +97,14 @@ def main() -> None:
     else:
         runs = study_cases()
 
+    law = ContactLaw(kind=a.contact)
+
     def solve_all() -> list:
-        return [run_te(c, "analytic", n) for c, n in runs]
+        return [run_te(c, "analytic", n, law=law) for c, n in runs]
 
     rs, best, cpu = best_of(solve_all, a.repeat)
-    print(f"MC draw ({a.case}: {len(runs)} analytic solves, steps {[n for _, n in runs]}): {best:.3f} s wall, "
+    print(f"MC draw ({a.case}, {a.contact} law: {len(runs)} analytic solves, steps {[n for _, n in runs]}): "
+          f"{best:.3f} s wall, "
           f"{cpu:.3f} s CPU (best of {a.repeat})")
     for (c, n), r in zip(runs, rs):
         print(f"  {c.name} load {c.load_Nm:g} N m dir {c.direction:+d}: pp {r.stats['pp']:.6f} arcsec  "
@@ -105,10 +113,10 @@ def main() -> None:
         pairs = [(c.load_Nm, c.direction) for c, _ in runs]
         batches = {
             "TE run_te + 4 play runs as one run_te_many": lambda: (
-                [run_te(runs[0][0], "analytic", runs[0][1])]
-                + run_te_many(runs[1][0], "analytic", runs[1][1], loads=pairs[1:])),
+                [run_te(runs[0][0], "analytic", runs[0][1], law=law)]
+                + run_te_many(runs[1][0], "analytic", runs[1][1], loads=pairs[1:], law=law)),
             "all 5 runs as one run_te_many": lambda: run_te_many(
-                runs[0][0], "analytic", [n for _, n in runs], loads=pairs)}
+                runs[0][0], "analytic", [n for _, n in runs], loads=pairs, law=law)}
         for name, fn in batches.items():
             rb, bw, bc = best_of(fn, a.repeat)
             d = max(float(np.abs(x.table["te_arcsec"].to_numpy() - y.table["te_arcsec"].to_numpy()).max())

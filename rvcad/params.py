@@ -63,6 +63,13 @@ class Design:
         Needle rollers of each cam bearing: count, diameter and effective length, mm (assumption:
         16 x 2.5 mm x 8 mm in the 9 mm cam hole).
     journal_bearing_rollers, journal_bearing_roller_diameter_mm, journal_bearing_roller_length_mm : int, float, float
+        (see the bearing block below)
+    carrier_pillars, carrier_pillar_radius_mm : int, float
+        Pillars joining the output flange and the carrier end plate (round bars on the crank circle, midway
+        between the cranks), mm; their bending and shear twist the carrier (rvdyn.bearings.carrier_torsional_stiffness).
+    pin_seat_clearance_mm : float
+        Radial clearance of a pin in its housing groove (groove radius = pin radius + this), mm; the conformal
+        line contact of the seat is in series with the pin-disc contact (rvdyn.bearings.pin_seat_contact).
         Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
         (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
     profile_equidistant_mm, profile_shift_mm, profile_rotation_deg : float
@@ -101,6 +108,14 @@ class Design:
     journal_bearing_rollers: int = 12
     journal_bearing_roller_diameter_mm: float = 3.0
     journal_bearing_roller_length_mm: float = 6.0
+    # Carrier: the output flange and the carrier end plate joined by pillars through the discs, on the crank
+    # circle midway between the cranks (not in the paper; README "Assumptions"). The pillar holes of the discs
+    # are taken as large as the crank holes (cam_radius_mm), so a pillar is a round bar of radius
+    # cam_radius - e - 0.7 mm = 7 mm. Pin seats: each pin lies in a semicircular groove of the housing whose
+    # radius is the pin radius plus pin_seat_clearance_mm (a running fit: the pins turn in their grooves).
+    carrier_pillars: int = 2
+    carrier_pillar_radius_mm: float = 7.0
+    pin_seat_clearance_mm: float = 0.01
     # Profile modification of the cycloid discs (rvcad.profile.modified_profile_parameters): the
     # grinding wheel's radius rp + equidistant, its centre circle Rp + shift, the profile turned by
     # rotation. Zero by default (the paper's unmodified, zero-backlash profile).
@@ -264,6 +279,19 @@ class Design:
             bad("disc_center_hole_radius_mm", self.disc_center_hole_radius_mm,
                 f"< crank radius - cam radius - eccentricity = {a - self.cam_radius_mm - self.eccentricity_mm:g} mm",
                 "mm leaves no web to the crank holes")
+        # the pillars pass through holes of the discs as large as the pillar plus the eccentricity (the disc
+        # orbits by e): the hole must leave a web to the centre hole and stay inside the disc root
+        ph = self.carrier_pillar_radius_mm + self.eccentricity_mm
+        if a - ph <= self.disc_center_hole_radius_mm:
+            bad("carrier_pillar_radius_mm", self.carrier_pillar_radius_mm,
+                f"< crank radius - eccentricity - centre hole radius = "
+                f"{a - self.eccentricity_mm - self.disc_center_hole_radius_mm:g} mm",
+                "mm: the pillar holes of the discs (pillar radius + eccentricity) cut into the centre hole")
+        if a + ph >= rp - self.pin_radius_mm - self.eccentricity_mm:
+            bad("carrier_pillar_radius_mm", self.carrier_pillar_radius_mm,
+                f"< Rp - pin radius - 2 e - crank radius = "
+                f"{rp - self.pin_radius_mm - 2 * self.eccentricity_mm - a:g} mm",
+                "mm: the pillar holes of the discs reach the disc root")
         if self.housing_outer_radius_mm <= rp + self.pin_radius_mm:
             bad("housing_outer_radius_mm", self.housing_outer_radius_mm,
                 f"> Rp + pin radius = {rp + self.pin_radius_mm:g} mm", "mm does not hold the pins")
@@ -353,6 +381,10 @@ FIELD_RANGES: dict[str, tuple[float, float, bool, str]] = {
     "journal_bearing_rollers": (3, 200, False, "rolling elements of one bearing"),
     "journal_bearing_roller_diameter_mm": (0.0, 100.0, True, "rollers below 100 mm"),
     "journal_bearing_roller_length_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "carrier_pillars": (1, 12, False, "pillars joining the output flange and the carrier end plate"),
+    "carrier_pillar_radius_mm": (0.0, 1000.0, True, "inside the disc between its centre hole and root as well"),
+    "pin_seat_clearance_mm": (1e-4, 1.0, False, "a groove at least 0.1 um wider than the pin (the conformal "
+                              "Hertz seat law needs a finite relative radius) and at most 1 mm"),
     **{k: (-lim, lim, False, "rvcad.profile.MAX_MODIFICATION") for k, lim in MAX_MODIFICATION.items()},
 }
 

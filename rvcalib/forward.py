@@ -1,7 +1,10 @@
 """The forward model of a measured run: rvdyn TE at the readings, or on a uniform grid.
 
 The model TE is solved by rvdyn's one forward runner (:class:`rvdyn.runner.Runner`: analytic contacts,
-each case's own contact law). TE is periodic in one output revolution (input N turns, N the ratio of
+each case's own contact law: rvdyn's default, the physical law, unless the case's ``model.contact`` or the
+runner's ``law`` says otherwise; the simulated "rig" of :mod:`rvcalib.simulate` solves its truth on the same
+runner, so truth and model share one law, and ``rv-calibrate --workers/--cache`` keeps it). TE is periodic
+in one output revolution (input N turns, N the ratio of
 the case's design; see :mod:`rvcalib.orders`), so angles are taken modulo it. Every design constant
 comes from the case (its ``design`` object). :func:`grid_te` solves a uniform grid of ``steps`` input
 angles over one output revolution (the screening and the coarse fits of :mod:`rvcalib.identify`);

@@ -17,6 +17,18 @@ Formulas and sources:
   (Roark, Table 8.1 case 1e): ``y(x) = Q b x (L^2 - b^2 - x^2) / (6 E I L)`` for ``x <= a``.
 - Crankshaft torsion between the planet and the mean cam plane: ``phi = M_t l / (G J_p)``, i.e. a spring
   ``G J_p / (l r_b2^2)`` along the stage I line of action, in series with the mesh (in the equilibrium).
+- Carrier: the far (carrier) end plate reaches the output flange through the pillars. A pillar is a
+  Timoshenko beam clamped in both plates, its ends displaced parallel (guided):
+  ``1/k = L^3/(12 E I) + L/(kappa G A)`` (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a
+  solid circle ``kappa = 6 (1 + nu)/(7 + 6 nu)``, Cowper 1966); the plate turns by ``phi`` relative to the
+  flange against ``k_t = n_p k r_p^2`` (pillars on the circle r_p). The torque that takes this path is the
+  share ``beta`` of the output torque carried by the far journals (lever rule of each crank, statically
+  determinate, with the discs sharing the torque equally: the mean position of the cam planes between the
+  journals), so the output lags by ``beta^2 T / k_t`` (Castigliano), in series after the equilibrium.
+- Pin seat: each pin lies in a housing groove of radius ``r_pin + clearance``; a conformal Hertz line contact
+  (Johnson 1985, eq. 5.36 with a concave ``R2 = -(r_pin + clearance)``) in series with the pin-disc contact
+  over the disc's face width. Both are ``delta = A_i P (C_i - ln P)`` in the same load per length ``P``, so
+  the series law is the same form with ``A = A_1 + A_2``, ``C = (A_1 C_1 + A_2 C_2)/A``.
 """
 from __future__ import annotations
 
@@ -26,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rvcad.params import Design
-from rvdyn.materials import MATERIALS
+from rvdyn.materials import MATERIALS, LineContact
 
 #: Palmgren's line-contact constant, mm N^-0.9 mm^0.8.
 PALMGREN_LINE = 3.84e-5
@@ -58,6 +70,45 @@ def radial_bearing_K_discrete(z: int, length_mm: float, cage_angle: float = 0.0)
     return float(kn * np.sum(np.where(c > 0, c, 0.0) ** (1.0 + BEARING_EXP)))
 
 
+def circle_shear_coefficient(nu: float) -> float:
+    """Timoshenko shear coefficient of a solid circular section, ``6 (1 + nu)/(7 + 6 nu)`` (Cowper 1966)."""
+    return 6.0 * (1.0 + nu) / (7.0 + 6.0 * nu)
+
+
+def guided_beam_stiffness(E: float, nu: float, radius: float, length: float) -> float:
+    """Lateral stiffness (N/mm) of a round Timoshenko beam clamped at one end and guided at the other (ends
+    displaced parallel, no end rotation): ``1/k = L^3/(12 E I) + L/(kappa G A)``, ``I = pi r^4/4``,
+    ``A = pi r^2``, ``G = E/(2 (1 + nu))``. E in MPa, lengths in mm."""
+    I = math.pi * radius ** 4 / 4.0
+    A = math.pi * radius ** 2
+    G = E / (2.0 * (1.0 + nu))
+    return 1.0 / (length ** 3 / (12.0 * E * I) + length / (circle_shear_coefficient(nu) * G * A))
+
+
+def pillar_length_mm(d: Design) -> float:
+    """Free length of a pillar between the inner faces of the flange plate and the carrier end plate, mm:
+    both discs, the gap between them and the axial clearance on either side."""
+    return 2.0 * AXIAL_CLEARANCE_MM + 2.0 * d.disc_width_mm + d.disc_gap_mm
+
+
+def carrier_torsional_stiffness(d: Design) -> float:
+    """Torsional stiffness (N mm/rad) of the carrier end plate relative to the output flange through the
+    pillars: ``n_p k r_p^2`` with ``k`` of :func:`guided_beam_stiffness` (material of the carrier, paper
+    Table 2) and ``r_p`` the crank circle (the pillars stand midway between the cranks). The plates are
+    taken rigid."""
+    m = MATERIALS["carrier"]
+    k = guided_beam_stiffness(m.E, m.nu, d.carrier_pillar_radius_mm, pillar_length_mm(d))
+    return d.carrier_pillars * k * d.center_distance_mm ** 2
+
+
+def pin_seat_contact(d: Design) -> LineContact:
+    """Johnson constants of a pin in its housing groove over one disc's face width: convex pin radius
+    ``r_pin`` in a concave groove of radius ``r_pin + pin_seat_clearance_mm`` (GCr15 pin, QT500-7 housing)."""
+    r = d.pin_radius_mm
+    return LineContact.of(np.array(r), np.array(-(r + d.pin_seat_clearance_mm)), MATERIALS["pin"],
+                          MATERIALS["pin_housing"], d.disc_width_mm)
+
+
 def _check_design(d: Design) -> None:
     for name in ("cam_bearing_rollers", "journal_bearing_rollers"):
         v = getattr(d, name)
@@ -81,6 +132,7 @@ class Supports:
     EI : N mm^2, bending stiffness of the crankshaft (journal radius over the whole span)
     GJ : N mm^2, torsional stiffness of the crankshaft
     z_planet, z_journal, z_cams : mm, axial positions (planet, journal A and B, cam planes of discs 0, 1)
+    carrier_k : N mm/rad, torsional stiffness of the carrier end plate against the flange (pillars)
     """
 
     cam_K: float
@@ -92,6 +144,7 @@ class Supports:
     z_planet: float
     z_journal: tuple[float, float]
     z_cams: tuple[float, float]
+    carrier_k: float = math.inf
 
     @classmethod
     def from_design(cls, d: Design) -> "Supports":
@@ -111,7 +164,7 @@ class Supports:
                    cam_r=d.cam_radius_mm - d.cam_bearing_roller_diameter_mm / 2.0,
                    journal_r=d.crank_journal_radius_mm + d.journal_bearing_roller_diameter_mm / 2.0,
                    EI=EI, GJ=GJ, z_planet=g1 / 2.0, z_journal=(sum(f) / 2.0, sum(cr) / 2.0),
-                   z_cams=(sum(d0) / 2.0, sum(d1) / 2.0))
+                   z_cams=(sum(d0) / 2.0, sum(d1) / 2.0), carrier_k=carrier_torsional_stiffness(d))
 
     # ------------------------------------------------------------------ statics
     @staticmethod
@@ -163,6 +216,13 @@ class Supports:
                     xx = L - x
                     infl[i, k] = a * xx * (L * L - a * a - xx * xx) / (6.0 * self.EI * L)
         return np.einsum("ik,njkx->njix", infl, Q)
+
+    def far_journal_share(self) -> float:
+        """Share ``beta`` of the output torque that the far journals (carrier end plate) take: the lever rule of
+        each crank with the torque shared equally by the discs, the mean axial position of the cam planes
+        between the journals (1/2 for the default design)."""
+        zA, zB = self.z_journal
+        return float(np.mean((np.asarray(self.z_cams) - zA) / (zB - zA)))
 
     def torsion_lever_mm(self) -> float:
         """Length of crankshaft twisted by the planet torque: planet plane to the mean cam plane, mm."""

@@ -55,9 +55,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="output load torque in N m (default: the case's, 20); 0 = rigid single-flank limit")
     te.add_argument("--direction", type=int, choices=(1, -1), default=None, help="+1 or -1 (default: the case's)")
     te.add_argument("--contact", choices=CONTACT_LAWS, default=None,
-                    help="contact law: impact (paper Eq. 1, F = K delta^n) or physical (Hertz line contact, ISO 6336 "
-                         "mesh stiffness, bearing and crankshaft compliance); default: the case's model.contact")
-    te.add_argument("--K", type=float, default=None, help="impact-law stiffness, N/mm^n (default 2e5)")
+                    help="contact law: physical (Hertz line contact, ISO 6336 mesh stiffness, bearing and crankshaft "
+                         "compliance) or impact (paper Eq. 1, F = K delta^n, to reproduce the paper); default: the "
+                         "case's model.contact, else physical")
+    te.add_argument("--K", type=float, default=None,
+                    help="impact-law stiffness, N/mm^n (default 2e5; needs --contact impact or the case's "
+                         "model.contact impact)")
     te.add_argument("--n", type=float, default=None, help="impact-law force exponent (default 1.5)")
     te.add_argument("--rigid", action="store_true", help="rigid single-flank limit (K -> infinity)")
     te.add_argument("--backlash", action="store_true",
@@ -78,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--out", default=None, help="CURVE.csv to write (torque_Nm, torsion_arcmin, branch)")
     st.add_argument("--plot", default=None, help="PNG of the hysteresis curve")
     st.add_argument("--contact", choices=CONTACT_LAWS, default=None,
-                    help="contact law (default: the case's model.contact)")
+                    help="contact law: physical or impact (default: the case's model.contact, else physical)")
     st.add_argument("--solver", choices=SOLVERS, default="analytic")
     st.add_argument("--input-deg", dest="input_deg", type=float, default=0.0, help="locked input angle, deg")
     st.add_argument("--points", type=int, default=41, help="points per sweep branch (default 41)")

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from rvdyn.bearings import Supports
+from rvdyn.bearings import Supports, pin_seat_contact
 from rvdyn.contacts import ContactLaw, PhysicalLaw
 from rvdyn.materials import (MATERIALS, LineContact, e_star, hertz_line_pressure, iso_mesh_stiffness,
                              iso_single_tooth_stiffness, transverse_contact_ratio)
@@ -40,7 +40,13 @@ class PhysicsMixin:
         self.supports = None
         self.k_stage1 = self.k_mesh
         self.torsion_share = 0.0
+        # pin-disc Johnson constant A, and the pin seat (groove) in series with it: same law form, A_1 + A_2
+        # and C = (A_1 C_1 + A_2 C_2)/A (rvdyn.bearings; only with elastic supports)
+        self.pin_A = 1.0 / (math.pi * self.pin_estar)
+        self.seat = None
         if self.chain_on:
+            self.seat = pin_seat_contact(d)
+            self.pin_A = self.pin_A + self.seat.A
             self.supports = Supports.from_design(d)
             # crank torsion between planet and cams in series with the mesh, seen along the line of action
             k_t = self.supports.GJ / (self.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
@@ -66,7 +72,11 @@ class PhysicsMixin:
         # a concave boundary must be wider than the pin (conformal limit: relative radius <= 1e4 mm)
         rho = np.where((rho < 0) & (-rho < r_pin * (1.0 + 1e-4)), -r_pin * (1.0 + 1e-4), rho)
         R = 1.0 / (1.0 / r_pin + 1.0 / rho)
-        return LineContact.of(r_pin, rho, *self.pin_mats, self.face_width).C, R
+        C = LineContact.of(r_pin, rho, *self.pin_mats, self.face_width).C
+        if self.seat is not None:                                               # the pin seat in series
+            a1 = 1.0 / (math.pi * self.pin_estar)
+            C = (a1 * C + self.seat.A * self.seat.C) / self.pin_A
+        return C, R
 
 
     # ------------------------------------------------------------------ state maps
@@ -75,7 +85,22 @@ class PhysicsMixin:
         if not law.physical:
             return law
         n1 = self.nd * self.zp
-        return PhysicalLaw(LineContact(1.0 / (math.pi * self.pin_estar), C, self.face_width), n1, self.k_stage1)
+        return PhysicalLaw(LineContact(self.pin_A, C, self.face_width), n1, self.k_stage1)
+
+    def _seat_parts(self, f: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """Wind-up of the pin seats (N,) rad: ``sum f delta_seat`` over the pin contacts, with the seat's own
+        approach ``delta_seat = A_s P (C_s - ln P)`` under each pin force F (N, n_pin) and f = dF/dT."""
+        P = np.maximum(F, 0.0) / self.face_width
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.where(P > 0, self.seat.A * P * (self.seat.C - np.log(np.where(P > 0, P, 1.0))), 0.0)
+        return (f * d).sum(axis=1)
+
+    def _carrier_twist(self, n: int, T: float) -> np.ndarray:
+        """Output lag (n,) rad of the carrier end plate turning against the flange: ``beta^2 T / k_t`` with beta
+        the far journals' share of the torque (rvdyn.bearings.Supports.far_journal_share; the discs' shares
+        taken equal: the split the equilibrium finds under errors is not fed in, its force-based value being
+        dominated at light load by the preload the errors make, which carries no output torque)."""
+        return np.full(n, self.supports.far_journal_share() ** 2 * T / self.supports.carrier_k)
 
     def _pin_pressure(self, F: np.ndarray, law) -> np.ndarray:
         """Peak Hertzian pressure p0 = sqrt(P E*/(pi R)) of every pin contact (N, 2 Zp), MPa, with the

@@ -40,8 +40,10 @@ class Solution:
         Output wind-up of each part kind at the step (unit-load method, section 8 of docs/physics.md):
         ``pins`` and ``gears`` (contact deflections), and with the physical law and elastic supports
         ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (the supports inside
-        the equilibrium, rvdyn.support_eq); empty in the rigid limit and with the spring model of floating
-        discs (impact law or rigid supports with a cam-bearing clearance).
+        the equilibrium, rvdyn.support_eq), ``pin_seats`` (the pins in their housing grooves, in series with
+        the pin-disc contacts inside the equilibrium) and ``carrier`` (the end plate turning against the
+        output flange through the pillars, in series after the equilibrium); empty in the rigid limit and
+        with the spring model of floating discs (impact law or rigid supports with a cam-bearing clearance).
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
     warnings : list of str
     pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
@@ -135,9 +137,14 @@ class ResultsMixin:
                 if self.chain is not None:
                     parts["crank_torsion"] = self.torsion_share * parts["gears"]
                     parts["gears"] = parts["gears"] - parts["crank_torsion"]
+                    parts["pin_seats"] = self._seat_parts(f[:, :n1], F[:, :n1])
+                    parts["pins"] = parts["pins"] - parts["pin_seats"]
                     parts.update(self._chain_parts(th, x, dx, law))
                     cam_F = self.chain_cam_forces(th, x, law)
                     self._raw_last = None
+                    # the carrier end plate turning against the flange: in series (docs/physics.md, section 8)
+                    parts["carrier"] = self._carrier_twist(th.size, T)
+                    te = te - direction * parts["carrier"]
         nan = law.rigid
         pressure = np.full(th.size, np.nan)
         if not nan:

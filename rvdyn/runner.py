@@ -303,8 +303,8 @@ class Runner:
         Default steps per ``revolutions`` output turns (>= 2).
     law : ContactLaw or None
         Contact law of every case; None: each case's own (its ``model`` options,
-        :func:`rvdyn.solver.law_from_model`, as :func:`rvdyn.te.run_te` does; the paper's K = 2e5
-        N/mm^1.5, n = 1.5 unless the case says otherwise).
+        :func:`rvdyn.solver.law_from_model`, as :func:`rvdyn.te.run_te` does: the physical law unless
+        the case's ``model.contact`` says ``impact``).
     revolutions : float
         Output revolutions of a solve.
     progress : bool

@@ -118,7 +118,8 @@ def augment_section(res: Any) -> AugmentSection | None:
         + (" and the pin clearance terms |EB/2-EC| (um), EA:|EB/2-EC|, EA^2:|EB/2-EC|" if _physical_ok(res.factors)
            else "") + " is added alone and judged on the design and validation runs together (Bonferroni-adjusted "
         "partial F at alpha and a lower BIC); the supported term is added and the loop repeats (at most 2). The "
-        "solver is deterministic, so pure error is zero and the whole residual is lack of fit.\n")
+        "solver is deterministic, so pure error is zero and the whole residual is lack of fit. "
+        f"Contact model: {res.config.contact_models()['augment']}.\n")
     sec = AugmentSection("## 8b. The response-surface loop on our design (lack of fit -> higher-order or physical "
                          "term)\n", intro, results=augs)
     sec.tables["augment_summary"] = augment_table(augs)

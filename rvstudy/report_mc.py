@@ -69,8 +69,7 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
     tab(mc["features"], "mc_features")
     t = mc["timing"]
     add("## 9. Monte Carlo tolerance stack-up through the full solver\n")
-    law = (f"impact contact law F = {cfg.K:g} delta^{cfg.n:g}" if cfg.mc_contact == "impact" else
-           "physical contact law (Hertz, ISO 6336-1, elastic supports)")
+    law = "contact model " + cfg.contact_models()["monte_carlo"]
     add(f"Reducer: {reducer_text(d)}. Every draw is a case solved by the quasi-static solver (analytic contact "
         f"provider, {cfg.steps} steps per output revolution, {law}, load "
         f"{cfg.load_Nm:g} N m); {mc['n_features']} toleranced features are drawn per case (each pin's radius, pitch "

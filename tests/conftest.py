@@ -97,15 +97,21 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 def calib_forward_cache(tmp_path_factory) -> Path:
     """rvcalib's forward model for the session: rvdyn's runner with the in-memory cache of the default
     one and a disk cache shared by the pytest-xdist workers (entries are written atomically; a solve
-    one worker made is read by the other). Returns the cache folder."""
+    one worker made is read by the other). Returns the cache folder.
+
+    The runner names its contact law: the paper's impact law (``ContactLaw()``). These tests check the
+    loop's identification logic on data whose truth and model are solved on this one runner, so one law
+    serves both; the impact law costs about a third of rvdyn's default physical law per revolution.
+    ``rv-calibrate --workers/--cache`` keeps the forward runner's law."""
     import os
 
     from rvcalib import forward
+    from rvdyn.contacts import ContactLaw
     from rvdyn.runner import Runner
 
     base = tmp_path_factory.getbasetemp()
     root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "rvcalib-forward-cache"
-    prev = forward.use_runner(Runner(cache=root, memory_bytes=forward.CACHE_BYTES))
+    prev = forward.use_runner(Runner(cache=root, memory_bytes=forward.CACHE_BYTES, law=ContactLaw()))
     yield root
     forward.use_runner(prev)
 

@@ -175,10 +175,34 @@ def test_runner_without_a_law_solves_each_case_with_its_own():
     a law given to the runner replaces it for every case."""
     from rvdyn.contacts import ContactLaw
 
-    soft = Case.from_dict({**CASE, "model": {"contact_K_N_per_mm_n": 5.0e4}})
-    own, paper = rvdyn.run_cases([soft, Case.from_dict(CASE)], steps=STEPS)
+    soft = Case.from_dict({**CASE, "model": {"contact": "impact", "contact_K_N_per_mm_n": 5.0e4}})
+    paper_case = Case.from_dict({**CASE, "model": {"contact": "impact"}})
+    own, paper, default = rvdyn.run_cases([soft, paper_case, Case.from_dict(CASE)], steps=STEPS)
     np.testing.assert_array_equal(own["te_arcsec"], run_te(soft, "analytic", STEPS).table["te_arcsec"])
     forced = rvdyn.run_cases([soft], steps=STEPS, law=ContactLaw())[0]
     np.testing.assert_array_equal(forced["te_arcsec"], paper["te_arcsec"])
     assert forced["key"] != own["key"]  # the law enters the key
     assert np.max(np.abs(own["te_arcsec"] - paper["te_arcsec"])) > 0.1  # a softer contact winds up more
+    # a case that names no law is solved with the default, physical one (conventions.md)
+    phys = run_te(Case.from_dict(CASE), "analytic", STEPS)
+    assert phys.stats["contact"] == "physical"
+    np.testing.assert_array_equal(default["te_arcsec"], phys.table["te_arcsec"])
+    assert np.max(np.abs(default["te_arcsec"] - paper["te_arcsec"])) > 0.1
+
+
+def test_cli_te_and_stiffness_default_to_the_physical_law(capsys):
+    """conventions.md: the quasi-static analysis is physical by default; the impact law is a named option,
+    and its --K/--n without --contact impact are refused naming the option."""
+    import json
+
+    from rvdyn.cli import main
+
+    assert main(["te", "--steps", "4", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["contact"] == "physical"
+    assert main(["te", "--steps", "4", "--json", "--contact", "impact", "--K", "2e5", "--n", "1.5"]) == 0
+    assert json.loads(capsys.readouterr().out)["contact"] == "impact"
+    assert main(["te", "--steps", "4", "--K", "2e5"]) == 2
+    assert "--K and --n set the impact law; they need --contact impact" in capsys.readouterr().err
+    assert main(["stiffness", "--points", "5", "--json"]) == 0
+    f = json.loads(capsys.readouterr().out)
+    assert f["contact"] == "physical" and {"carrier", "pin_seats"} <= set(f["budget"])

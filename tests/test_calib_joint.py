@@ -31,6 +31,8 @@ from rvcalib.joint import aic, model_weights
 from rvcalib.lsq import bic
 from rvcalib.simulate import simulate_dataset
 
+pytestmark = pytest.mark.usefixtures("calib_forward_cache")  # the session's forward runner (impact law, shared cache)
+
 RUNS = [{"run": "fw10", "load_Nm": 10.0, "direction": 1}, {"run": "bw30", "load_Nm": 30.0, "direction": -1}]
 HIDDEN = {"errors": {"cam_eccentricity": 4.494, "cam_phase": 5.726},
           "model": {"torsional_compliance_arcsec_per_Nm": 0.2}}

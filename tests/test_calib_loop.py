@@ -236,7 +236,7 @@ def test_forward_model_runs_on_the_rvdyn_runner_it_is_given(tmp_path):
     one = [forward.grid_te(c, 80) for c in cases]
     x = grid_angles_deg(80, PERIOD_DEG)[::-7] + PERIOD_DEG
     at = forward.te_at(cases[1], x)
-    disk = Runner(cache=tmp_path / "cache", memory_bytes=forward.CACHE_BYTES)
+    disk = Runner(cache=tmp_path / "cache", memory_bytes=forward.CACHE_BYTES, law=forward.forward_runner().law)
     prev = forward.use_runner(disk)
     try:
         many = forward.grid_te_many(cases + [{"errors": {"no_such_error": 1.0}}], 80)

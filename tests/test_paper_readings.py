@@ -111,3 +111,21 @@ def test_contact_law_reaches_worker_and_key():
     assert out["stats"]["mean_abs"] == pytest.approx(float(ref.stats["mean_abs"]), rel=1e-12)
     imp = run_te(case, "analytic", 16, 1.0, law=ContactLaw())
     assert abs(float(imp.stats["mean_abs"]) - out["stats"]["mean_abs"]) > 1e-3
+
+
+def test_a_run_of_the_readings_alone_is_a_result():
+    """``rv-stackup --stages readings`` writes a report whose section 8c is the result: exit 0, not 'no stage
+    gave a result' (a run with nothing solved still is that error)."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from rvstudy.cli import useful
+
+    none = SimpleNamespace(fits={}, mc=None, screen=None, readings=None)
+    assert not useful(none)
+    done = SimpleNamespace(fits={}, mc=None, screen=None, readings=SimpleNamespace(table=pd.DataFrame({"r": [0.9]})))
+    assert useful(done)
+    failed = SimpleNamespace(fits={}, mc=None, screen=None,
+                             readings=SimpleNamespace(table=pd.DataFrame({"r": [float("nan")]})))
+    assert not useful(failed)

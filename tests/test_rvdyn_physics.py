@@ -28,11 +28,13 @@ def test_ideal_parts_zero_te_and_ratio() -> None:
 
 
 def test_ideal_parts_under_load_wind_up_scales_with_contact_law() -> None:
-    """Zero backlash: the loaded contacts do not change with load, so every deflection scales as
-    load**(1/n) and so does the wind-up (constant over the revolution up to mesh ripple)."""
+    """Zero backlash: the loaded contacts do not change with load, so every deflection of the impact law
+    ``F = K delta**n`` (named explicitly: the default is the physical law) scales as load**(1/n) and so does
+    the wind-up (constant over the revolution up to mesh ripple)."""
     nominal = Case.from_dict({})
-    r1 = run_te(nominal, "analytic", STEPS, load_Nm=20.0)
-    r2 = run_te(nominal, "analytic", STEPS, load_Nm=40.0)
+    impact = ContactLaw()
+    r1 = run_te(nominal, "analytic", STEPS, load_Nm=20.0, law=impact)
+    r2 = run_te(nominal, "analytic", STEPS, load_Nm=40.0, law=impact)
     te1, te2 = r1.table["te_arcsec"].to_numpy(), r2.table["te_arcsec"].to_numpy()
     assert te1.max() < -1.0  # output lags under load, direction +1
     assert r1.stats["pp"] < 0.02 * abs(r1.stats["mean"])  # only mesh ripple on top of the wind-up
@@ -40,7 +42,7 @@ def test_ideal_parts_under_load_wind_up_scales_with_contact_law() -> None:
     r3 = run_te(nominal, "analytic", STEPS, load_Nm=20.0, law=ContactLaw(n=1.0, K=2e5))
     r4 = run_te(nominal, "analytic", STEPS, load_Nm=40.0, law=ContactLaw(n=1.0, K=2e5))
     assert r4.stats["mean"] / r3.stats["mean"] == pytest.approx(2.0, rel=2e-3)
-    minus = run_te(nominal, "analytic", STEPS, load_Nm=20.0, direction=-1)
+    minus = run_te(nominal, "analytic", STEPS, load_Nm=20.0, direction=-1, law=impact)
     assert minus.stats["mean"] == pytest.approx(-r1.stats["mean"], rel=1e-3)
 
 
@@ -92,8 +94,9 @@ def test_pin_ring_rotation_shifts_te_by_120_over_121_of_it(delta_deg: float) -> 
 
 def test_cam_bearing_clearance_backlash_is_geometric_slack() -> None:
     """At the rigid limit a cam-bearing clearance c is pure geometric slack: the backlash is
-    symmetric (TE +-LM/2 in the two directions), proportional to c, zero without a clearance."""
-    lm = {c: backlash(Case.from_dict({"model": {"cam_bearing_clearance_um": c}} if c else {}), steps=60)
+    symmetric (TE +-LM/2 in the two directions), proportional to c, zero without a clearance (cranks held
+    rigidly in the carrier: ``supports`` rigid, the model of the derivation)."""
+    lm = {c: backlash(Case.from_dict({"model": {"supports": "rigid", "cam_bearing_clearance_um": c}}), steps=60)
           for c in (0.0, 2.0, 4.0)}
     assert abs(lm[0.0]["backlash_arcsec"]) < 1e-6
     for c in (2.0, 4.0):
@@ -108,7 +111,8 @@ def test_cam_bearing_clearance_slack_between_its_closed_form_bounds() -> None:
     bearing offset of hole h is then ``a (d + dx/Zc) t_h + e (k d - dx) t_chi``, k = 4/3, with t_h of
     opposite sign for the two holes. With the tangents aligned the best dx = k d needs
     ``a (1 + k/Zc) d <= c``: slack c / 31.03 mm = 6.648 arcsec/um, the least; orthogonal, the
-    sum of squares gives c (A^2 + Zc^2 e^2)^0.5 / ((Zc + k) a e): 7.725 arcsec/um, the most."""
+    sum of squares gives c (A^2 + Zc^2 e^2)^0.5 / ((Zc + k) a e): 7.725 arcsec/um, the most. The cranks are
+    held rigidly in the carrier (``supports`` rigid), as the derivation assumes."""
     from rvcad.params import Design
 
     dsg = Design()
@@ -118,7 +122,8 @@ def test_cam_bearing_clearance_slack_between_its_closed_form_bounds() -> None:
     hi = 1e-3 * math.sqrt(a ** 2 + zc ** 2 * e ** 2) / ((zc + k) * a * e) * ARCSEC_PER_RAD
     c = 2.0
     for d in (1, -1):
-        r = run_te(Case.from_dict({"model": {"cam_bearing_clearance_um": c}, "load_Nm": 0.0, "direction": d}),
+        r = run_te(Case.from_dict({"model": {"supports": "rigid", "cam_bearing_clearance_um": c}, "load_Nm": 0.0,
+                                   "direction": d}),
                    steps=240)
         per_um = -d * r.table["te_arcsec"].to_numpy() / c
         assert per_um.min() >= lo * (1 - 1e-4) and per_um.max() <= hi
@@ -325,13 +330,14 @@ def physical_nominal():
 
 def test_physical_budget_is_the_wind_up(physical_nominal) -> None:
     """Virtual work: the TE is the sum of every part's deflection work per unit torque (to 1e-3): with
-    rigid supports the pins' and the gears', with elastic supports also the bearings', the crank bending
-    (series, after the equilibrium) and the crank torsion (a spring in series with the mesh, inside the
-    equilibrium: its share of the stage I deflection is c_torsion / (c_mesh + c_torsion)). The supports
+    rigid supports the pins' and the gears', with elastic supports also the bearings', the crank bending,
+    the pin seats (in series with the pins), the carrier (series, after the equilibrium) and the crank torsion
+    (a spring in series with the mesh, inside the equilibrium: its share of the stage I deflection is
+    c_torsion / (c_mesh + c_torsion)). The supports
     and the Hertz contact make the wind-up grow slightly less than linearly with the load."""
     for sup, parts in (("rigid", {"pins", "gears"}),
-                       ("elastic", {"pins", "gears", "cam_bearings", "journal_bearings", "crank_bending",
-                                    "crank_torsion"})):
+                       ("elastic", {"pins", "pin_seats", "gears", "cam_bearings", "journal_bearings",
+                                    "crank_bending", "crank_torsion", "carrier"})):
         for L, sol in physical_nominal[sup].items():
             assert set(sol.parts_rad) == parts
             assert -sol.te_rad == pytest.approx(sum(sol.parts_rad.values()), rel=1e-3)
@@ -383,16 +389,17 @@ def test_load_and_interference_messages_name_the_cause() -> None:
 
 
 def test_pressure_above_the_limit_warns(tmp_path, capsys) -> None:
-    """Peak Hertz pressure against the stated limit (model.contact_pressure_limit_MPa): one pin 0.025 deg
-    out of pitch (28 um into a zero-backlash disc) under the physical law (supports taking part of the misfit)
-    reaches about 4.4 GPa > 4 GPa: a warning in the result and on stderr; the nominal case stays far below."""
-    r = run_te(Case.from_dict({"errors": {"pin_pitch": 0.025}, "model": {"contact": "physical"}}), steps=4)
+    """Peak Hertz pressure against the stated limit (model.contact_pressure_limit_MPa): one pin 0.035 deg
+    out of pitch (39 um into a zero-backlash disc) under the physical law (supports and the pin's seat taking
+    part of the misfit) reaches about 4.6 GPa > 4 GPa: a warning in the result and on stderr (through the CLI
+    with the default law); the nominal case stays far below."""
+    r = run_te(Case.from_dict({"errors": {"pin_pitch": 0.035}, "model": {"contact": "physical"}}), steps=4)
     assert r.stats["peak_pressure_MPa"] > 4000
     assert any("exceeds the stated limit 4000 MPa" in w for w in r.stats["warnings"])
     ok = run_te(Case.from_dict({"model": {"contact": "physical"}}), steps=4)
     assert ok.stats["warnings"] == [] and 100 < ok.stats["peak_pressure_MPa"] < 4000
     cf = tmp_path / "c.json"
-    cf.write_text(json.dumps({"errors": {"pin_pitch": 0.025}}))
-    assert rvdyn_main(["te", str(cf), "--contact", "physical", "--steps", "4", "--json"]) == 0
+    cf.write_text(json.dumps({"errors": {"pin_pitch": 0.035}}))
+    assert rvdyn_main(["te", str(cf), "--steps", "4", "--json"]) == 0
     cap = capsys.readouterr()
     assert "rvdyn: warning: peak pin-disc contact pressure" in cap.err and json.loads(cap.out)["warnings"]

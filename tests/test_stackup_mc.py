@@ -238,4 +238,7 @@ def test_grouped_draw_solves_equal_single_solves_and_share_the_cache(tmp_path):
     pre.prefetch(cases[:2], "ahead", steps=steps[:2], group=[0, 0])
     out = pre(cases[:2], "read", steps=steps[:2])
     assert pre.computed == 2 and pre.reused == 0
-    np.testing.assert_array_equal(out[1]["te_arcsec"], grouped[1]["te_arcsec"])
+    # the prefetched batch is the batch solve of those two cases (the physical law's damping floor depends on
+    # the batch, so a batch of two equals a batch of five only within run_te_many's bound, checked above)
+    direct = Runner(None, None, "analytic", STEPS)(cases[:2], "direct", steps=steps[:2], group=[0, 0])
+    np.testing.assert_array_equal(out[1]["te_arcsec"], direct[1]["te_arcsec"])

@@ -1,0 +1,123 @@
+"""The carrier (pillars) and pin-seat compliances of the physical law against closed forms
+(docs/physics.md, section 8; rvdyn.bearings)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rvcad.errors import Case
+from rvcad.geometry import ReducerGeometry
+from rvcad.params import Design
+from rvcad.validation import DesignError
+from rvdyn.bearings import (Supports, carrier_torsional_stiffness, circle_shear_coefficient, guided_beam_stiffness,
+                            pillar_length_mm, pin_seat_contact)
+from rvdyn.contacts import AnalyticContacts
+from rvdyn.materials import MATERIALS, LineContact, e_star
+from rvdyn.solver import QuasiStaticSolver
+
+
+def test_guided_beam_is_timoshenko_bending_plus_shear() -> None:
+    """Clamped-guided round bar: 12 E I / L^3 for a slender bar, kappa G A / L for a stubby one, and the
+    series sum of both in between; Cowper's kappa of a solid circle is 0.886 at nu = 0.3."""
+    E, nu, r = 2.0e5, 0.3, 5.0
+    I, A, G = math.pi * r ** 4 / 4, math.pi * r ** 2, E / (2 * (1 + nu))
+    assert circle_shear_coefficient(0.3) == pytest.approx(7.8 / 8.8, rel=1e-12)
+    slender = 2000.0     # shear part 3 E r^2 / (kappa G L^2) = 5.5e-5 of the bending part
+    assert guided_beam_stiffness(E, nu, r, slender) == pytest.approx(12 * E * I / slender ** 3, rel=1e-4)
+    stubby = 0.05        # bending part 1.1e-5 of the shear part
+    assert guided_beam_stiffness(E, nu, r, stubby) == pytest.approx(7.8 / 8.8 * G * A / stubby, rel=1e-4)
+    L = 20.0
+    k = 1.0 / (L ** 3 / (12 * E * I) + L / (7.8 / 8.8 * G * A))
+    assert guided_beam_stiffness(E, nu, r, L) == pytest.approx(k, rel=1e-12)
+
+
+def test_carrier_stiffness_of_the_default_design() -> None:
+    """Two pillars of radius 7 mm, 21.5 mm free length (two 10 mm discs, 0.5 mm gap, 0.5 mm clearance either
+    side), on the 30 mm crank circle, ZG65Mn (E 198 GPa, nu 0.23): k_t = 2 k r^2 = 4.30e8 N mm/rad."""
+    d = Design()
+    assert pillar_length_mm(d) == pytest.approx(21.5)
+    E, nu, r, L = 1.98e5, 0.23, 7.0, 21.5
+    I, A, G = math.pi * r ** 4 / 4, math.pi * r ** 2, E / (2 * (1 + nu))
+    kappa = 6 * (1 + nu) / (7 + 6 * nu)
+    k = 1.0 / (L ** 3 / (12 * E * I) + L / (kappa * G * A))
+    assert carrier_torsional_stiffness(d) == pytest.approx(2 * k * 30.0 ** 2, rel=1e-12)
+    assert carrier_torsional_stiffness(d) == pytest.approx(4.30e8, rel=2e-3)
+    assert carrier_torsional_stiffness(d.replace(carrier_pillars=3)) == pytest.approx(
+        1.5 * carrier_torsional_stiffness(d), rel=1e-12)
+
+
+def test_pin_seat_is_johnson_conformal_line_contact_in_series() -> None:
+    """The seat's approach is Johnson's ``P/pi sum c_i (2 ln(4 R_i/b) - 1)`` with the concave groove (relative
+    radius r (r + c)/c), and the series law (A_1 + A_2, weighted C) gives the sum of the two approaches."""
+    d = Design()
+    seat = pin_seat_contact(d)
+    r, c, L = d.pin_radius_mm, d.pin_seat_clearance_mm, d.disc_width_mm
+    pin, hs = MATERIALS["pin"], MATERIALS["pin_housing"]
+    es = e_star(pin, hs)
+    R = r * (r + c) / c
+    for F in (50.0, 500.0, 3000.0):
+        P = F / L
+        b = math.sqrt(4 * P * R / (math.pi * es))
+        johnson = P / math.pi * (pin.c * (2 * math.log(4 * r / b) - 1) + hs.c * (2 * math.log(4 * (r + c) / b) - 1))
+        assert float(seat.approach(np.array(F))) == pytest.approx(johnson, rel=1e-10)
+    disc = LineContact.of(np.array(r), np.array(-20.0), pin, MATERIALS["cycloid_disc"], L)
+    both = LineContact(disc.A + seat.A, (disc.A * disc.C + seat.A * seat.C) / (disc.A + seat.A), L)
+    F = np.array([10.0, 300.0, 2500.0])
+    np.testing.assert_allclose(both.approach(F), disc.approach(F) + seat.approach(F), rtol=1e-12)
+    np.testing.assert_allclose(both.force(both.approach(F)), F, rtol=1e-9)   # the solver's exact inversion
+    # a closer fit is stiffer (larger conformal radius), a looser one softer
+    tight, loose = (pin_seat_contact(d.replace(pin_seat_clearance_mm=v)) for v in (0.002, 0.05))
+    assert tight.approach(np.array(500.0)) < seat.approach(np.array(500.0)) < loose.approach(np.array(500.0))
+
+
+def test_pillar_and_seat_sizes_are_validated() -> None:
+    with pytest.raises(DesignError, match="design.carrier_pillar_radius_mm 20.0 mm: the pillar holes"):
+        Design(carrier_pillar_radius_mm=20.0).validate()
+    with pytest.raises(DesignError, match=r"design.pin_seat_clearance_mm 0.0 is out of range; allowed: a number in "
+                                          r"\[0.0001, 1\] mm"):
+        Design(pin_seat_clearance_mm=0.0).validate()
+    with pytest.raises(DesignError, match=r"design.carrier_pillars 0 is out of range"):
+        Design(carrier_pillars=0).validate()
+
+
+@pytest.fixture(scope="module")
+def rated():
+    """The nominal case at rated torque (167 N m), physical law, elastic supports, at two input angles; and
+    the same with a carrier 1000x stiffer (pillars of 1000^(1/4) the radius would not fit: the pillar count)."""
+    th = np.array([0.0, 0.7])
+    out = {}
+    for n in (2, 12):
+        c = Case.from_dict({"design": {"carrier_pillars": n}, "model": {"contact": "physical"}})
+        g = ReducerGeometry(c)
+        s = QuasiStaticSolver(g, AnalyticContacts(g))
+        out[n] = (s, s.solve(th, 1, 167.0))
+    return out
+
+
+def test_carrier_wind_up_is_beta_squared_T_over_k(rated) -> None:
+    """Nominal case: both discs carry half the torque, the cam planes sit at 1/3 and 2/3 of the journal span,
+    so the far journals take beta = 1/2 of it and the carrier adds beta^2 T / k_t to the wind-up; the TE moves
+    by exactly the change of that term when k_t changes (it is in series, after the equilibrium)."""
+    s, sol = rated[2]
+    k_t = carrier_torsional_stiffness(s.geom.design)
+    assert s.supports.carrier_k == pytest.approx(k_t, rel=1e-12)
+    np.testing.assert_allclose(sol.parts_rad["carrier"], 0.25 * 167e3 / k_t, rtol=1e-12)
+    s6, sol6 = rated[12]
+    np.testing.assert_allclose(sol6.parts_rad["carrier"], sol.parts_rad["carrier"] / 6, rtol=1e-12)
+    np.testing.assert_allclose(sol.te_rad - sol6.te_rad, -(sol.parts_rad["carrier"] - sol6.parts_rad["carrier"]),
+                               rtol=1e-9)
+    assert -sol.te_rad == pytest.approx(sum(sol.parts_rad.values()), rel=1e-3)
+
+
+def test_far_journal_share_is_the_lever_rule() -> None:
+    """Equal disc shares: beta = mean axial position of the cam planes between the journals, 1/2 for the
+    default layout (cam planes at 1/3 and 2/3 of the 31.5 mm span)."""
+    sup = Supports.from_design(Design())
+    zA, zB = sup.z_journal
+    assert zB - zA == pytest.approx(31.5)
+    assert sup.far_journal_share() == pytest.approx(0.5, rel=1e-12)
+    wide = Supports.from_design(Design(disc_gap_mm=10.5))
+    zA, zB = wide.z_journal
+    assert wide.far_journal_share() == pytest.approx(np.mean((np.asarray(wide.z_cams) - zA) / (zB - zA)), rel=1e-12)
