@@ -73,14 +73,12 @@ def cache_stats() -> dict[str, float]:
     solver seconds (``seconds``) and bytes held in memory (``bytes``)."""
     r = forward_runner()
     return {"solves": r.computed, "hits": r.reused, "seconds": r.counters()["solve_seconds_total"],
-            "bytes": r.memory.bytes if r.memory is not None else 0}
+            "bytes": r.memory.bytes}
 
 
 def clear_cache() -> None:
     """Forget the solutions held in memory (a disk cache stays)."""
-    r = forward_runner()
-    if r.memory is not None:
-        r.memory.clear()
+    forward_runner().memory.clear()
 
 
 def grid_angles_deg(steps: int, period: float) -> np.ndarray:

@@ -370,15 +370,14 @@ class JointSelection(Selection):
             if d.effect.screen != "analytic":
                 t = self.lib.by_name(d.effect.template or d.effect.name)
                 temps[t.name] = t
+        # the templates' signatures unless the budget has run out; one stop before or after them (the
+        # budget only runs out further)
+        n_solves = 0 if self.over_budget() else self.solve_signatures(list(temps.values()), self._pairs())
         if self.over_budget():
             log["joint"] = {"shortlist": [d.effect.name for d in short], "stopped": "time budget"}
             return None
-        n_solves = self.solve_signatures(list(temps.values()), self._pairs())
         # everything on the screening grid without projection: the empirical terms are pool members
         # (a subset may drop one and let physical effects explain its part)
-        if self.over_budget():
-            log["joint"] = {"shortlist": [d.effect.name for d in short], "stopped": "time budget"}
-            return None
         ce = np.zeros(0)
         if Ec is not None:
             ce, *_ = np.linalg.lstsq(Ec, rc_cat, rcond=None)

@@ -124,7 +124,13 @@ class ContactLaw:
 class PhysicalLaw:
     """The physical law at one linearisation: Hertz line contact on the first ``n_pin`` columns (one
     Johnson constant ``C`` per step and pin, from the local curvature), a linear mesh spring ``k_mesh``
-    (N/mm along the line of action) on the others. ``rows`` selects steps of the chunk."""
+    (N/mm along the line of action) on the others. ``rows`` selects steps of the chunk.
+
+    The per-step constant ``ln A + C`` of the inversion (:meth:`rvdyn.materials.LineContact._u`) is computed
+    once per linearisation, and the inversion runs on whole arrays (no masked copies); the numbers are the
+    same operations in the same order as ``LineContact``'s. :meth:`energy_force_stiffness` gives the energy,
+    force and stiffness of one inversion (the solver's line search keeps the force and stiffness of the
+    accepted step for its next Newton step)."""
 
     rigid = False
     kind = "physical"
@@ -133,6 +139,9 @@ class PhysicalLaw:
         self.line = line
         self.n_pin = n_pin
         self.k_mesh = float(k_mesh)
+        C = np.asarray(line.C, dtype=float)
+        self._lnAC = np.log(line.A) + C                 # per step and pin, once per linearisation
+        self._Pmax = np.exp(C - (1.0 + 1e-12))          # the law's largest line load, N/mm (u = 1)
 
     def describe(self) -> str:
         return "the physical contact law (Hertz line contact, ISO 6336 mesh stiffness)"
@@ -144,19 +153,31 @@ class PhysicalLaw:
         C = np.median(self.line.C)
         return float(self.line.stiffness(np.array(1e-4), np.array(C)))
 
-    def force_stiffness(self, delta: np.ndarray, rows=None) -> tuple[np.ndarray, np.ndarray]:
+    def _u_pos(self, delta: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The pin contacts in touch (delta > 0) as flat indices into ``delta`` (N, M), their u = C - ln P and
+        their line load P = delta / (A u) (N/mm; at most the law's maximum ``e^(C - 1)``).
+
+        ``u - ln u = ln(A e^C / delta)`` by Newton from ``u0 = rhs + ln rhs`` (3 steps), each step written
+        ``u <- u (ln u + rhs - 1) / (u - 1)`` (the same Newton step, two operations fewer). ``P = delta / (A u)``
+        is Johnson's relation itself (``delta = A P (C - ln P)``), without the exponential of ``e^(C - u)``."""
+        N, M = delta.shape
         p = self.n_pin
-        C = self._C(rows)
-        dp = delta[:, :p]
-        u = self.line._u(dp, C)
-        pos = dp > 0
-        F = np.empty_like(delta)
-        K = np.empty_like(delta)
-        F[:, :p] = np.where(pos, self.line.L * np.exp(C - u), 0.0)
-        K[:, :p] = np.where(pos, self.line.L / (self.line.A * (u - 1.0)), 0.0)
-        dm = delta[:, p:]
-        F[:, p:] = self.k_mesh * np.maximum(dm, 0.0)
-        K[:, p:] = np.where(dm > 0, self.k_mesh, 0.0)
+        lnAC = self._lnAC if rows is None else self._lnAC[rows]
+        Pmax = self._Pmax if rows is None else self._Pmax[rows]
+        ix = np.flatnonzero(delta[:, :p] > 0)                                  # in the (N, p) pin block
+        d = np.take(delta[:, :p], ix) if M != p else np.take(delta, ix)
+        rhs = np.take(lnAC, ix) - np.log(d)
+        rhs = np.maximum(rhs, 1.0 + 1e-12)             # delta beyond the law's maximum: clamp at u = 1
+        u = rhs + np.log(rhs)
+        r1 = rhs - 1.0
+        for _ in range(3):
+            u = u * (np.log(u) + r1) / (u - 1.0)
+        u = np.maximum(u, 1.0 + 1e-12)
+        P = np.minimum(d / (self.line.A * u), np.take(Pmax, ix))
+        return ix + (ix // p) * (M - p), u, P
+
+    def force_stiffness(self, delta: np.ndarray, rows=None) -> tuple[np.ndarray, np.ndarray]:
+        _, F, K = self.energy_force_stiffness(delta, rows, energy=False)
         return F, K
 
     def force(self, delta: np.ndarray, rows=None) -> np.ndarray:
@@ -166,11 +187,28 @@ class PhysicalLaw:
         return self.force_stiffness(delta, rows)[1]
 
     def energy(self, delta: np.ndarray, rows=None) -> np.ndarray:
+        return self.energy_force_stiffness(delta, rows, fk=False)[0]
+
+    def energy_force_stiffness(self, delta: np.ndarray, rows=None, fk: bool = True, energy: bool = True):
+        """Energy (N mm), force (N) and stiffness (N/mm) of every contact (None: the energy without ``energy``,
+        the force and stiffness without ``fk``), computed on the contacts in touch only."""
         p = self.n_pin
-        E = np.empty_like(delta)
-        E[:, :p] = self.line.energy(delta[:, :p], self._C(rows))
-        E[:, p:] = 0.5 * self.k_mesh * np.maximum(delta[:, p:], 0.0) ** 2
-        return E
+        ix, u, P = self._u_pos(delta, rows)
+        L, A = self.line.L, self.line.A
+        dm = delta[:, p:]
+        E = F = K = None
+        if energy:
+            E = np.zeros_like(delta)
+            np.put(E, ix, 0.5 * L * A * P * P * (u - 0.5))
+            E[:, p:] = 0.5 * self.k_mesh * np.maximum(dm, 0.0) ** 2
+        if fk:
+            F = np.zeros_like(delta)
+            K = np.zeros_like(delta)
+            np.put(F, ix, L * P)
+            np.put(K, ix, L / (A * (u - 1.0)))
+            F[:, p:] = self.k_mesh * np.maximum(dm, 0.0)
+            K[:, p:] = np.where(dm > 0, self.k_mesh, 0.0)
+        return E, F, K
 
 
 class AnalyticContacts:

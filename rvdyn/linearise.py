@@ -77,6 +77,8 @@ class LinearisationMixin:
         nk = 1 + self.nc
         TH, X = self._stacked(th_in, x) if stacked is None else stacked
         cen_all, ang_all = self._poses(TH, X)
+        # the poses of the stacked states, for the chain's hole offsets at the same states (rvdyn.support_eq)
+        self._stack_poses = (np.array(th_in, dtype=float), np.array(x, dtype=float), TH, X, cen_all, ang_all)
         cen, ang = cen_all[:N], ang_all[:N]
         dcen = np.zeros(cen.shape + (self.nj,))
         dang = np.zeros(ang.shape + (self.nj,))
@@ -116,24 +118,38 @@ class LinearisationMixin:
         self._C_last = self._R_last = None
         self._nrm_last = np.stack([mx, my], axis=-1)                            # fixed frame, (N, nd, Zp, 2)
         lever = nx * py - ny * px
-        # -(mx dc_x + my dc_y) + lever dphi, evaluated in place (the same operations in the same order)
+        # -(mx dc_x + my dc_y) + lever dphi, evaluated in place (the same operations in the same order) on the
+        # kinematic columns; a floating disc's own columns are -mx, -my and lever / a (its shift and turn move
+        # its centre by 1 and its angle by 1 / a), the other disc's 0
         if jac is None:
             jac = np.empty((N, self.nd, self.zp, self.nj))
-        np.multiply(mx[..., None], dcen[:, :, None, 0, :], out=jac)
-        jac += my[..., None] * dcen[:, :, None, 1, :]
-        np.negative(jac, out=jac)
-        jac += lever[..., None] * dang[:, :, None, :]
+        jk = jac[..., :nk]
+        np.multiply(mx[..., None], dcen[:, :, None, 0, :nk], out=jk)
+        jk += my[..., None] * dcen[:, :, None, 1, :nk]
+        np.negative(jk, out=jk)
+        jk += lever[..., None] * dang[:, :, None, :nk]
+        if self.float_discs:
+            jac[..., nk:] = 0.0
+            for k in range(self.nd):
+                b = 1 + self.nc + 3 * k
+                np.negative(mx[:, k], out=jac[:, k, :, b])
+                np.negative(my[:, k], out=jac[:, k, :, b + 1])
+                np.multiply(lever[:, k], 1.0 / self.a, out=jac[:, k, :, b + 2])
         return gaps, jac
 
-    def _line_last(self, rows: slice | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def _line_last(self, rows: slice | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Johnson constants C and relative radii R (N, nd Zp) of the pin contacts of the last linearisation
-        (``rows``: of those rows only; row by row, so the same numbers as the rows of the whole)."""
+        (``rows``: of those rows only, a slice or an index array; row by row, so the same numbers as the rows of
+        the whole)."""
         if self._C_last is not None:
             return (self._C_last, self._R_last) if rows is None else (self._C_last[rows], self._R_last[rows])
         Cs, Rs = [], []
         for k, (pts, tk, foot) in enumerate(self._feet_last):
             if rows is not None:
-                sub = slice(rows.start * self.zp, rows.stop * self.zp)
+                if isinstance(rows, slice):
+                    sub = slice(rows.start * self.zp, rows.stop * self.zp)
+                else:
+                    sub = (np.asarray(rows)[:, None] * self.zp + np.arange(self.zp)).ravel()
                 pts, tk, foot = pts[sub], tk[sub], None if foot is None else foot[sub]
             r_pin = np.broadcast_to(self.geom.pin_radii[None], (len(tk) // self.zp, self.zp)).ravel()
             Ck, Rk = self._line_C(k, pts, tk, r_pin, foot)

@@ -120,7 +120,7 @@ class PhysicsMixin:
         J = self._J_all
         nj = J.shape[-1]
         _, k = law.force_stiffness(delta)
-        H = np.einsum("nmi,nm,nmj->nij", J, k, J) + 1e-12 * np.eye(nj)[None]
+        H = np.matmul(J.transpose(0, 2, 1) * k[:, None, :], J) + 1e-12 * np.eye(nj)[None]
         arms = self._hole_arms(th, x, law, exact=True) if self.float_discs else None
         if arms is not None:
             # the supports' exact tangent condensed onto the contacts' coordinates (option springs: their own)

@@ -27,8 +27,9 @@ Every call returns one result dict per case, in the order of the cases:
 * ``error`` -- the message of a failed solve (else empty); ``cached`` -- taken from a cache.
 
 Two caches, both keyed by :meth:`rvdyn.cache.Job.key`: the disk cache (:class:`rvdyn.cache.CaseCache`,
-survives the process) and an optional in-memory one (:class:`MemoryCache`, ``memory_bytes`` > 0: for
-callers that ask for the same solves again and again within a process, e.g. a fit's trial values).
+survives the process) and the in-memory one (:class:`MemoryCache`): within its ``memory_bytes`` budget
+for callers that ask for the same solves again and again within a process (e.g. a fit's trial values),
+and beside it, pinned, the results of :meth:`Runner.prefetch` until they are read.
 
 Executors (:mod:`rvdyn.executors`) run the same worker function, :func:`solve_job`, on JSON-ready job payloads
 (:meth:`rvdyn.cache.Job.to_payload`) and yield ``(index, result)`` pairs as they finish. The results
@@ -212,30 +213,33 @@ ENTRY_OVERHEAD_BYTES = 1024
 
 
 class MemoryCache:
-    """Results of this process by job key, the least recently used dropped first beyond ``max_bytes``.
+    """Results of this process by job key: the least recently used dropped first beyond ``max_bytes``,
+    except pinned entries, which stay until :meth:`clear` (:meth:`Runner.prefetch`'s results).
 
     Entries are result dicts whose ``te_arcsec`` is a read-only float64 array (or None when failed).
 
     Parameters
     ----------
     max_bytes : int
-        Budget, bytes: each entry counts its TE array plus :data:`ENTRY_OVERHEAD_BYTES` (>= 0; 0 keeps
-        nothing).
+        Budget of the unpinned entries, bytes: each entry counts its TE array plus
+        :data:`ENTRY_OVERHEAD_BYTES` (>= 0; 0 keeps only pinned entries).
 
     Attributes
     ----------
     hits, misses : int
         Lookups since construction.
     bytes : int
-        Bytes held now.
+        Bytes held now (pinned entries included).
+    pinned_bytes : int
+        Bytes of the pinned entries.
     """
 
     def __init__(self, max_bytes: int) -> None:
         if isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, np.integer)) or max_bytes < 0:
             raise ValueError(f"memory_bytes {max_bytes!r} must be an integer >= 0")
         self.max_bytes = int(max_bytes)
-        self._d: OrderedDict[str, tuple[dict[str, Any], int]] = OrderedDict()
-        self.bytes = self.hits = self.misses = 0
+        self._d: OrderedDict[str, tuple[dict[str, Any], int, bool]] = OrderedDict()  # entry, size, pinned
+        self.bytes = self.pinned_bytes = self.hits = self.misses = 0
 
     def __len__(self) -> int:
         return len(self._d)
@@ -250,9 +254,14 @@ class MemoryCache:
         self.hits += 1
         return hit[0]
 
-    def put(self, key: str, result: dict[str, Any]) -> dict[str, Any]:
-        """Keep a result (its TE made a read-only array); drop the oldest entries beyond the budget.
-        Returns the entry as kept."""
+    def pinned(self, key: str) -> bool:
+        """True if the key's entry is pinned (no lookup is counted)."""
+        hit = self._d.get(key)
+        return hit is not None and hit[2]
+
+    def put(self, key: str, result: dict[str, Any], pin: bool = False) -> dict[str, Any]:
+        """Keep a result (its TE made a read-only array), pinned if ``pin`` (an entry once pinned stays
+        pinned); drop the oldest unpinned entries beyond the budget. Returns the entry as kept."""
         te = result.get("te_arcsec")
         if te is not None:
             te = np.array(te, dtype=np.float64)
@@ -261,18 +270,23 @@ class MemoryCache:
         size = ENTRY_OVERHEAD_BYTES + (0 if te is None else te.nbytes)
         old = self._d.pop(key, None)
         if old is not None:
+            pin = pin or old[2]
             self.bytes -= old[1]
-        self._d[key] = (entry, size)
+            self.pinned_bytes -= old[1] if old[2] else 0
+        self._d[key] = (entry, size, pin)
         self.bytes += size
-        while self.bytes > self.max_bytes and self._d:
-            _, (_, n) = self._d.popitem(last=False)
-            self.bytes -= n
+        self.pinned_bytes += size if pin else 0
+        if self.bytes - self.pinned_bytes > self.max_bytes:
+            for k in [k for k, v in self._d.items() if not v[2]]:  # oldest first
+                self.bytes -= self._d.pop(k)[1]
+                if self.bytes - self.pinned_bytes <= self.max_bytes:
+                    break
         return entry
 
     def clear(self) -> None:
-        """Forget every entry."""
+        """Forget every entry (pinned ones too)."""
         self._d.clear()
-        self.bytes = 0
+        self.bytes = self.pinned_bytes = 0
 
 
 def _check_steps(steps: Any, what: str = "steps") -> int:
@@ -282,8 +296,8 @@ def _check_steps(steps: Any, what: str = "steps") -> int:
 
 
 class Runner:
-    """Solve cases through an executor, reusing and filling a :class:`rvdyn.cache.CaseCache` (and a
-    :class:`MemoryCache` if ``memory_bytes`` > 0).
+    """Solve cases through an executor, reusing and filling a :class:`rvdyn.cache.CaseCache` and a
+    :class:`MemoryCache`.
 
     ``runner(cases, desc)`` returns one result dict per case, in order (see the module docstring).
     Equal jobs (equal keys) are solved once per call. Every finished solve is written to the cache at
@@ -312,16 +326,16 @@ class Runner:
     solve_fn : callable
         Worker function (default :func:`solve_job`; tests swap it).
     memory_bytes : int
-        Budget of the in-memory cache, bytes (:class:`MemoryCache`; default 0: none). Looked up before
-        the disk cache and filled from it and from every solve.
+        Budget of the in-memory cache, bytes (:class:`MemoryCache`; default 0: it keeps only what
+        :meth:`prefetch` pins). Looked up before the disk cache and filled from it and from every solve.
 
     Attributes
     ----------
     computed, reused, failed : int
         Unique solves done now, taken from a cache (memory or disk), and failed (computed or cached),
         cumulative.
-    memory : MemoryCache or None
-        The in-memory cache (None when ``memory_bytes`` is 0).
+    memory : MemoryCache
+        The in-memory cache (its unpinned entries within ``memory_bytes``; the prefetched results pinned).
     solve_seconds : list of float
         Solver wall time of every computed case, s.
     wall_seconds : float
@@ -347,7 +361,7 @@ class Runner:
         elif not hasattr(executor, "run"):
             executor = make_executor(workers=executor)
         self.executor: Executor = executor
-        self.memory = MemoryCache(memory_bytes) if memory_bytes else None
+        self.memory = MemoryCache(memory_bytes)
         self.cache = cache if isinstance(cache, CaseCache) else CaseCache(cache)
         self.solver = solver
         self.law = law
@@ -358,8 +372,6 @@ class Runner:
         self.solve_seconds: list[float] = []
         self.wall_seconds = 0.0
         self.worker_seconds = 0.0
-        self._memo: dict[str, dict[str, Any]] = {}
-        self._counted: set[str] = set()
 
     def jobs(self, cases: Sequence[Case], steps: int | Sequence[int] | None = None,
              theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None) -> list[Job]:
@@ -425,13 +437,13 @@ class Runner:
             unique.setdefault(k, j)
         results: dict[str, dict[str, Any]] = {}
         todo: list[str] = []
-        n_memo = 0
+        prefetched: set[str] = set()
         for k in unique:
-            if k in self._memo:  # solved (or taken from the cache) by this runner's prefetch: counted there
-                results[k] = self._memo[k]
-                n_memo += 1
+            if self.memory.pinned(k):  # solved (or taken from the cache) by this runner's prefetch: counted there
+                results[k] = self.memory.get(k)  # type: ignore[assignment]
+                prefetched.add(k)
                 continue
-            hit = self.memory.get(k) if self.memory is not None else None
+            hit = self.memory.get(k)
             if hit is None:
                 hit = self.cache.get(k)
                 if hit is not None:
@@ -440,7 +452,7 @@ class Runner:
                 todo.append(k)
             else:
                 results[k] = {**hit, "cached": True}
-        self.reused += len(results) - n_memo
+        self.reused += len(results) - len(prefetched)
         tasks = self._tasks(todo, keys, group, len(jobs))
         payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
                     for t in tasks]
@@ -465,11 +477,11 @@ class Runner:
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0
-        if keep:
-            self._memo.update((k, results[k]) for k in unique if k not in self._memo)
-        self.failed += sum(1 for k in unique if results[k].get("status") == "failed" and k not in self._counted)
-        if keep:
-            self._counted.update(unique)
+        self.failed += sum(1 for k in unique if results[k].get("status") == "failed" and k not in prefetched)
+        if keep:  # pinned with the cached flag of this call, for later calls (counted now)
+            for k in unique:
+                if k not in prefetched:
+                    self.memory.put(k, results[k], pin=True)
         out = []
         for k in keys:
             r = dict(results[k])
@@ -479,15 +491,15 @@ class Runner:
         return out
 
     def _keep(self, key: str, res: dict[str, Any]) -> dict[str, Any]:
-        """A result with its TE as an array (None when failed), kept in memory if there is a memory cache."""
+        """A result with its TE as an array (None when failed), kept in memory (within its budget)."""
         te = res.get("te_arcsec")
         r = {**res, "te_arcsec": np.asarray(te, dtype=float) if te is not None and len(te) else None}
-        return self.memory.put(key, r) if self.memory is not None else r
+        return self.memory.put(key, r)
 
     def prefetch(self, cases: Sequence[Case], desc: str = "cases", **kw: Any) -> None:
         """Solve a batch now and keep its results in memory for later calls of this runner (the same
-        arguments as :meth:`__call__`): a later call takes them without solving, reading the cache or
-        counting them again. A study submits every case it will need at once (no worker waits between
+        arguments as :meth:`__call__`; pinned in :attr:`memory`, outside its budget): a later call takes
+        them without solving, reading the cache or counting them again. A study submits every case it will need at once (no worker waits between
         its stages) and then reads them stage by stage."""
         self(cases, desc, keep=True, **kw)
 

@@ -41,6 +41,14 @@ from rvdyn.support_eq import SupportChain, SupportMixin
 #: Largest change of a state coordinate (mm) in one outer iteration (trust region of the linearised gaps).
 OUTER_TRUST_MM = 0.01
 
+#: Inexact inner solves (the physical law with the supports inside): a state whose step in this outer iteration
+#: exceeds LOOSE_MIN_STEP outer tolerances stops its inner Newton iterations once a step moves it less than
+#: INNER_LOOSE times that step (inexact Newton, Dembo, Eisenstat & Steihaug, SIAM J. Numer. Anal. 19, 1982): the
+#: minimum of a linearisation the outer loop redoes is not worth the last one or two Newton iterations; the
+#: outer loop's last iteration (a step below the tolerance) is solved in full, so the equilibrium is the same.
+INNER_LOOSE = 1e-2
+LOOSE_MIN_STEP = 100.0
+
 #: Largest trust radius (mm) a batch (:meth:`QuasiStaticSolver.solve_many`) grows to: the largest penetration
 #: an elastic solution may have, so one outer step never crosses more than the elastic range.
 MAX_TRUST_MM = 0.1
@@ -128,21 +136,33 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         floor = (fk * max(1.0, M / 4.0))[:, None]
         eye = np.eye(D)
 
-        E0 = energy_sub(self, x0, G, J, B, law, step, arms)
+        # a law that gives the energy, force and stiffness of one evaluation (the physical law): the line search
+        # keeps the force and stiffness of the step it accepts for the next Newton step (the same numbers)
+        keep_fk = hasattr(law, "energy_force_stiffness")
+        if keep_fk:
+            E0, F_all, K_all = energy_sub(self, x0, G, J, B, law, step, arms, fk=True)
+        else:
+            E0 = energy_sub(self, x0, G, J, B, law, step, arms)
         Jnorm = _row_norm(J)
         bnorm = np.linalg.norm(B, axis=1)
         tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
+        loose = self.chain is not None
         active = np.ones(N, dtype=bool)
-        for _ in range(max_iter):
+        for it in range(max_iter):
             idx = np.nonzero(active)[0]
             if idx.size == 0:
                 break
+            if it == 1 and self.chain is not None:
+                self.newton_load(B, False)            # the load estimate shaped the first step: exact tangents now
             every = idx.size == N                     # all states still iterating: views, no copies
             sel = slice(None) if every else idx
             s = step[sel]
             Gi, Ji = G[sel], J[sel]
-            delta = -(Gi + _jdot(Ji, s[:, :nj]))
-            f, k = law.force_stiffness(delta, idx)
+            if keep_fk:
+                f, k = (F_all, K_all) if every else (F_all[idx], K_all[idx])
+            else:
+                delta = -(Gi + _jdot(Ji, s[:, :nj]))
+                f, k = law.force_stiffness(delta, idx)
             if nj == D:
                 grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[sel]
                 H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
@@ -169,14 +189,19 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 if w.size == idx.size:
                     cand = s + alpha * dstep
                     Ec = energy_sub(self, x0[sel], Gi, Ji, B[sel], law, cand, None if arms is None else arms[sel],
-                                    rows=idx)
+                                    rows=idx, fk=keep_fk)
                 else:
                     cand = s[w] + alpha * dstep[w]
                     Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], B[idx[w]], law, cand,
-                                    None if arms is None else arms[idx[w]], rows=idx[w])
+                                    None if arms is None else arms[idx[w]], rows=idx[w], fk=keep_fk)
+                if keep_fk:
+                    Ec, fc, kc = Ec
                 upd = Ec < best_E[w]
                 best_E[w[upd]] = Ec[upd]
                 best_s[w[upd]] = cand[upd]
+                if keep_fk:
+                    F_all[idx[w[upd]]] = fc[upd]
+                    K_all[idx[w[upd]]] = kc[upd]
                 if alpha == 1.0:
                     accepted_full[w[upd]] = True
                 pending[w[upd]] = False
@@ -189,6 +214,12 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             if nj != D:
                 scale = scale + sup_scale
             done = (moved < tol_mm) & (np.linalg.norm(grad, axis=1) <= 1e-7 * scale)
+            if loose:
+                # inexact Newton: a state still far from its equilibrium (step so far > LOOSE_MIN_STEP outer
+                # tolerances) stops once its Newton step is below INNER_LOOSE of that step: the outer loop
+                # linearises again there, and its last iteration (a step below the tolerance) is solved in full
+                tot = np.linalg.norm(best_s, axis=1)
+                done |= (tot > LOOSE_MIN_STEP * 100.0 * tol_mm) & (moved < INNER_LOOSE * tot)
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False
         return step
@@ -328,10 +359,20 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         active = list(range(len(bounds)))
         prev_rows = None
         dx = np.zeros((0, self.ndof))
+        # one solve with the supports inside: each state leaves the outer loop at its own convergence (the
+        # damping floor of the inner loop fixed at the first linearisation's), so a few slow states do not keep
+        # the others iterating, and no state's result depends on the others'
+        per_row = len(bounds) == 1 and self.chain is not None
+        row_on = np.zeros(N, dtype=bool)
+        row_on[bounds[0][0]:bounds[0][1]] = True
+        fk0 = None
         for it in range(self.tol.solver_max_iter):
             if not active:
                 break
-            if len(active) == len(bounds) and len(bounds) == 1:
+            if per_row and not row_on[bounds[0][0]:bounds[0][1]].all():
+                rows = np.nonzero(row_on)[0]
+                n_rows = rows.size
+            elif len(active) == len(bounds) and len(bounds) == 1:
                 rows = slice(bounds[0][0], bounds[0][1])
                 n_rows = bounds[0][1] - bounds[0][0]
             else:
@@ -350,6 +391,9 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             C = self._line_last()[0] if law.physical else None
             step_law = self._step_law(law, C)
             floor_k = None
+            if per_row and C is not None:
+                fk0 = step_law.floor_stiffness() if fk0 is None else fk0
+                floor_k = np.full(n_rows, fk0)
             if C is not None and len(bounds) > 1:
                 floor_k = np.empty(n_rows)
                 for lc in locs:
@@ -384,6 +428,27 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             xs += dx
             x[rows] = xs
             still = []
+            if per_row:
+                ch = np.abs(dx).max(axis=1)
+                conv = (ch < tol_mm) | ((it >= self.tol.solver_max_iter // 3) & (ch < 10 * tol_mm))
+                used[0] = it + 1
+                if conv.any():
+                    rr = np.arange(N)[rows][conv]
+                    o = offset + rr
+                    out["G"][o] = G[conv] + _jdot(J[conv], dx[conv][:, :self.nj])
+                    out["nrm"][o] = self._nrm_last[conv]
+                    out["J"][o] = J[conv]
+                    out["C"][o], out["R"][o] = self._line_last(np.nonzero(conv)[0])
+                    row_on[rr] = False
+                if row_on.any():
+                    still.append((0, locs[0]))
+                    if it + 1 == self.tol.solver_max_iter:
+                        a, b = bounds[0]
+                        used[0] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[0], float(ch.max()))
+                        if not collect:
+                            raise used[0]
+                active = [g for g, _ in still]
+                continue
             for g, lc in zip(active, locs):
                 used[g] = it + 1
                 change = np.abs(dx[lc]).max()
@@ -422,10 +487,17 @@ def _jdot(J: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def energy_sub(solver: QuasiStaticSolver, x0, G, J, b, law: ContactLaw, s: np.ndarray,
-               arms: np.ndarray | None = None, rows=None) -> np.ndarray:
+               arms: np.ndarray | None = None, rows=None, fk: bool = False):
     """Linearised potential of the states x0 + s (N,), N mm (``b``: load vector (ndof,) or one per state
-    (N, ndof); ``arms``: hole arms at x0, floating discs; ``rows``: the steps of the law's per-step constants)."""
+    (N, ndof); ``arms``: hole arms at x0, floating discs; ``rows``: the steps of the law's per-step constants).
+    ``fk`` (a law with ``energy_force_stiffness``): also the contact forces and stiffnesses (N, M) at x0 + s."""
     delta = -(G + _jdot(J, s[:, :J.shape[-1]]))
     work = s @ b if b.ndim == 1 else np.einsum("nd,nd->n", s, b)
-    E = law.energy(delta, rows).sum(axis=1) + work
-    return E if arms is None else E + solver._bearing(x0 + s, arms, derivs=False)[0]
+    if fk:
+        e, f, k = law.energy_force_stiffness(delta, rows)
+    else:
+        e = law.energy(delta, rows)
+    E = e.sum(axis=1) + work
+    if arms is not None:
+        E = E + solver._bearing(x0 + s, arms, derivs=False)[0]
+    return (E, f, k) if fk else E

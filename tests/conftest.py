@@ -34,25 +34,25 @@ SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
 #: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a
 #: long unit late in the queue would leave the other worker idle at the end. The rest follow in
-#: collection order (all below ~15 CPU-s). CPU-s of each unit measured on this 2-core machine at load 5-13
-#: (2026-11-23, one module at a time, each solve from an empty cache; shared fixtures counted once): the
-#: off-grid scenario over 180 (3 x 1000 readings solved exactly at each trial), calib-declared 113
-#: (19 + 94; the declared model's own screening), the two-effect and zero-offset scenarios ~100 each,
-#: the single-pin scenario 64 (with the screening of the loop's three run conditions, 19), study ~70
-#: (small_study ~30), stackup Monte Carlo 40, screening grid ~45, rvcad export 41, scale error ~30,
-#: fcl vs analytic 27, joint 20, ratio-81 18. The first makes the screening of the loop's three run
-#: conditions (280 points) as it starts, the second screens its declared model, so every later scenario
-#: on either worker reads that screening from disk (:func:`calib_forward_cache`).
-HEAVY_FIRST = ("test_off_grid_readings_two_revolutions", "calib-declared", "test_two_effects_at_once",
-               "test_encoder_zero_offset_is_not_disguised_as_physics",
-               "test_table4_error_single_pin_with_transient_and_duplicates", "study",
-               "test_screening_grid_does_not_alias_whatever_the_steps", "test_rvcad_export", "test_stackup_mc",
-               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_fcl_vs_analytic",
-               "test_load_dependent_effect", "test_direction_dependent_effect",
-               "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_calib_joint", "test_calib_design",
-               "calib-order3", "test_rvcad_parts", "test_stackup_reducer", "test_rsm_augment", "test_fuzz_loaders",
-               "test_stackup_failures", "test_rvcad_errors",
-               "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds", "test_paper_readings")
+#: collection order (all below ~5 CPU-s). CPU-s of each unit measured on this 2-core machine at load 3-4
+#: (2026-11-23, ``-n 0`` one module at a time, with a CPU-time plugin; shared fixtures counted once):
+#: the single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions, ~18),
+#: calib-declared 55 (13 + 42; the declared model's own screening), study ~70 (small_study ~37, dask 15,
+#: stackup 13), stackup Monte Carlo 37, rvcad export 35, screening grid 29, scale error 26 (7 with the
+#: screening on disk), calib groups 14, two-effect scenario 14, joint 13, ratio-81 12, stiffness 10, the
+#: zero-offset scenario 8.5. The study runs alone on one worker while the single-pin/off-grid scenario
+#: makes the screening of the loop's three run conditions (280 points) as it starts and the declared pair
+#: screens its declared model, so every later scenario on either worker reads that screening from disk
+#: (:func:`calib_forward_cache`).
+HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "test_stackup_mc", "test_rvcad_export",
+               "test_screening_grid_does_not_alias_whatever_the_steps", "test_calib_groups",
+               "test_two_effects_at_once", "test_calib_joint", "test_calib_design", "test_rvdyn_stiffness",
+               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_reducer",
+               "test_encoder_zero_offset_is_not_disguised_as_physics", "test_direction_dependent_effect",
+               "calib-order3", "test_load_dependent_effect", "test_a_drift_in_time_is_a_drift_term_not_a_scale_error",
+               "test_stackup_failures", "test_rvcad_parts", "test_paper_readings", "test_rsm_plots",
+               "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds", "test_fcl_vs_analytic",
+               "test_fuzz_loaders", "test_rvcad_errors", "test_rsm_augment")
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -40,7 +40,8 @@ def common_pin_radius(tmp_path_factory):
     """Only a common pin-radius change, normal(-10 um, 2 um): a uniform clearance at every pin."""
     cfg = StudyConfig(out=tmp_path_factory.mktemp("cf"), solver="analytic", steps=STEPS, workers=1, stages=("mc",),
                       progress=False, figures=False, use_cache=False, load_Nm=0.0, mc_draws=30, mc_sobol=0,
-                      mc_check=0, tolerances={"pin_radius": parse_tolerance("pin_radius[common]=normal:2:-10")})
+                      mc_check=0, tolerances={"pin_radius": parse_tolerance("pin_radius[common]=normal:2:-10")},
+                      mc_contact="impact")  # the rigid limit of the closed form (load 0); ~1/3 the physical law's cost
     return run_study(cfg)
 
 
@@ -157,7 +158,8 @@ def test_mc_rerun_is_bit_identical_and_reports(tmp_path, capsys):
     tol.write_text(json.dumps({**{k: "none" for k in default_tolerances()}, "pin_radius": "normal:1.5",
                                "model.torsional_compliance_arcsec_per_Nm": "uniform:0:0.5"}))
     argv = ["--solver", "analytic", "--steps", "24", "--workers", "1", "--stages", "mc", "--mc-draws", "6",
-            "--mc-sobol", "2", "--mc-check", "0", "--no-progress", "--json", "--tolerances", str(tol)]
+            "--mc-sobol", "2", "--mc-check", "0", "--no-progress", "--json", "--tolerances", str(tol),
+            "--mc-contact", "impact"]  # the rerun check is the law's own; the physical MC runs in small_study
     assert cli.main(["--out", str(tmp_path / "a"), *argv]) == 0
     s1 = json.loads(capsys.readouterr().out)
     assert cli.main(["--out", str(tmp_path / "b"), *argv, "--no-cache"]) == 0
