@@ -116,6 +116,11 @@ def run_realistic(args) -> int:
         for e in res.effects:
             if e.family != "table4":
                 print(f"  named {e.name} = {e.value:+.4g} {e.unit}")
+        for g in res.groups:
+            if g["kind"] == "instances" and g.get("combined"):
+                print(f"  instance set named once at its combined effect: {g['found']} = "
+                      f"{g['combined']['value']:+.4g} {g['combined']['unit']} from "
+                      + ", ".join(f"{m['name']} {m['value']:+.4g}" for m in g["members"]))
         others = [e.name for e in res.effects if e.family != "table4"]
         print(f"  other effects: {others}; unexplained: {[u.label for u in res.unexplained]}; groups: "
               f"{len(res.groups)}; stopped by: {res.stopped_by}")

@@ -8,7 +8,9 @@ RMS it would leave. Twins of the same error type (kind ``instances``) leave the 
 interval that covers every member's size; a member of another error type (kind ``unsplit``) means
 the effect is not named (it leaves ``effects``; the group gives every member's size). Beside them:
 effects whose joint-fit estimates are correlated beyond :data:`CORRELATION_LIMIT`, and an
-unexplained empirical term with the library effects that could produce it.
+unexplained empirical term with the library effects that could produce it. Several instances of one
+error type in the model that one instance reproduces within the noise are named once, at the size of
+their combined effect (:meth:`Groups._instance_sets`; kind ``instances`` with ``combined``).
 
 Honest intervals: the interval of each named effect is the union of its plain interval and its
 intervals in the linearised model augmented by any one library candidate left out, at the size the
@@ -240,10 +242,104 @@ class Groups(JointSelection):
                         widen[f.name] = (gain, e.name)
         for name, (_, cand) in widen.items():
             by_name[name].selection["interval_widened_by"] = cand
-        kept = [f for f in fitted if f.name not in unsplit]
+        # 3. instance sets: several instances of one error type in the model that one instance replaces
+        #    within the noise are one identified error (its combined effect), not several
+        merged, combined = self._instance_sets(members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq,
+                                               by_name, unsplit)
+        groups += [g for g, _ in combined]
+        kept = [f for f in fitted if f.name not in unsplit and f.name not in merged] + [f for _, f in combined]
         self.log(f"identifiability at the final state: {len(groups)} group(s), {len(unsplit)} effect(s) not named, "
                  f"{time.perf_counter() - t0:.1f} s")
         return kept, groups
+
+    def _instance_sets(self, members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq, by_name, unsplit
+                       ) -> tuple[set[str], list[tuple[dict, FittedEffect]]]:
+        """Effects in the model that are instances of one Table 4 error type (carrier hole eccentricity
+        of crank 0 and of crank 1, ...): the set's combined contribution (linearised at the final state,
+        every other effect and empirical term refitted) is fitted by each member instance alone; when
+        the best leaves the residual sum of squares within chi-square(df) 95 % noise variances of the
+        set's (df: the parameters the set has more), the data see one error of that type. It is named
+        once, at the equivalent size of that instance (the combined effect), and the set is reported
+        as a group of kind ``instances`` with every member's own size. Returns (names of the merged
+        members, [(group, the named combined effect)])."""
+        sets: dict[str, list[int]] = {}
+        for i, a in enumerate(self.active):
+            f = by_name.get(a.effect.name)
+            if f is not None and a.effect.family == "table4" and f.name not in unsplit:
+                sets.setdefault(a.effect.key, []).append(i)
+        merged: set[str] = set()
+        out: list[tuple[dict, FittedEffect]] = []
+        for key, idx in sorted(sets.items()):
+            if len(idx) < 2:
+                continue
+            t = r_fin.copy()
+            for i in idx:
+                m, a = members[i], self.active[i]
+                t += m.cols @ coef[col0[i]:col0[i + 1]] + (m.contribution if m.contribution is not None
+                                                           else m.cols @ np.asarray(a.p, dtype=float))
+            rest = [blocks[j] for j in range(len(blocks)) if j not in idx]
+            k_set = sum(blocks[i].shape[1] for i in idx)
+            best = None
+            for i in idx:
+                A = np.column_stack([blocks[i]] + rest)
+                c, *_ = np.linalg.lstsq(A, t, rcond=None)
+                rr = t - A @ c
+                rss_i = float(rr @ rr)
+                if best is None or rss_i < best[1]:
+                    best = (i, rss_i, c, A)
+            i, rss_i, c, A = best
+            k_i = blocks[i].shape[1]
+            miss = max(0.0, rss_i - rss_grid) * w
+            limit = float(stats.chi2.ppf(0.95, max(1, k_set - k_i)))
+            names = [self.active[j].effect.name for j in idx]
+            if miss / s2 >= limit:
+                self.log(f"instances of {key} in the model ({', '.join(names)}): the data split them "
+                         f"({miss / s2:.1f} noise variances for one instance, limit {limit:.2f})")
+                continue
+            m, a = members[i], self.active[i]
+            e = a.effect
+            p_now = np.asarray(a.p, dtype=float)
+            # the member's columns are the TE change per unit of to_p's coefficients: the total is B c
+            B = np.column_stack([m.to_p(np.eye(k_i)[k]) - p_now for k in range(k_i)])
+            p_eq = B @ c[:k_i]
+            cov_c = (s2 / w) * np.linalg.pinv(A.T @ A)[:k_i, :k_i]
+            Cp = B @ cov_c @ B.T
+            if e.polar:
+                mag, ang = e.magnitude_angle(p_eq)
+                g = p_eq / mag if mag > 0 else np.array([1.0, 0.0])
+                se = float(math.sqrt(max(g @ Cp @ g, 0.0)))
+                params = {"x": float(p_eq[0]), "y": float(p_eq[1])}
+                angle: float | None = float(ang)
+            else:
+                se = float(math.sqrt(max(Cp[0, 0], 0.0)))
+                params = {"value": float(p_eq[0])}
+                angle = None
+            val = float(e.value(p_eq))
+            f0 = by_name[e.name]
+            sel = dict(f0.selection, combined_from=names)
+            comb = FittedEffect(e.name, e.key, e.family, e.unit, e.meaning, val, val - tq * se, val + tq * se, angle,
+                                se, params, f0.iteration, f0.explained_fraction, f0.F, f0.p_value, f0.delta_bic,
+                                list(f0.alternatives), None, None, sel)
+            mem = []
+            for j in idx:
+                fj = by_name[self.active[j].effect.name]
+                d = {"name": fj.name, "key": fj.key, "value": fj.value, "unit": fj.unit, "found": True}
+                if fj.angle_deg is not None:
+                    d["angle_deg"] = fj.angle_deg
+                mem.append(d)
+            grp = {"kind": "instances", "found": e.name, "combined": {"name": e.name, "value": val, "unit": e.unit,
+                                                                      "angle_deg": angle,
+                                                                      "rms_after_arcsec": float(math.sqrt(
+                                                                          (self.rss_full + miss) / self.n))},
+                   "members": mem,
+                   "note": f"{len(idx)} instances of {key} in the model that one instance ({e.name}) reproduces "
+                           "within the noise: the data see one error of this type, named once at the size of "
+                           "their combined effect; the members' own sizes are not identified"}
+            merged.update(names)
+            out.append((grp, comb))
+            self.log(f"instances of {key} in the model ({', '.join(names)}) named once: {e.name} = {val:.4g} "
+                     f"{e.unit} (combined effect; {miss / s2:.2f} noise variances, limit {limit:.2f})")
+        return merged, out
 
     # ------------------------------------------------------------------ experiment design
     def _member_signature(self, name: str, value: float, cond: dict, base: np.ndarray) -> np.ndarray | None:

@@ -73,6 +73,9 @@ RAMP_NOISE_FACTOR = 3.0
 #: the residual is called unexplained (a tie goes to the physical effect).
 HARMONIC_BIC_MARGIN = 2.0
 
+#: Joint steps at the term limit that may only swap members (each must lower the BIC on all samples).
+MAX_SWAP_STEPS = 2
+
 
 class Calibrator(Groups):
     """The loop on one dataset (see the module docstring and :class:`rvcalib.model.LoopModel` for the
@@ -97,11 +100,35 @@ class Calibrator(Groups):
         tried: set[str] = set()
         self.stopped_by = "nothing more passes the F test and the BIC"
         dec = ""
+        swap_only = False       # at the term limit: a joint step may only swap members
+        swaps_left = MAX_SWAP_STEPS
+        eliminated = False      # the backward elimination ran on the present model (nothing changed since)
         while True:
+            swap_only = False
             if len(self.active) + len(self.empirical) >= self.max_terms:
-                self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search: the residual "
-                                   "may hold more that a larger limit would name")
-                break
+                # at the term limit, first free the terms the joint fit no longer needs (stand-ins that
+                # later effects made redundant), then allow swaps; stop only when neither helps
+                if self.active and not eliminated and not self.over_budget():
+                    r_lim, _ = self.full_residual(self._pairs(), self.empirical)
+                    weak = self.removal_candidates()
+                    gone = self._backward([a.effect for a in self.active], np.zeros(0), np.zeros((0, 0)),
+                                          float(r_lim @ r_lim), include_last=True, only=weak) if weak else []
+                    eliminated = True
+                    if gone:
+                        r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+                        self.rss_full = float(r_full @ r_full)
+                        iterations.append({"iteration": it + 1, "decision": "at the term limit: removed "
+                                           + ", ".join(gone) + " (not needed by the joint fit)"})
+                        self.log(f"at the term limit: removed {', '.join(gone)} (RMS "
+                                 f"{math.sqrt(self.rss_full / self.n):.4g} arcsec)")
+                        continue
+                if self.joint and swaps_left > 0:
+                    swap_only = True
+                    swaps_left -= 1
+                else:
+                    self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search: the "
+                                       "residual may hold more that a larger limit would name")
+                    break
             if self.over_budget():
                 self.stopped_by = self.budget_stop("between iterations")
                 break
@@ -206,19 +233,29 @@ class Calibrator(Groups):
                 if got is not None:
                     log["decision"] = got[1]
                     self.rescreen_due += 1
-            if got is None and dec in ("physical", "empirical") and self.over_budget():
+            if got is not None and got[0]:
+                eliminated = False
+            if got is None and swap_only:
+                self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search (no swap "
+                                   "at the limit improves the model): the residual may hold more that a larger "
+                                   "limit would name")
+                log["decision"] = "stop: " + self.stopped_by
+                dec = "stop"
+            elif got is None and dec in ("physical", "empirical") and self.over_budget():
                 self.stopped_by = self.budget_stop(f"in iteration {it} before the refit")
                 log["decision"] = "stop: " + self.stopped_by
                 dec = "stop"
             elif got is None and dec == "physical":
                 ok, msg = self._add_physical(best, ranking, r_full, it, log, harms)
                 self.rescreen_due += int(ok)
+                eliminated = eliminated and not ok
                 log["decision"] = msg
                 if not ok:
                     tried.add(best.effect.name)
                     dec = "retry" if len(tried) < 3 else "stop"
             elif got is None and dec == "empirical":
                 ok, msg = self._add_empirical(hbest.term, it, log)
+                eliminated = eliminated and not ok
                 log["decision"] = msg
                 if not ok:
                     dec = "stop"
@@ -232,7 +269,7 @@ class Calibrator(Groups):
                      f"{log['seconds']:.1f} s)")
             if dec == "stop":
                 break
-        if self.active:
+        if self.active and not eliminated:
             r_full, _ = self.full_residual(self._pairs(), self.empirical)
             removed = self._backward([a.effect for a in self.active], np.zeros(0), np.zeros((0, 0)),
                                      float(r_full @ r_full), include_last=True)

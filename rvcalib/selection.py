@@ -105,14 +105,15 @@ class Selection(Fitting):
         return True, msg
 
     def _backward(self, effects: list[Effect], x: np.ndarray, jac: np.ndarray, rss: float,
-                  include_last: bool = False) -> list[str]:
+                  include_last: bool = False, only: set[str] | None = None) -> list[str]:
         """Drop effects that the joint fit no longer needs.
 
         For each effect (the newest only if ``include_last``): the residual with its parameters set to
         zero and the others kept is an upper bound of the residual without it; if even that increase
         is not significant it is removed; if the increase is significant but not overwhelmingly so
         (F below 100 times the critical value) or the estimate is small (|p| < 0.1 typical size), the
-        others are refitted without it and the F test decides. Returns the removed names.
+        others are refitted without it and the F test decides. ``only``: consider only these names
+        (default all). Returns the removed names.
         """
         removed: list[str] = []
         changed = True
@@ -122,6 +123,8 @@ class Selection(Fitting):
             dof = max(1, self.n - p_tot)
             F_crit = float(stats.f.isf(self.thr, 1, dof))
             pool = self.active if include_last else self.active[:-1]
+            if only is not None:
+                pool = [a for a in pool if a.effect.name in only]
             for a in sorted(pool, key=lambda a: float(np.linalg.norm(a.p)) / a.effect.scale):
                 k = a.effect.n_params
                 others = [(b.effect, b.p) for b in self.active if b is not a]
