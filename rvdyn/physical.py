@@ -72,10 +72,10 @@ class PhysicsMixin:
         # a concave boundary must be wider than the pin (conformal limit: relative radius <= 1e4 mm)
         rho = np.where((rho < 0) & (-rho < r_pin * (1.0 + 1e-4)), -r_pin * (1.0 + 1e-4), rho)
         R = 1.0 / (1.0 / r_pin + 1.0 / rho)
-        C = LineContact.of(r_pin, rho, *self.pin_mats, self.face_width).C
+        disc = LineContact.of(r_pin, rho, *self.pin_mats, self.face_width)
+        C = disc.C
         if self.seat is not None:                                               # the pin seat in series
-            a1 = 1.0 / (math.pi * self.pin_estar)
-            C = (a1 * C + self.seat.A * self.seat.C) / self.pin_A
+            C = (disc.A * C + self.seat.A * self.seat.C) / self.pin_A
         return C, R
 
 
@@ -90,9 +90,7 @@ class PhysicsMixin:
     def _seat_parts(self, f: np.ndarray, F: np.ndarray) -> np.ndarray:
         """Wind-up of the pin seats (N,) rad: ``sum f delta_seat`` over the pin contacts, with the seat's own
         approach ``delta_seat = A_s P (C_s - ln P)`` under each pin force F (N, n_pin) and f = dF/dT."""
-        P = np.maximum(F, 0.0) / self.face_width
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.where(P > 0, self.seat.A * P * (self.seat.C - np.log(np.where(P > 0, P, 1.0))), 0.0)
+        d = np.where(F > 0, self.seat.approach(np.where(F > 0, F, 1.0)), 0.0)
         return (f * d).sum(axis=1)
 
     def _carrier_twist(self, n: int, T: float) -> np.ndarray:
