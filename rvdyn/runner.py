@@ -29,7 +29,7 @@ Every call returns one result dict per case, in the order of the cases:
 Two caches, both keyed by :meth:`rvdyn.cache.Job.key`: the disk cache (:class:`rvdyn.cache.CaseCache`,
 survives the process) and the in-memory one (:class:`MemoryCache`): within its ``memory_bytes`` budget
 for callers that ask for the same solves again and again within a process (e.g. a fit's trial values),
-and beside it, pinned, the results of :meth:`Runner.prefetch` until they are read.
+and beside it, pinned outside that budget until :meth:`MemoryCache.clear`, the results of :meth:`Runner.prefetch`.
 
 Executors (:mod:`rvdyn.executors`) run the same worker function, :func:`solve_job`, on JSON-ready job payloads
 (:meth:`rvdyn.cache.Job.to_payload`) and yield ``(index, result)`` pairs as they finish. The results
