@@ -292,12 +292,19 @@ class JointSelection(Selection):
         search sees one instance per family, and the residual beyond it no longer ranks the truth).
         The instance index is a discrete parameter of the effect: it is chosen here by the same
         nonlinear refit as the sizes, among the :data:`SIBLING_REFITS` siblings ranked by
-        :meth:`siblings`. Returns the (old, new) names swapped."""
+        :meth:`siblings`, and again from the new instance while a swap lowers the residual (a descent over
+        the instance index; instances already tried are not tried again). ``rc``: the residual on the
+        screening grid at the state. Returns the (old, new) names swapped, in order."""
         swapped: list[tuple[str, str]] = []
-        for a in [b for b in self.active if b.effect.name in names]:
+        todo = [b for b in self.active if b.effect.name in names]
+        tried: set[str] = set()
+        while todo:
+            a = todo.pop(0)
+            tried.add(a.effect.name)
             if self.over_budget():
                 break
-            sibs = self.siblings(a, rc)
+            sibs = [(x, q) for x, q in self.siblings(a, rc, SIBLING_REFITS + len(tried)) if x.name not in tried]
+            sibs = sibs[:SIBLING_REFITS]
             if not sibs:
                 continue
             best = None
@@ -323,6 +330,11 @@ class JointSelection(Selection):
             r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
             self.rss_full = float(r_full @ r_full)
             swapped.append((old, x.name))
+            # the new instance's own siblings next (a descent over the instance index): the first choice
+            # can be several pins from the truth (pin 15 for 12 beside a drift stand-in)
+            rc = np.concatenate([coarse_values(r, y - q, self.m, self.period)
+                                 for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))])
+            todo.insert(0, a)
         return swapped
 
     # ------------------------------------------------------------------ subsets
