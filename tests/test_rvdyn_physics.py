@@ -302,7 +302,7 @@ def test_crank_beam_and_cam_statics_closed_forms() -> None:
 
     s = Supports.from_design(Design())
     L = s.z_journal[1] - s.z_journal[0]
-    mid = replace(s, z_cams=(s.z_journal[0] + L / 2, s.z_journal[0] + L / 2))
+    mid = replace(s, z_cams=(s.z_journal[0] + L / 2, s.z_journal[0] + L / 2), sections=())   # uniform Euler beam
     B = np.zeros((1, 2, 2, 2))
     B[0, 0, 0] = (0.0, -500.0)                                  # disc 0 pushes crank 0 by +500 N in y
     y = mid.bending_deflections(B)
