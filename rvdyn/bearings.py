@@ -205,6 +205,7 @@ class Supports:
     carrier_k : N mm/rad, torsional stiffness of the carrier end plate against the flange (pillars)
     sections : ``(x0, x1, EI, kGA)`` tuples of the stepped Timoshenko crank between the journals
         (:func:`crank_sections`; x from journal A, mm); empty: a uniform Euler beam of ``EI``
+    crank_radius : mm, radius of the crank circle (the carrier's turn moves journal B by crank_radius * phi)
     """
 
     cam_K: float
@@ -218,6 +219,7 @@ class Supports:
     z_cams: tuple[float, float]
     carrier_k: float = math.inf
     sections: tuple = ()
+    crank_radius: float = 1.0
 
     @classmethod
     def from_design(cls, d: Design) -> "Supports":
@@ -240,7 +242,7 @@ class Supports:
                    journal_r=d.crank_journal_radius_mm + d.journal_bearing_roller_diameter_mm / 2.0,
                    EI=EI, GJ=GJ, z_planet=g1 / 2.0, z_journal=zj,
                    z_cams=(sum(d0) / 2.0, sum(d1) / 2.0), carrier_k=carrier_torsional_stiffness(d),
-                   sections=crank_sections(d, zj, (d0, d1)))
+                   sections=crank_sections(d, zj, (d0, d1)), crank_radius=d.center_distance_mm)
 
     # ------------------------------------------------------------------ statics
     @staticmethod

@@ -93,13 +93,6 @@ class PhysicsMixin:
         d = np.where(F > 0, self.seat.approach(np.where(F > 0, F, 1.0)), 0.0)
         return (f * d).sum(axis=1)
 
-    def _carrier_twist(self, n: int, T: float) -> np.ndarray:
-        """Output lag (n,) rad of the carrier end plate turning against the flange: ``beta^2 T / k_t`` with beta
-        the far journals' share of the torque (rvdyn.bearings.Supports.far_journal_share; the discs' shares
-        taken equal: the split the equilibrium finds under errors is not fed in, its force-based value being
-        dominated at light load by the preload the errors make, which carries no output torque)."""
-        return np.full(n, self.supports.far_journal_share() ** 2 * T / self.supports.carrier_k)
-
     def _pin_pressure(self, F: np.ndarray, law) -> np.ndarray:
         """Peak Hertzian pressure p0 = sqrt(P E*/(pi R)) of every pin contact (N, 2 Zp), MPa, with the
         relative radius R at the converged foot points (for either law: the force meets the real geometry)."""

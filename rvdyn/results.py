@@ -142,9 +142,6 @@ class ResultsMixin:
                     parts.update(self._chain_parts(th, x, dx, law))
                     cam_F = self.chain_cam_forces(th, x, law)
                     self._raw_last = None
-                    # the carrier end plate turning against the flange: in series (docs/physics.md, section 8)
-                    parts["carrier"] = self._carrier_twist(th.size, T)
-                    te = te - direction * parts["carrier"]
         nan = law.rigid
         pressure = np.full(th.size, np.nan)
         if not nan:
