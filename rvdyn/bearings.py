@@ -23,14 +23,13 @@ Formulas and sources:
   uniform and shear-free it is Roark Table 8.1 case 1e, ``y(x) = Q b x (L^2 - b^2 - x^2) / (6 E I L)``.
 - Crankshaft torsion between the planet and the mean cam plane: ``phi = M_t l / (G J_p)``, i.e. a spring
   ``G J_p / (l r_b2^2)`` along the stage I line of action, in series with the mesh (in the equilibrium).
-- Carrier: the far (carrier) end plate reaches the output flange through the pillars. A pillar is a
-  Timoshenko beam clamped in both plates, its ends displaced parallel (guided):
-  ``1/k = L^3/(12 E I) + L/(kappa G A)`` (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a
-  solid circle ``kappa = 6 (1 + nu)/(7 + 6 nu)``, Cowper 1966); the plate turns by ``phi`` relative to the
-  flange against ``k_t = n_p k r_p^2`` (pillars on the circle r_p). The torque that takes this path is the
-  share ``beta`` of the output torque carried by the far journals (lever rule of each crank, statically
-  determinate, with the discs sharing the torque equally: the mean position of the cam planes between the
-  journals), so the output lags by ``beta^2 T / k_t`` (Castigliano), in series after the equilibrium.
+- Carrier: the far (carrier) end plate reaches the output flange through the pillars. A pillar is a Timoshenko
+  beam clamped in both plates, its ends displaced parallel (guided): ``1/k = L^3/(12 E I) + L/(kappa G A)``
+  (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a solid circle ``kappa = 6 (1 + nu)/(7 +
+  6 nu)``, Cowper 1966); the plate turns by ``phi`` relative to the flange against ``k_t = n_p k r_p^2``
+  (pillars on the circle r_p). The turn is a coordinate of the equilibrium (rvdyn.support_eq: it carries
+  journal B of every crank along the crank circle), so the torque split between the journals is solved;
+  :meth:`Supports.far_journal_share` is the lever-rule statics of equal discs (1/2 by default), for reference.
 - Pin seat: each pin lies in a housing groove of radius ``r_pin + clearance``; a conformal Hertz line contact
   (Johnson 1985, eq. 5.36 with a concave ``R2 = -(r_pin + clearance)``) in series with the pin-disc contact
   over the disc's face width. Both are ``delta = A_i P (C_i - ln P)`` in the same load per length ``P``, so

@@ -2,7 +2,7 @@
 
 Constants of the physical contact law (Johnson line contact at the pins with the local profile
 curvature, ISO 6336-1 mesh stiffness, crank torsion in series with the mesh), the unit-load forces
-``dF/dT``, the cam-bearing statics and the series wind-up of the supports, and the peak Hertz pressure.
+``dF/dT``, the cam-bearing statics, the pin seats' wind-up and the peak Hertz pressure.
 Derivations and sources: docs/physics.md, sections 7, 8 and 11.
 """
 from __future__ import annotations

@@ -4,14 +4,16 @@ Two models of the cam bearings of floating discs (docs/physics.md, sections 3 an
 
 - ``option spring`` (the impact law, or ``supports = "rigid"``, with a cam-bearing clearance): each hole
   sits on a linear spring ``model.cam_bearing_stiffness_N_per_um`` beyond the clearance; the cranks are rigid.
-- ``chain`` (the physical law with ``supports = "elastic"``): every disc floats (3 coordinates per disc) and
-  every crank has 4 + 2 nd more: the radial deflections of its two journal bearings and its bending
-  deflections at the cam planes. Each disc hole is held by a needle bearing (Palmgren line contact, radial
+- ``chain`` (the physical law with ``supports = "elastic"``): every disc floats (3 coordinates per disc),
+  every crank has 4 + 2 nd more: the displacements of its two journal nodes and its bending deflections at the
+  cam planes, and the carrier end plate one, ``s = a phi`` (its turn against the output flange, mm at the
+  crank circle a): journal B's bearing deflects by ``u_B - s t_j`` (t_j the crank circle's tangent), the pillars
+  store ``k_t phi^2 / 2`` (``bearings.carrier_torsional_stiffness``). Each disc hole is held by a needle bearing (Palmgren line contact, radial
   law ``F = K_c (|d| - c)^(10/9)`` beyond the clearance c, ``bearings.radial_bearing_K``) against its cam;
   the cam moves with the crank: ``y_k = (1 - l_k) u_A + l_k u_B + w_k`` (journal deflections interpolated at
   the cam plane, l_k its axial position between the journals, plus bending). Journals: the same law without
   clearance; bending: ``w^T K_b w / 2`` with ``K_b`` the inverse of the simply-supported beam's influence
-  matrix at the cam planes (Roark, ``bearings.Supports.bending_deflections``). All of it is an exact
+  matrix at the cam planes (the stepped Timoshenko crank, ``bearings.Supports.bending_deflections``). All of it is an exact
   potential of the state: the equilibrium shares every preload between contacts and supports.
 
 The hole offsets ``d = hole - cam`` (fixed frame) are linearised at each outer iteration like the contact
@@ -399,8 +401,8 @@ class SupportMixin:
         ``g_con`` (N, nj), ``H_con`` (N, nj, nj): the contacts' gradient and Hessian in their coordinates; ``b``
         (N, ndof) the load vector; ``mu`` (N,) the Levenberg-Marquardt damping; ``floor`` (N, 1) its floor. The
         Hessian is assembled by blocks (contacts' coordinates a, each crank's support coordinates q) and solved by
-        the Schur complement on a (the q blocks of different cranks do not couple), both solves by
-        :func:`batch_solve`."""
+        the Schur complement on the outer set ``[a, s]`` (the q blocks of different cranks do not couple; the
+        carrier coordinate s couples them and joins a), both solves by :func:`batch_solve`."""
         ch = self.chain
         N, nj, nc, pc = x.shape[0], self.nj, self.nc, ch.per_crank
         ns, nq0 = ch.n_carrier, nc * pc
