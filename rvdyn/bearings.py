@@ -21,8 +21,10 @@ Formulas and sources:
   needles run on the eccentric) with shear (Timoshenko): influence coefficients by the unit-load (Maxwell-Mohr)
   integral ``d_ik = int m_i m_k / (E I) dx + int v_i v_k / (kappa G A) dx`` (Timoshenko & Gere; Roark sec. 8.10);
   uniform and shear-free it is Roark Table 8.1 case 1e, ``y(x) = Q b x (L^2 - b^2 - x^2) / (6 E I L)``.
-- Crankshaft torsion between the planet and the mean cam plane: ``phi = M_t l / (G J_p)``, i.e. a spring
-  ``G J_p / (l r_b2^2)`` along the stage I line of action, in series with the mesh (in the equilibrium).
+- Crankshaft torsion between the planet and the mean cam plane: ``phi = M_t sum l_i / (G J_p,i)`` over the
+  stepped sections (journal radius to the first disc, eccentric beyond), i.e. a spring
+  ``1 / (sum l_i/(G J_p,i) r_b2^2)`` along the stage I line of action, in series with the mesh (in the
+  equilibrium).
 - Carrier: the far (carrier) end plate reaches the output flange through the pillars. A pillar is a Timoshenko
   beam clamped in both plates, its ends displaced parallel (guided): ``1/k = L^3/(12 E I) + L/(kappa G A)``
   (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a solid circle ``kappa = 6 (1 + nu)/(7 +
@@ -205,6 +207,8 @@ class Supports:
     sections : ``(x0, x1, EI, kGA)`` tuples of the stepped Timoshenko crank between the journals
         (:func:`crank_sections`; x from journal A, mm); empty: a uniform Euler beam of ``EI``
     crank_radius : mm, radius of the crank circle (the carrier's turn moves journal B by crank_radius * phi)
+    GJ_sections : ``(z0, z1, GJ)`` tuples (axial positions, mm; N mm^2) of the crank from its planet end: the
+        journal radius up to the first disc, the eccentric radius beyond (:meth:`torsion_compliance`)
     """
 
     cam_K: float
@@ -219,6 +223,7 @@ class Supports:
     carrier_k: float = math.inf
     sections: tuple = ()
     crank_radius: float = 1.0
+    GJ_sections: tuple = ()
 
     @classmethod
     def from_design(cls, d: Design) -> "Supports":
@@ -233,6 +238,7 @@ class Supports:
         r = d.crank_journal_radius_mm
         EI = m.E * math.pi * r ** 4 / 4.0
         GJ = m.E / (2.0 * (1.0 + m.nu)) * math.pi * r ** 4 / 2.0
+        re = d.cam_radius_mm - d.cam_bearing_roller_diameter_mm                # the eccentric (needle raceway)
         zj = (sum(f) / 2.0, sum(cr) / 2.0)
         return cls(cam_K=radial_bearing_K(d.cam_bearing_rollers, d.cam_bearing_roller_length_mm),
                    journal_K=radial_bearing_K(d.journal_bearing_rollers, d.journal_bearing_roller_length_mm,
@@ -241,7 +247,8 @@ class Supports:
                    journal_r=d.crank_journal_radius_mm + d.journal_bearing_roller_diameter_mm / 2.0,
                    EI=EI, GJ=GJ, z_planet=g1 / 2.0, z_journal=zj,
                    z_cams=(sum(d0) / 2.0, sum(d1) / 2.0), carrier_k=carrier_torsional_stiffness(d),
-                   sections=crank_sections(d, zj, (d0, d1)), crank_radius=d.center_distance_mm)
+                   sections=crank_sections(d, zj, (d0, d1)), crank_radius=d.center_distance_mm,
+                   GJ_sections=((0.0, d0[0], GJ), (d0[0], d1[1], GJ * (re / r) ** 4)))
 
     # ------------------------------------------------------------------ statics
     @staticmethod
@@ -304,6 +311,20 @@ class Supports:
         between the journals (1/2 for the default design)."""
         zA, zB = self.z_journal
         return float(np.mean((np.asarray(self.z_cams) - zA) / (zB - zA)))
+
+    def torsion_compliance(self) -> float:
+        """Torsional compliance (rad per N mm) of the crankshaft between the planet plane and the mean cam plane:
+        ``sum l_i / (G J_i)`` over its sections (the planet's bore and the journal at the journal radius up to the
+        first disc, the eccentric beyond; ``GJ_sections``), or ``l / GJ`` without sections."""
+        z0, z1 = self.z_planet, float(np.mean(self.z_cams))
+        if not self.GJ_sections:
+            return (z1 - z0) / self.GJ
+        c = 0.0
+        for a, b, GJ in self.GJ_sections:
+            lo, hi = max(a, z0), min(b, z1)
+            if hi > lo:
+                c += (hi - lo) / GJ
+        return c
 
     def torsion_lever_mm(self) -> float:
         """Length of crankshaft twisted by the planet torque: planet plane to the mean cam plane, mm."""

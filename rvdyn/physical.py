@@ -49,7 +49,7 @@ class PhysicsMixin:
             self.pin_A = self.pin_A + self.seat.A
             self.supports = Supports.from_design(d)
             # crank torsion between planet and cams in series with the mesh, seen along the line of action
-            k_t = self.supports.GJ / (self.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
+            k_t = 1.0 / (self.supports.torsion_compliance() * g.planet.base_radius ** 2)
             self.k_stage1 = 1.0 / (1.0 / self.k_mesh + 1.0 / k_t)
             self.torsion_share = self.k_stage1 / k_t                           # share of the stage I deflection
         self._C_last: np.ndarray | None = None

@@ -98,3 +98,14 @@ def test_bad_contact_angle_and_roller_diameter_are_refused() -> None:
         Design().replace(journal_bearing_contact_angle_deg=-1.0)
     with pytest.raises(ValueError, match=r"design\.cam_bearing_roller_diameter_mm 9\.5 must be < cam_radius_mm"):
         Supports.from_design(Design(cam_bearing_roller_diameter_mm=9.5))
+
+
+def test_crank_torsion_over_the_stepped_sections() -> None:
+    """Planet plane (z = 5 mm) to the mean cam plane (31.25 mm): 16 mm of journal (radius 7 mm) to the first
+    disc, then 10.25 mm of eccentric (6.5 mm): ``sum l_i / (G pi r_i^4 / 2)``; without sections ``l / GJ``."""
+    s = Supports.from_design(Design())
+    m = MATERIALS["crankshaft"]
+    G = m.E / (2 * (1 + m.nu))
+    want = 16.0 / (G * math.pi * 7.0 ** 4 / 2) + 10.25 / (G * math.pi * 6.5 ** 4 / 2)
+    assert s.torsion_compliance() == pytest.approx(want, rel=1e-12)
+    assert replace(s, GJ_sections=()).torsion_compliance() == pytest.approx(26.25 / s.GJ, rel=1e-12)
