@@ -283,7 +283,8 @@ class JointSelection(Selection):
     def sibling_refit(self, names: set[str], rc: np.ndarray) -> list[tuple[str, str]]:
         """Refit the model with each of an instance's nearest siblings in its place (the instances of
         ``names`` that have just entered) and keep the one that leaves the smallest residual on all
-        samples (the same number of parameters: the BIC and the F test rank them alike).
+        samples (the same number of parameters: the BIC and the F test rank them alike), when it lowers
+        the BIC by more than :data:`JOINT_BIC_MARGIN` (twin instances tie and keep the first).
 
         Which instance of a family ranks first is decided by linear screening at a state where other
         effects may still be missing; neighbouring instances have close signatures (under rvdyn's
@@ -317,7 +318,9 @@ class JointSelection(Selection):
                     params, rss, *_ = self.fit_full(effects, p0, self.empirical)
                 except ModelEvaluationError:
                     continue
-                if rss < self.rss_full and (best is None or rss < best[0]):
+                # a swap must be worth the joint choice's margin (twin instances, pins 20 apart, tie)
+                worth = self.n * math.log(max(self.rss_full, 1e-300) / max(rss, 1e-300)) > JOINT_BIC_MARGIN
+                if worth and (best is None or rss < best[0]):
                     best = (rss, x, params)
             if best is None:
                 continue
