@@ -235,7 +235,8 @@ class JointSelection(Selection):
                 out.add(a.effect.name)
         return out
 
-    def siblings(self, a: Active, rc: np.ndarray, n: int = SIBLING_REFITS) -> list[tuple[Effect, np.ndarray]]:
+    def siblings(self, a: Active, rc: np.ndarray, n: int = SIBLING_REFITS,
+                 sigma2: float = 0.0) -> list[tuple[Effect, np.ndarray]]:
         """The other instances of an effect's family (one pin's pitch among the pins, a cam error of one
         crank and disc among the others) closest to it on these data, with a start for their refit.
 
@@ -244,8 +245,10 @@ class JointSelection(Selection):
         (:attr:`Effect.shift_deg`) are ranked by how well the effect's own contribution rotated by their
         pin-pitch difference reproduces it (its fitted size, not the typical one: under rvdyn's physical
         law a pin's TE change is far from proportional to its error); other families by their screening
-        signatures at the state (:meth:`screen_effect`). Returns at most ``n`` (effect, start parameters),
-        best first; an effect of no family, an empty list."""
+        signatures at the state (:meth:`screen_effect`). A sibling whose column reproduces the effect's
+        own within the noise (``sigma2``, arcsec^2: the chi-square rule of :meth:`_alternatives`; twins such
+        as pins 20 apart) is left out: the data cannot prefer it, and the groups report it. Returns at most
+        ``n`` (effect, start parameters), best first; an effect of no family, an empty list."""
         e = a.effect
         if e.family == "measurement":
             return []
@@ -268,15 +271,24 @@ class JointSelection(Selection):
                 if abs(roll - round(roll)) > 1e-9:
                     continue
                 col = np.roll(blocks, int(round(roll)), axis=1).ravel()
+                dd = col - contrib
+                if float(dd @ dd) * self.n / self.nc < 3.84 * sigma2:
+                    continue  # the same on these data (a twin)
                 c = float(col @ target) / max(float(col @ col), 1e-300)
                 r = target - c * col
                 ranked.append((1.0 - float(r @ r) / tt, x, p * c))
         else:
             groups: dict[int, tuple] = {}
+            own = self.screen_effect(e, groups, target, None)
             for x in sibs:
                 d = self.screen_effect(x, groups, target, None)
-                if d is not None:
-                    ranked.append((d.explained, x, np.asarray(d.p, dtype=float)))
+                if d is None:
+                    continue
+                if own is not None and own.fit is not None and d.fit is not None:
+                    dd = d.fit - own.fit
+                    if float(dd @ dd) * self.n / self.nc < 3.84 * sigma2:
+                        continue
+                ranked.append((d.explained, x, np.asarray(d.p, dtype=float)))
         ranked.sort(key=lambda t: -t[0])
         return [(x, q) for _, x, q in ranked[:n]]
 
@@ -304,7 +316,9 @@ class JointSelection(Selection):
             tried.add(a.effect.name)
             if self.over_budget():
                 break
-            sibs = [(x, q) for x, q in self.siblings(a, rc, SIBLING_REFITS + len(tried)) if x.name not in tried]
+            r_now, _ = self.full_residual(self._pairs(), self.empirical)
+            sibs = [(x, q) for x, q in self.siblings(a, rc, SIBLING_REFITS + len(tried), self._noise2(r_now))
+                    if x.name not in tried]
             sibs = sibs[:SIBLING_REFITS]
             if not sibs:
                 continue
