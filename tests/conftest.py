@@ -34,25 +34,29 @@ SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
 #: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a
 #: long unit late in the queue would leave the other worker idle at the end. The rest follow in
-#: collection order (all below ~5 CPU-s). CPU-s of each unit measured on this 2-core machine at load 3-4
-#: (2026-11-23, ``-n 0`` one module at a time, with a CPU-time plugin; shared fixtures counted once):
-#: the single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions, ~18),
-#: calib-declared 55 (13 + 42; the declared model's own screening), study ~70 (small_study ~37, dask 15,
-#: stackup 13), stackup Monte Carlo 37, rvcad export 35, screening grid 29, scale error 26 (7 with the
-#: screening on disk), calib groups 14, two-effect scenario 14, joint 13, ratio-81 12, stiffness 10, the
+#: collection order (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per
+#: test, with a CPU-time plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load
+#: 3-4 (2026-11-23; shared fixtures counted once): study ~70 (small_study 36, the executor comparison ~15,
+#: the stack-up tests 16), rvcad export 33, fcl against analytic 20 (26 tests), stack-up Monte Carlo 17,
+#: rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up on other reducers 8, stiffness 7, fcl
+#: contacts 7. The loop's scenarios (measured before, ``-n 0`` one module at a time): the
+#: single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions, ~18),
+#: calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
+#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, ratio-81 12, the
 #: zero-offset scenario 8.5. The study runs alone on one worker while the single-pin/off-grid scenario
 #: makes the screening of the loop's three run conditions (280 points) as it starts and the declared pair
 #: screens its declared model, so every later scenario on either worker reads that screening from disk
 #: (:func:`calib_forward_cache`).
-HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "test_stackup_mc", "test_rvcad_export",
-               "test_screening_grid_does_not_alias_whatever_the_steps", "test_calib_groups",
-               "test_two_effects_at_once", "test_calib_joint", "test_calib_design", "test_rvdyn_stiffness",
-               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_reducer",
-               "test_encoder_zero_offset_is_not_disguised_as_physics", "test_direction_dependent_effect",
-               "calib-order3", "test_load_dependent_effect", "test_a_drift_in_time_is_a_drift_term_not_a_scale_error",
-               "test_stackup_failures", "test_rvcad_parts", "test_paper_readings", "test_rsm_plots",
-               "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds", "test_fcl_vs_analytic",
-               "test_fuzz_loaders", "test_rvcad_errors", "test_rsm_augment")
+HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "test_rvcad_export",
+               "test_screening_grid_does_not_alias_whatever_the_steps", "test_fcl_vs_analytic", "test_stackup_mc",
+               "test_calib_groups", "test_two_effects_at_once", "test_calib_joint", "test_calib_design",
+               "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
+               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_reducer", "test_rvdyn_stiffness",
+               "test_fcl_contacts", "test_encoder_zero_offset_is_not_disguised_as_physics",
+               "test_direction_dependent_effect", "calib-order3", "test_load_dependent_effect",
+               "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_stackup_failures",
+               "test_paper_readings", "test_rsm_plots", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
+               "test_fuzz_loaders", "test_rsm_augment")
 
 
 def pytest_configure(config: pytest.Config) -> None:
