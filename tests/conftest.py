@@ -126,10 +126,14 @@ STUDY_STEPS = 24
 #: ``rv-stackup`` options of the design stage alone: 27 runs, 25 unique cases, in this process.
 DOE_ARGV = ["--solver", "analytic", "--steps", str(STUDY_STEPS), "--workers", "1", "--stages", "doe",
             "--no-progress", "--no-figures"]
-#: Every stage with small counts, figures included.
+#: Every stage with small counts, figures included. The Monte Carlo on the impact law: the tests of this run
+#: check the pipeline (stages, tables, figures, report, summary), which is the same under either law, and the
+#: impact law costs about a third of the physical one per draw. The physical law (``rv-stackup``'s default)
+#: is tested on the Monte Carlo in tests/test_stackup_dask.py (serial, pool and Dask runs, and one draw
+#: solved again directly) and as the command line's default in tests/test_stackup.py.
 SMALL_STUDY_ARGV = ["--solver", "analytic", "--steps", str(STUDY_STEPS), "--workers", "1", "--sweep-points", "3",
                     "--validation-cases", "4", "--mc-check", "1", "--mc-draws", "6", "--mc-sobol", "2",
-                    "--no-progress"]
+                    "--mc-contact", "impact", "--no-progress"]
 
 
 def _run_stackup(argv: list[str]) -> str:
@@ -156,6 +160,7 @@ def doe_reference(tmp_path_factory) -> tuple[Path, dict]:
 
 @pytest.fixture(scope="session")
 def small_study(tmp_path_factory) -> tuple[Path, str]:
-    """One ``rv-stackup`` run of every stage with small counts and figures: (output folder, printed summary)."""
+    """One ``rv-stackup`` run of every stage with small counts and figures (the Monte Carlo on the impact law,
+    see :data:`SMALL_STUDY_ARGV`): (output folder, printed summary)."""
     out = tmp_path_factory.mktemp("small_study") / "run"
     return out, _run_stackup(["--out", str(out), *SMALL_STUDY_ARGV])
