@@ -182,6 +182,10 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             best_s = s.copy()
             accepted_full = np.zeros(idx.size, dtype=bool)
             pending = np.ones(idx.size, dtype=bool)
+            # supports inside (loose): a Newton step shorter than the inner tolerance that does not lower the
+            # potential at full length (rounding at the minimum) is not shortened further: a shorter one would
+            # move the state by less than the tolerance too (the same convergence test, no evaluations)
+            tiny = (np.linalg.norm(dstep, axis=1) < tol_mm) if loose else None
             for alpha in (1.0, 0.5, 0.25, 0.1, 0.02):
                 w = np.nonzero(pending)[0]
                 if w.size == 0:
@@ -204,6 +208,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                     K_all[idx[w[upd]]] = kc[upd]
                 if alpha == 1.0:
                     accepted_full[w[upd]] = True
+                    if tiny is not None:
+                        pending[w[tiny[w]]] = False
                 pending[w[upd]] = False
             moved = np.linalg.norm(best_s - s, axis=1)
             step[idx] = best_s
