@@ -262,7 +262,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             Steps solved together. ``None``: all at once (analytic provider); 1: step by step, each
             started from the previous solution (fcl provider: fewer distance queries).
         x_init : (N, ndof) or None
-            Start states (scaled coordinates); default the ideal kinematics.
+            Start states (scaled coordinates); default the ideal kinematics, or with the supports inside and
+            ``chunk`` None, at least ``PILOT_MIN_ROWS`` angles, the pilot start (:meth:`_pilot_start`).
         """
         th = self._check_solve_args(theta_in, direction, load_Nm)
         N = th.size
@@ -309,6 +310,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         step_law = self._step_law(law, self._line_last()[0] if law.physical else None)
         self.newton_load(B, True)
         dx = self._inner(th, xp, G, J, B, step_law, np.ones(1))
+        if not np.all(np.isfinite(dx)):                  # no usable pilot: the rows start as without one
+            return np.zeros((th_in.size, self.ndof)), 1.0
         xp += dx * min(1.0, OUTER_TRUST_MM / max(float(np.abs(dx).max()), 1e-300))
         to_r, psi_r = self.geom.ideal_state(th_in)
         to_p, psi_p = self.geom.ideal_state(th)
