@@ -87,14 +87,14 @@ def five_run_dataset(root: Path) -> Path:
     return root / "dataset"
 
 
-def realistic_dataset(root: Path, seed: int) -> Path:
-    """Draw 0 of ``bench_calibrate.py --realistic 1 --seed S``."""
+def realistic_dataset(root: Path, seed: int) -> tuple[Path, dict]:
+    """Draw 0 of ``bench_calibrate.py --realistic 1 --seed S`` and its hidden truth."""
     from bench_calibrate import realistic_hidden
     rng = np.random.default_rng(seed)
     hidden = realistic_hidden(rng)
     simulate_dataset(root / "draw0", standard_runs((10.0, 30.0), (1, -1)), hidden, noise_arcsec=0.2,
                      input_noise_arcsec=1.0, samples_per_rev=333, start_deg=0.37, seed=100)
-    return root / "draw0"
+    return root / "draw0", hidden
 
 
 def main() -> int:
@@ -111,7 +111,11 @@ def main() -> int:
     # the impact law must be named for truth and model alike; None leaves each case's own (physical)
     forward.use_runner(Runner(solver="analytic", memory_bytes=forward.CACHE_BYTES, law=law))
     root = Path(tempfile.mkdtemp(prefix="profile-calibrate-"))
-    folder = realistic_dataset(root, args.realistic_seed) if args.realistic_seed is not None else five_run_dataset(root)
+    hidden = None
+    if args.realistic_seed is not None:
+        folder, hidden = realistic_dataset(root, args.realistic_seed)
+    else:
+        folder = five_run_dataset(root)
     forward.clear_cache()
     r = forward.forward_runner()
     sim_solves = r.computed
@@ -130,6 +134,15 @@ def main() -> int:
     for e in res.effects:
         print(f"  {e.name} = {e.value:.7g} {e.unit} [{e.ci_low:.6g}, {e.ci_high:.6g}]")
     print(f"  unexplained: {[u.label for u in res.unexplained]}")
+    if hidden is not None:
+        from bench_calibrate import check_realistic
+        noise = json.loads(folder.with_name(folder.name + ".answer.json").read_text())["noise_te_arcsec"]
+        c = check_realistic(res, hidden, noise, cpu)
+        print(f"  issue 10 conditions (seconds: CPU): RMS after/noise {res.rms_after / noise:.2f} "
+              f"{'ok' if c['rms_ok'] else 'FAIL'}; compliance {c['compliance']} {'ok' if c['compliance_ok'] else 'FAIL'}; "
+              f"named {'ok' if c['named_ok'] else 'FAIL'}; CPU < 180 s {'ok' if c['seconds_ok'] else 'FAIL'}")
+        for name, v, t, unit, ok in c["named"]:
+            print(f"    {name} = {v:+.4g} {unit} vs truth of its type {t:+.4g}: {'ok' if ok else 'FAIL'}")
     print(f"{'stage':70s} {'batches':>7s} {'cases':>6s} {'solves':>6s} {'CPU s':>7s}")
     for k, (b, n, s, t) in sorted(stats.items(), key=lambda kv: -kv[1][3]):
         print(f"{k[:70]:70s} {b:7d} {n:6d} {s:6d} {t:7.1f}")

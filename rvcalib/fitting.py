@@ -106,17 +106,59 @@ class Fitting(Screening):
             r = fun(np.zeros(0))
             return [], float(r @ r), np.zeros(0), fun, np.zeros((r.size, 0))
         x0 = np.clip(np.concatenate([np.asarray(p, dtype=float) for p in p0]) / scales, lo, hi)
-        got = chord_fit(fun, x0, lo, hi, deadline=self._deadline())
+        J0, known = self._cached_jacobian(effects, terms, P)
+        got = chord_fit(fun, x0, lo, hi, deadline=self._deadline(), J0=J0, known=known)
         if got is not None:
             x, r, J, nfev = got
-            self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord", "nfev": nfev})
+            self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord", "nfev": nfev,
+                                   "reused_columns": int(known.sum()) if known is not None else 0})
+            self._keep_jacobian(effects, terms, J)
             return [p for _, p in unpack(x)], float(r @ r), x, fun, J
         sol = optimize.least_squares(fun, x0, jac=lambda x: fd_jac(fun, x, lo, hi, h=0.01), bounds=(lo, hi),
                                      method="trf", x_scale=1.0, max_nfev=max_nfev, xtol=1e-5, ftol=1e-7)
         self.fit_stats.append({"effects": [e.name for e in effects], "method": "trf", "nfev": int(sol.nfev),
                                "njev": int(sol.njev or 0), "status": int(sol.status)})
         params = [p for _, p in unpack(sol.x)]
+        self._keep_jacobian(effects, terms, np.asarray(sol.jac, dtype=float))
         return params, float(2.0 * sol.cost), sol.x, fun, sol.jac
+
+    def _cached_jacobian(self, effects: list[Effect], terms: list[EmpiricalTerm],
+                         P) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """A start Jacobian for :meth:`fit_full` from the columns the last joint fits left of these
+        effects (:meth:`_keep_jacobian`), and the mask of the columns it holds.
+
+        A column is reused when it was kept with empirical terms that are all among ``terms`` (the
+        projector of ``terms`` applied to a column projected with fewer terms is the column projected
+        with ``terms``: their span holds the fewer terms' span). It is the derivative at another state
+        (the effect's own size and the others' as they were then); the chord fit corrects it by its
+        Broyden updates from every evaluation, and differences only the effects without a column. The
+        backward elimination's refits (the same effects but one) and the next step's refit of the
+        members in the model then need no differencing solves of their own."""
+        cache: dict = self.__dict__.setdefault("_jac_cache", {})
+        tset = set(terms)
+        blocks, mask = [], []
+        for e in effects:
+            got = cache.get(e.name)
+            if got is not None and got[1] <= tset and got[0].shape == (self.n, e.n_params):
+                blocks.append(P(got[0]) if got[1] != tset else got[0])
+                mask += [True] * e.n_params
+            else:
+                blocks.append(np.zeros((self.n, e.n_params)))
+                mask += [False] * e.n_params
+        if not any(mask):
+            return None, None
+        return np.column_stack(blocks), np.array(mask)
+
+    def _keep_jacobian(self, effects: list[Effect], terms: list[EmpiricalTerm], J: np.ndarray) -> None:
+        """Keep each effect's columns of a joint fit's final Jacobian (scaled parameters, residual projected
+        with ``terms``) for the start of later fits (:meth:`_cached_jacobian`)."""
+        if J is None or J.ndim != 2 or J.shape[0] != self.n:
+            return
+        cache: dict = self.__dict__.setdefault("_jac_cache", {})
+        i = 0
+        for e in effects:
+            cache[e.name] = (np.array(J[:, i:i + e.n_params]), frozenset(terms))
+            i += e.n_params
 
     def _declared_total(self, e: Effect, p: np.ndarray) -> tuple[float | None, float | None]:
         """For a correction to a declared error (the runs declare the default instance of ``e.key``,
