@@ -59,7 +59,7 @@ def instrument() -> dict:
 
     def wrapped(case_dicts, input_deg, solver="analytic"):
         r = forward.forward_runner()
-        c0, s0 = r.computed, sum(r.solve_seconds)
+        c0 = r.computed
         t0 = time.process_time()
         out = orig(case_dicts, input_deg, solver)
         st = stats[stage_of_stack()]
@@ -105,6 +105,7 @@ def main() -> int:
     ap.add_argument("--time-budget", type=float, default=None)
     ap.add_argument("--cprofile", default=None, help="write a cProfile here and print its top entries")
     ap.add_argument("--json", default=None, help="write the result JSON here")
+    ap.add_argument("--verbose", action="store_true", help="print the loop's progress")
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     law = ContactLaw() if args.law == "impact" else None
@@ -124,7 +125,8 @@ def main() -> int:
     t0, c0 = time.perf_counter(), time.process_time()
     if prof:
         prof.enable()
-    res = calibrate(read_dataset(folder), max_terms=args.max_terms, time_budget_s=args.time_budget)
+    log = (lambda m: print(f"  [{time.process_time() - c0:6.1f} s CPU] {m}", flush=True)) if args.verbose else None
+    res = calibrate(read_dataset(folder), max_terms=args.max_terms, time_budget_s=args.time_budget, log=log)
     if prof:
         prof.disable()
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0

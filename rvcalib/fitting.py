@@ -23,6 +23,10 @@ from rvcalib.screening import Screening
 class Fitting(Screening):
     """The fitting stage of the loop (methods on the loop's model and screening)."""
 
+    #: Start Jacobians of the joint refits taken from the last joint fit: ``"removals"`` (its own state
+    #: only: refits of the same effects with members removed), ``"all"`` (any kept column, stale) or ``"off"``.
+    jacobian_reuse: str = "removals"
+
     def refine_coarse(self, e: Effect, p0: np.ndarray, rc_raw: list[np.ndarray],
                       Ec: np.ndarray | None, ms: int | None = None) -> tuple[float, np.ndarray]:
         """Fit one candidate's parameters through the nonlinear model at the current state on its
@@ -106,41 +110,55 @@ class Fitting(Screening):
             r = fun(np.zeros(0))
             return [], float(r @ r), np.zeros(0), fun, np.zeros((r.size, 0))
         x0 = np.clip(np.concatenate([np.asarray(p, dtype=float) for p in p0]) / scales, lo, hi)
-        J0, known = self._cached_jacobian(effects, terms, P)
+        J0, known = self._cached_jacobian(effects, p0, terms, P)
         got = chord_fit(fun, x0, lo, hi, deadline=self._deadline(), J0=J0, known=known)
         if got is not None:
             x, r, J, nfev = got
             self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord", "nfev": nfev,
                                    "reused_columns": int(known.sum()) if known is not None else 0})
-            self._keep_jacobian(effects, terms, J)
-            return [p for _, p in unpack(x)], float(r @ r), x, fun, J
+            params = [p for _, p in unpack(x)]
+            self._keep_jacobian(effects, params, terms, J)
+            return params, float(r @ r), x, fun, J
         sol = optimize.least_squares(fun, x0, jac=lambda x: fd_jac(fun, x, lo, hi, h=0.01), bounds=(lo, hi),
                                      method="trf", x_scale=1.0, max_nfev=max_nfev, xtol=1e-5, ftol=1e-7)
         self.fit_stats.append({"effects": [e.name for e in effects], "method": "trf", "nfev": int(sol.nfev),
                                "njev": int(sol.njev or 0), "status": int(sol.status)})
         params = [p for _, p in unpack(sol.x)]
-        self._keep_jacobian(effects, terms, np.asarray(sol.jac, dtype=float))
+        self._keep_jacobian(effects, params, terms, np.asarray(sol.jac, dtype=float))
         return params, float(2.0 * sol.cost), sol.x, fun, sol.jac
 
-    def _cached_jacobian(self, effects: list[Effect], terms: list[EmpiricalTerm],
+    def _cached_jacobian(self, effects: list[Effect], p0: list[np.ndarray], terms: list[EmpiricalTerm],
                          P) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """A start Jacobian for :meth:`fit_full` from the columns the last joint fits left of these
-        effects (:meth:`_keep_jacobian`), and the mask of the columns it holds.
+        """A start Jacobian for :meth:`fit_full` from the last joint fit's final Jacobian
+        (:meth:`_keep_jacobian`), and the mask of the columns it holds.
 
-        A column is reused when it was kept with empirical terms that are all among ``terms`` (the
-        projector of ``terms`` applied to a column projected with fewer terms is the column projected
-        with ``terms``: their span holds the fewer terms' span). It is the derivative at another state
-        (the effect's own size and the others' as they were then); the chord fit corrects it by its
-        Broyden updates from every evaluation, and differences only the effects without a column. The
-        backward elimination's refits (the same effects but one) and the next step's refit of the
-        members in the model then need no differencing solves of their own."""
-        cache: dict = self.__dict__.setdefault("_jac_cache", {})
+        Columns are reused only at that fit's own state: every effect of this fit was in it, at the
+        same parameters (``p0`` equal to its solution), and its empirical terms are all among
+        ``terms`` (the projector of ``terms`` applied to a column projected with fewer terms is the
+        column projected with ``terms``). That is a refit of the same effects with members removed
+        (the backward elimination, the term-limit checks): its start Jacobian is the kept one's
+        columns; otherwise (new members, moved sizes) every column is differenced as before. With
+        ``jacobian_reuse = "all"`` any kept column of an effect is reused wherever it was taken (a
+        stale start: faster, but the fits then stop at other points within their tolerance and the
+        loop's discrete choices can change; measured in docs/calibration.md)."""
+        kept = self.__dict__.get("_jac_kept")
+        mode = getattr(self, "jacobian_reuse", "removals")
+        if kept is None or mode == "off":
+            return None, None
+        cols, kterms, kparams = kept
         tset = set(terms)
+        if not kterms <= tset:
+            return None, None
+        if mode != "all":
+            for e, p in zip(effects, p0):
+                q = kparams.get(e.name)
+                if q is None or q.shape != np.shape(p) or not np.array_equal(q, np.asarray(p, dtype=float)):
+                    return None, None
         blocks, mask = [], []
         for e in effects:
-            got = cache.get(e.name)
-            if got is not None and got[1] <= tset and got[0].shape == (self.n, e.n_params):
-                blocks.append(P(got[0]) if got[1] != tset else got[0])
+            got = cols.get(e.name)
+            if got is not None and got.shape == (self.n, e.n_params):
+                blocks.append(P(got) if kterms != tset else got)
                 mask += [True] * e.n_params
             else:
                 blocks.append(np.zeros((self.n, e.n_params)))
@@ -149,16 +167,20 @@ class Fitting(Screening):
             return None, None
         return np.column_stack(blocks), np.array(mask)
 
-    def _keep_jacobian(self, effects: list[Effect], terms: list[EmpiricalTerm], J: np.ndarray) -> None:
-        """Keep each effect's columns of a joint fit's final Jacobian (scaled parameters, residual projected
-        with ``terms``) for the start of later fits (:meth:`_cached_jacobian`)."""
+    def _keep_jacobian(self, effects: list[Effect], params: list[np.ndarray], terms: list[EmpiricalTerm],
+                       J: np.ndarray) -> None:
+        """Keep a joint fit's final Jacobian (scaled parameters, residual projected with ``terms``) per
+        effect, with the fit's solution, for the start of later fits (:meth:`_cached_jacobian`)."""
         if J is None or J.ndim != 2 or J.shape[0] != self.n:
             return
-        cache: dict = self.__dict__.setdefault("_jac_cache", {})
+        cols: dict[str, np.ndarray] = {}
+        if getattr(self, "jacobian_reuse", "removals") == "all" and "_jac_kept" in self.__dict__:
+            cols.update(self._jac_kept[0])
         i = 0
         for e in effects:
-            cache[e.name] = (np.array(J[:, i:i + e.n_params]), frozenset(terms))
+            cols[e.name] = np.array(J[:, i:i + e.n_params])
             i += e.n_params
+        self._jac_kept = (cols, frozenset(terms), {e.name: np.array(p, dtype=float) for e, p in zip(effects, params)})
 
     def _declared_total(self, e: Effect, p: np.ndarray) -> tuple[float | None, float | None]:
         """For a correction to a declared error (the runs declare the default instance of ``e.key``,

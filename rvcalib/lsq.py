@@ -121,7 +121,8 @@ def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int
     J0, known : ndarray or None
         A start Jacobian (columns of the scaled parameters) whose columns ``known`` (bool mask) are taken
         as they are (e.g. from an earlier fit of the same effects near this state); only the other
-        columns are differenced at ``x0``. The Broyden updates of every evaluation then correct it.
+        columns are differenced at ``x0``. The Broyden updates of every evaluation then correct it; when
+        its first step gives no decrease, the whole Jacobian is differenced there and the fit goes on.
 
     Returns (x, residual, Jacobian, solves) or None if no decrease could be made."""
     try:
@@ -134,7 +135,9 @@ def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int
         d = float(x0[0] - ref[0][0])
         if abs(d) >= h * max(1.0, abs(float(x0[0]))):
             J = ((r - ref[1]) / d)[:, None]
+    reused = False
     if J is None and J0 is not None and known is not None and np.any(known):
+        reused = True
         J = np.array(J0, dtype=float, copy=True)
         todo = np.flatnonzero(~np.asarray(known, dtype=bool))
         if todo.size:
@@ -177,6 +180,15 @@ def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int
             lim = 0.5 * float(np.linalg.norm(s))
             nd = float(np.linalg.norm(dn))
             dx = dn if nd <= lim else dn * (lim / max(nd, 1e-300))
+        if not accepted and reused:
+            # the reused start Jacobian gave no decrease: difference it here and go on (once)
+            reused = False
+            try:
+                J = fd_jac(fun, x, lo, hi, h=h, f0=r)
+            except ModelEvaluationError:
+                return (x, r, J, nfev) if nfev > n_start else None
+            nfev += x.size
+            continue
         if not accepted:
             return (x, r, J, nfev) if nfev > n_start else None
         step = float(np.max(np.abs(xn - x)))
