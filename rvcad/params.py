@@ -63,15 +63,17 @@ class Design:
         Needle rollers of each cam bearing: count, diameter and effective length, mm (assumption:
         16 x 2.5 mm x 8 mm in the 9 mm cam hole).
     journal_bearing_rollers, journal_bearing_roller_diameter_mm, journal_bearing_roller_length_mm : int, float, float
-        (see the bearing block below)
+        Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
+        (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
+    journal_bearing_contact_angle_deg : float
+        Contact angle of the crank journal bearings, degrees: tapered roller bearings as in the RV-E series
+        (default 13.13 deg, ISO 281 e = 1.5 tan(alpha) = 0.35 of a small 302-series bearing); 0 = cylindrical.
     carrier_pillars, carrier_pillar_radius_mm : int, float
         Pillars joining the output flange and the carrier end plate (round bars on the crank circle, midway
         between the cranks), mm; their bending and shear twist the carrier (rvdyn.bearings.carrier_torsional_stiffness).
     pin_seat_clearance_mm : float
         Radial clearance of a pin in its housing groove (groove radius = pin radius + this), mm; the conformal
         line contact of the seat is in series with the pin-disc contact (rvdyn.bearings.pin_seat_contact).
-        Rollers of each crank journal bearing (two per crank): count, diameter, effective length, mm
-        (assumption: 12 x 3 mm x 6 mm around the 7 mm journal).
     profile_equidistant_mm, profile_shift_mm, profile_rotation_deg : float
         Profile modification of both discs: the disc is cut by a wheel of radius ``pin_radius_mm +
         equidistant`` whose centre runs on the circle ``pin_circle_radius + shift``, and the profile is
@@ -108,6 +110,10 @@ class Design:
     journal_bearing_rollers: int = 12
     journal_bearing_roller_diameter_mm: float = 3.0
     journal_bearing_roller_length_mm: float = 6.0
+    # The crank journal bearings of an RV-E reducer are tapered roller bearings: contact angle alpha (0: a
+    # cylindrical roller bearing). 13.13 deg: ISO 281's e = 1.5 tan(alpha) with e = 0.35 of the small 302-series
+    # tapered roller bearings (e.g. 30203, 17 mm bore; catalogue Y = 1.7 = 0.4 cot(alpha) agrees).
+    journal_bearing_contact_angle_deg: float = 13.13
     # Carrier: the output flange and the carrier end plate joined by pillars through the discs, on the crank
     # circle midway between the cranks (not in the paper; README "Assumptions"). The pillar holes of the discs
     # are taken as large as the crank holes (cam_radius_mm), so a pillar is a round bar of radius
@@ -381,6 +387,7 @@ FIELD_RANGES: dict[str, tuple[float, float, bool, str]] = {
     "journal_bearing_rollers": (3, 200, False, "rolling elements of one bearing"),
     "journal_bearing_roller_diameter_mm": (0.0, 100.0, True, "rollers below 100 mm"),
     "journal_bearing_roller_length_mm": (0.0, 1000.0, True, "axial widths below 1 m"),
+    "journal_bearing_contact_angle_deg": (0.0, 44.9, False, "cylindrical (0) to steep tapered roller bearings"),
     "carrier_pillars": (1, 12, False, "pillars joining the output flange and the carrier end plate"),
     "carrier_pillar_radius_mm": (0.0, 1000.0, True, "inside the disc between its centre hole and root as well"),
     "pin_seat_clearance_mm": (1e-4, 1.0, False, "a groove at least 0.1 um wider than the pin (the conformal "

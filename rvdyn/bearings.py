@@ -12,19 +12,26 @@ Formulas and sources:
   ``Q = K_c delta^(10/9)``, ``K_c = (l^0.8 / 3.84e-5)^(10/9)``; a roller between two raceways:
   ``K_n = K_c / 2^(10/9)``.
 - Radial bearing, zero clearance (Harris, sec. 7.2; NSK: ``Q_max = 4.08 F_r / Z`` for line contact):
-  ``F_r = Z J_r(0.5) K_n delta_r^(10/9)`` with ``J_r(0.5) = 0.2453`` (line contact).
-- Crankshaft bending: simply supported beam between the journals, point loads at the cam planes
-  (Roark, Table 8.1 case 1e): ``y(x) = Q b x (L^2 - b^2 - x^2) / (6 E I L)`` for ``x <= a``.
-- Crankshaft torsion between the planet and the mean cam plane: ``phi = M_t l / (G J_p)``, i.e. a spring
-  ``G J_p / (l r_b2^2)`` along the stage I line of action, in series with the mesh (in the equilibrium).
-- Carrier: the far (carrier) end plate reaches the output flange through the pillars. A pillar is a
-  Timoshenko beam clamped in both plates, its ends displaced parallel (guided):
-  ``1/k = L^3/(12 E I) + L/(kappa G A)`` (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a
-  solid circle ``kappa = 6 (1 + nu)/(7 + 6 nu)``, Cowper 1966); the plate turns by ``phi`` relative to the
-  flange against ``k_t = n_p k r_p^2`` (pillars on the circle r_p). The torque that takes this path is the
-  share ``beta`` of the output torque carried by the far journals (lever rule of each crank, statically
-  determinate, with the discs sharing the torque equally: the mean position of the cam planes between the
-  journals), so the output lags by ``beta^2 T / k_t`` (Castigliano), in series after the equilibrium.
+  ``F_r = Z J_r(0.5) K_n delta_r^(10/9)`` with ``J_r(0.5) = 0.2453`` (line contact). A tapered roller bearing of
+  contact angle alpha held axially (Harris, sec. 7.3: ``delta_psi = delta_a sin(alpha) + delta_r cos(alpha)
+  cos(psi)``, ``delta_a = 0``; the radial component of each roller load is ``Q cos(alpha)``):
+  ``F_r = Z J_r(0.5) K_n cos(alpha)^(19/9) delta_r^(10/9)``.
+- Crankshaft bending: simply supported beam between the journals, point loads at the cam planes, stepped
+  (journal radius on the journals, eccentric radius ``cam_radius - cam roller diameter`` over the discs: the
+  needles run on the eccentric) with shear (Timoshenko): influence coefficients by the unit-load (Maxwell-Mohr)
+  integral ``d_ik = int m_i m_k / (E I) dx + int v_i v_k / (kappa G A) dx`` (Timoshenko & Gere; Roark sec. 8.10);
+  uniform and shear-free it is Roark Table 8.1 case 1e, ``y(x) = Q b x (L^2 - b^2 - x^2) / (6 E I L)``.
+- Crankshaft torsion between the planet and the mean cam plane: ``phi = M_t sum l_i / (G J_p,i)`` over the
+  stepped sections (journal radius to the first disc, eccentric beyond), i.e. a spring
+  ``1 / (sum l_i/(G J_p,i) r_b2^2)`` along the stage I line of action, in series with the mesh (in the
+  equilibrium).
+- Carrier: the far (carrier) end plate reaches the output flange through the pillars. A pillar is a Timoshenko
+  beam clamped in both plates, its ends displaced parallel (guided): ``1/k = L^3/(12 E I) + L/(kappa G A)``
+  (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a solid circle ``kappa = 6 (1 + nu)/(7 +
+  6 nu)``, Cowper 1966); the plate turns by ``phi`` relative to the flange against ``k_t = n_p k r_p^2``
+  (pillars on the circle r_p). The turn is a coordinate of the equilibrium (rvdyn.support_eq: it carries
+  journal B of every crank along the crank circle), so the torque split between the journals is solved;
+  :meth:`Supports.far_journal_share` is the lever-rule statics of equal discs (1/2 by default), for reference.
 - Pin seat: each pin lies in a housing groove of radius ``r_pin + clearance``; a conformal Hertz line contact
   (Johnson 1985, eq. 5.36 with a concave ``R2 = -(r_pin + clearance)``) in series with the pin-disc contact
   over the disc's face width. Both are ``delta = A_i P (C_i - ln P)`` in the same load per length ``P``, so
@@ -55,19 +62,28 @@ def roller_contact_K(length_mm: float) -> float:
     return (length_mm ** 0.8 / PALMGREN_LINE) ** BEARING_EXP
 
 
-def radial_bearing_K(z: int, length_mm: float) -> float:
+def radial_bearing_K(z: int, length_mm: float, contact_angle_deg: float = 0.0) -> float:
     """Radial stiffness constant K_b (N/mm^(10/9)) of a roller bearing: F_r = K_b delta_r^(10/9).
 
-    ``K_b = Z J_r(0.5) K_c / 2^(10/9)`` (each roller between two raceways, zero clearance)."""
-    return z * JR_LINE * roller_contact_K(length_mm) / 2.0 ** BEARING_EXP
+    ``K_b = Z J_r(0.5) K_c cos(alpha)^(19/9) / 2^(10/9)`` (each roller between two raceways, zero clearance;
+    alpha the contact angle of a tapered roller bearing held axially, 0 for a cylindrical one: a radial shift
+    delta_r compresses the roller at psi by ``delta_r cos(alpha) cos(psi)`` and its load acts on the shaft with
+    the radial component ``Q cos(alpha)``, Harris sec. 7.3)."""
+    ca = math.cos(math.radians(contact_angle_deg))
+    return z * JR_LINE * roller_contact_K(length_mm) * ca ** (1.0 + BEARING_EXP) / 2.0 ** BEARING_EXP
 
 
-def radial_bearing_K_discrete(z: int, length_mm: float, cage_angle: float = 0.0) -> float:
-    """The same constant from the roller sum ``F_r = K_n delta^(10/9) sum cos^(19/9)(psi_j)`` (loaded half)."""
+def radial_bearing_K_discrete(z: int, length_mm: float, cage_angle: float = 0.0,
+                              contact_angle_deg: float = 0.0) -> float:
+    """The same constant from the roller sum: roller j at psi_j compressed by ``delta cos(alpha) cos(psi_j)``
+    carries ``Q_j = K_n (delta cos(alpha) cos(psi_j))^(10/9)`` whose radial component along delta is
+    ``Q_j cos(alpha) cos(psi_j)``: ``F_r = K_n cos(alpha)^(19/9) delta^(10/9) sum cos^(19/9)(psi_j)`` (loaded half)."""
     psi = cage_angle + 2.0 * math.pi * np.arange(z) / z
     c = np.cos(psi)
+    ca = math.cos(math.radians(contact_angle_deg))
     kn = roller_contact_K(length_mm) / 2.0 ** BEARING_EXP
-    return float(kn * np.sum(np.where(c > 0, c, 0.0) ** (1.0 + BEARING_EXP)))
+    q = kn * (ca * np.where(c > 0, c, 0.0)) ** BEARING_EXP                     # roller loads per unit delta^(10/9)
+    return float(np.sum(q * ca * np.where(c > 0, c, 0.0)))
 
 
 def circle_shear_coefficient(nu: float) -> float:
@@ -83,6 +99,53 @@ def guided_beam_stiffness(E: float, nu: float, radius: float, length: float) -> 
     A = math.pi * radius ** 2
     G = E / (2.0 * (1.0 + nu))
     return 1.0 / (length ** 3 / (12.0 * E * I) + length / (circle_shear_coefficient(nu) * G * A))
+
+
+def stepped_beam_influence(L: float, sections: tuple, xs) -> np.ndarray:
+    """Influence matrix (n, n), mm/N, of a simply supported stepped Timoshenko beam on ``[0, L]``: deflection
+    at ``xs[i]`` per unit transverse load at ``xs[k]``, by the unit-load (Maxwell-Mohr) integral
+
+        d_ik = int_0^L m_i m_k / (E I) dx + int_0^L v_i v_k / (kappa G A) dx
+
+    with the bending moment ``m_a(x) = x (L - a)/L`` (x <= a), ``a (L - x)/L`` (x >= a) and the shear force
+    ``v_a = (L - a)/L`` (x < a), ``-a/L`` (x > a) of a unit load at a (Timoshenko & Gere, *Mechanics of
+    Materials*, unit-load method with shear; Roark sec. 8.10). ``sections``: ``(x0, x1, EI, kGA)`` tuples
+    (mm, N mm^2, N) covering ``[0, L]``. Exact: the integrand is piecewise quadratic, integrated by two-point
+    Gauss-Legendre on every interval between section ends and load points."""
+    xs = np.asarray(xs, dtype=float)
+    n = xs.size
+    out = np.zeros((n, n))
+    g = 0.5 / math.sqrt(3.0)
+    for x0, x1, EI, kGA in sections:
+        cuts = np.unique(np.concatenate([[x0, x1], xs[(xs > x0) & (xs < x1)]]))
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            h = b - a
+            if h <= 0.0:
+                continue
+            mid = 0.5 * (a + b)
+            for x in (mid - g * h, mid + g * h):
+                m = np.where(x <= xs, x * (L - xs) / L, xs * (L - x) / L)               # (n,)
+                v = np.where(x < xs, (L - xs) / L, -xs / L)
+                out += 0.5 * h * (np.outer(m, m) / EI + np.outer(v, v) / kGA)
+    return out
+
+
+def crank_sections(d: Design, z_journal: tuple[float, float], discs: tuple) -> tuple:
+    """Sections ``(x0, x1, EI, kGA)`` of the crankshaft between the journal mid-planes, x from journal A, mm:
+    the journal radius on the journals and the axial clearances, the eccentric radius ``cam_radius -
+    cam roller diameter`` (the needles run on the eccentric) over both discs and the gap between them; solid
+    round sections of the crankshaft's material, Cowper's shear coefficient."""
+    m = MATERIALS["crankshaft"]
+    G = m.E / (2.0 * (1.0 + m.nu))
+    kap = circle_shear_coefficient(m.nu)
+    zA, zB = z_journal
+
+    def sec(z0: float, z1: float, r: float) -> tuple[float, float, float, float]:
+        return (z0 - zA, z1 - zA, m.E * math.pi * r ** 4 / 4.0, kap * G * math.pi * r ** 2)
+
+    rj, re = d.crank_journal_radius_mm, d.cam_radius_mm - d.cam_bearing_roller_diameter_mm
+    e0, e1 = discs[0][0], discs[-1][1]
+    return (sec(zA, e0, rj), sec(e0, e1, re), sec(e1, zB, rj))
 
 
 def pillar_length_mm(d: Design) -> float:
@@ -119,6 +182,13 @@ def _check_design(d: Design) -> None:
         v = getattr(d, name)
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):
             raise ValueError(f"design.{name} {v!r} must be a finite number > 0 (mm)")
+    if not d.cam_bearing_roller_diameter_mm < d.cam_radius_mm:
+        raise ValueError(f"design.cam_bearing_roller_diameter_mm {d.cam_bearing_roller_diameter_mm!r} must be < "
+                         f"cam_radius_mm = {d.cam_radius_mm!r} mm (the needles run on the eccentric inside the disc "
+                         "hole: the eccentric's radius is cam_radius_mm - roller diameter)")
+    a = d.journal_bearing_contact_angle_deg
+    if not (isinstance(a, (int, float)) and not isinstance(a, bool) and math.isfinite(a) and 0.0 <= a < 45.0):
+        raise ValueError(f"design.journal_bearing_contact_angle_deg {a!r} must be a finite angle in [0, 45) deg")
 
 
 @dataclass(frozen=True)
@@ -129,10 +199,16 @@ class Supports:
     ----------
     cam_K, journal_K : N/mm^(10/9), radial stiffness constants of one cam / journal bearing
     cam_r, journal_r : mm, pitch radii of the rolling elements (friction lever)
-    EI : N mm^2, bending stiffness of the crankshaft (journal radius over the whole span)
-    GJ : N mm^2, torsional stiffness of the crankshaft
+    EI : N mm^2, bending stiffness of the crankshaft's journal section (the uniform Euler beam when
+        ``sections`` is empty)
+    GJ : N mm^2, torsional stiffness of the crankshaft (journal section)
     z_planet, z_journal, z_cams : mm, axial positions (planet, journal A and B, cam planes of discs 0, 1)
     carrier_k : N mm/rad, torsional stiffness of the carrier end plate against the flange (pillars)
+    sections : ``(x0, x1, EI, kGA)`` tuples of the stepped Timoshenko crank between the journals
+        (:func:`crank_sections`; x from journal A, mm); empty: a uniform Euler beam of ``EI``
+    crank_radius : mm, radius of the crank circle (the carrier's turn moves journal B by crank_radius * phi)
+    GJ_sections : ``(z0, z1, GJ)`` tuples (axial positions, mm; N mm^2) of the crank from its planet end: the
+        journal radius up to the first disc, the eccentric radius beyond (:meth:`torsion_compliance`)
     """
 
     cam_K: float
@@ -145,6 +221,9 @@ class Supports:
     z_journal: tuple[float, float]
     z_cams: tuple[float, float]
     carrier_k: float = math.inf
+    sections: tuple = ()
+    crank_radius: float = 1.0
+    GJ_sections: tuple = ()
 
     @classmethod
     def from_design(cls, d: Design) -> "Supports":
@@ -159,12 +238,17 @@ class Supports:
         r = d.crank_journal_radius_mm
         EI = m.E * math.pi * r ** 4 / 4.0
         GJ = m.E / (2.0 * (1.0 + m.nu)) * math.pi * r ** 4 / 2.0
+        re = d.cam_radius_mm - d.cam_bearing_roller_diameter_mm                # the eccentric (needle raceway)
+        zj = (sum(f) / 2.0, sum(cr) / 2.0)
         return cls(cam_K=radial_bearing_K(d.cam_bearing_rollers, d.cam_bearing_roller_length_mm),
-                   journal_K=radial_bearing_K(d.journal_bearing_rollers, d.journal_bearing_roller_length_mm),
+                   journal_K=radial_bearing_K(d.journal_bearing_rollers, d.journal_bearing_roller_length_mm,
+                                              d.journal_bearing_contact_angle_deg),
                    cam_r=d.cam_radius_mm - d.cam_bearing_roller_diameter_mm / 2.0,
                    journal_r=d.crank_journal_radius_mm + d.journal_bearing_roller_diameter_mm / 2.0,
-                   EI=EI, GJ=GJ, z_planet=g1 / 2.0, z_journal=(sum(f) / 2.0, sum(cr) / 2.0),
-                   z_cams=(sum(d0) / 2.0, sum(d1) / 2.0), carrier_k=carrier_torsional_stiffness(d))
+                   EI=EI, GJ=GJ, z_planet=g1 / 2.0, z_journal=zj,
+                   z_cams=(sum(d0) / 2.0, sum(d1) / 2.0), carrier_k=carrier_torsional_stiffness(d),
+                   sections=crank_sections(d, zj, (d0, d1)), crank_radius=d.center_distance_mm,
+                   GJ_sections=((0.0, d0[0], GJ), (d0[0], d1[1], GJ * (re / r) ** 4)))
 
     # ------------------------------------------------------------------ statics
     @staticmethod
@@ -200,12 +284,16 @@ class Supports:
         return np.stack([RA, RB], axis=2)
 
     def bending_deflections(self, B: np.ndarray) -> np.ndarray:
-        """Crankshaft deflection at the cam planes (N, nc, nd, 2), mm, under the cam loads."""
+        """Crankshaft deflection at the cam planes (N, nc, nd, 2), mm, under the cam loads: the stepped
+        Timoshenko beam of ``sections`` (:func:`stepped_beam_influence`), or without sections the uniform Euler
+        beam (Roark Table 8.1 case 1e)."""
         Q = -np.swapaxes(B, 1, 2)
         zA, zB = self.z_journal
         L = zB - zA
         xs = np.asarray(self.z_cams) - zA
         nd = len(xs)
+        if self.sections:                                                       # stepped Timoshenko crank
+            return np.einsum("ik,njkx->njix", stepped_beam_influence(L, self.sections, xs), Q)
         infl = np.zeros((nd, nd))                                               # deflection at x_i per unit load at a_k
         for i, x in enumerate(xs):
             for k, a in enumerate(xs):
@@ -223,6 +311,20 @@ class Supports:
         between the journals (1/2 for the default design)."""
         zA, zB = self.z_journal
         return float(np.mean((np.asarray(self.z_cams) - zA) / (zB - zA)))
+
+    def torsion_compliance(self) -> float:
+        """Torsional compliance (rad per N mm) of the crankshaft between the planet plane and the mean cam plane:
+        ``sum l_i / (G J_i)`` over its sections (the planet's bore and the journal at the journal radius up to the
+        first disc, the eccentric beyond; ``GJ_sections``), or ``l / GJ`` without sections."""
+        z0, z1 = self.z_planet, float(np.mean(self.z_cams))
+        if not self.GJ_sections:
+            return (z1 - z0) / self.GJ
+        c = 0.0
+        for a, b, GJ in self.GJ_sections:
+            lo, hi = max(a, z0), min(b, z1)
+            if hi > lo:
+                c += (hi - lo) / GJ
+        return c
 
     def torsion_lever_mm(self) -> float:
         """Length of crankshaft twisted by the planet torque: planet plane to the mean cam plane, mm."""

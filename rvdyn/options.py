@@ -40,7 +40,7 @@ SOLVER_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
     ModelOption("supports", "", 0.0, 0.0, "elastic",
                 "bearings, crankshafts, pin seats and carrier with contact 'physical': 'elastic' (cam and journal "
                 "bearings, crankshaft bending and the pins' seats in their housing grooves inside the equilibrium, "
-                "crank torsion in series with the mesh, the carrier's pillars in series after it) or 'rigid'",
+                "crank torsion in series with the mesh, the carrier's pillars inside it) or 'rigid'",
                 choices=("elastic", "rigid")),
     ModelOption("pin_friction_coefficient", "", 0.0, 1.0, 0.05,
                 "Coulomb friction coefficient at the pin-disc contacts, used by the stiffness sweep (assumption "

@@ -2,7 +2,7 @@
 
 Constants of the physical contact law (Johnson line contact at the pins with the local profile
 curvature, ISO 6336-1 mesh stiffness, crank torsion in series with the mesh), the unit-load forces
-``dF/dT``, the cam-bearing statics and the series wind-up of the supports, and the peak Hertz pressure.
+``dF/dT``, the cam-bearing statics, the pin seats' wind-up and the peak Hertz pressure.
 Derivations and sources: docs/physics.md, sections 7, 8 and 11.
 """
 from __future__ import annotations
@@ -49,7 +49,7 @@ class PhysicsMixin:
             self.pin_A = self.pin_A + self.seat.A
             self.supports = Supports.from_design(d)
             # crank torsion between planet and cams in series with the mesh, seen along the line of action
-            k_t = self.supports.GJ / (self.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
+            k_t = 1.0 / (self.supports.torsion_compliance() * g.planet.base_radius ** 2)
             self.k_stage1 = 1.0 / (1.0 / self.k_mesh + 1.0 / k_t)
             self.torsion_share = self.k_stage1 / k_t                           # share of the stage I deflection
         self._C_last: np.ndarray | None = None
@@ -92,13 +92,6 @@ class PhysicsMixin:
         approach ``delta_seat = A_s P (C_s - ln P)`` under each pin force F (N, n_pin) and f = dF/dT."""
         d = np.where(F > 0, self.seat.approach(np.where(F > 0, F, 1.0)), 0.0)
         return (f * d).sum(axis=1)
-
-    def _carrier_twist(self, n: int, T: float) -> np.ndarray:
-        """Output lag (n,) rad of the carrier end plate turning against the flange: ``beta^2 T / k_t`` with beta
-        the far journals' share of the torque (rvdyn.bearings.Supports.far_journal_share; the discs' shares
-        taken equal: the split the equilibrium finds under errors is not fed in, its force-based value being
-        dominated at light load by the preload the errors make, which carries no output torque)."""
-        return np.full(n, self.supports.far_journal_share() ** 2 * T / self.supports.carrier_k)
 
     def _pin_pressure(self, F: np.ndarray, law) -> np.ndarray:
         """Peak Hertzian pressure p0 = sqrt(P E*/(pi R)) of every pin contact (N, 2 Zp), MPa, with the

@@ -42,7 +42,7 @@ class Solution:
         ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (the supports inside
         the equilibrium, rvdyn.support_eq), ``pin_seats`` (the pins in their housing grooves, in series with
         the pin-disc contacts inside the equilibrium) and ``carrier`` (the end plate turning against the
-        output flange through the pillars, in series after the equilibrium); empty in the rigid limit and
+        output flange through the pillars, inside the equilibrium); empty in the rigid limit and
         with the spring model of floating discs (impact law or rigid supports with a cam-bearing clearance).
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
     warnings : list of str
@@ -142,9 +142,6 @@ class ResultsMixin:
                     parts.update(self._chain_parts(th, x, dx, law))
                     cam_F = self.chain_cam_forces(th, x, law)
                     self._raw_last = None
-                    # the carrier end plate turning against the flange: in series (docs/physics.md, section 8)
-                    parts["carrier"] = self._carrier_twist(th.size, T)
-                    te = te - direction * parts["carrier"]
         nan = law.rigid
         pressure = np.full(th.size, np.nan)
         if not nan:

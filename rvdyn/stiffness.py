@@ -35,6 +35,7 @@ from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvdyn.bearings import Supports
 from rvdyn.contacts import ContactLaw
+from rvdyn.results import InterferenceError
 from rvdyn.options import model_value
 from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver
 from rvdyn.te import make_contacts, write_table_atomic
@@ -64,6 +65,8 @@ class StiffnessResult:
     figures : dict
         ``torsional_rigidity_Nm_per_arcmin``, ``lost_motion_arcmin``, ``backlash_arcmin``,
         ``hysteresis_loss_arcmin``, ``rated_torque_Nm``, ``budget`` (part -> arcsec at rated torque),
+        ``preloaded`` (the errors make an interference the parts take as a preload: no play, and the preload's
+        normal forces keep the friction band open at zero torque),
         ``pins_in_contact`` (torque fraction of rated -> pin contacts of both discs, positive side)
         and the context (contact law, friction coefficients, datasheet class, notes).
     """
@@ -163,12 +166,20 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     sides = {}
     budget_acc: dict[str, list[float]] = {}
     warnings: list[str] = []
+    preloaded = False
     for sign in (1, -1):
         rows = []
         for f in (0.0,) + LEVELS:
-            sol = s.solve(th, direction=-sign, load_Nm=f * rated)
+            torque = f * rated * sign
+            if f == 0.0:
+                sol, pre = _zero_torque(s, th, -sign)
+                preloaded |= pre
+                if pre:                              # the elastic point under the vanishing load, at its torque
+                    torque = sign * ContactLaw.RIGID_LOAD_NMM / 1e3
+            else:
+                sol = s.solve(th, direction=-sign, load_Nm=f * rated)
             warnings += [w for w in sol.warnings if w not in warnings]
-            rows.append((f * rated * sign, sol))
+            rows.append((torque, sol))
             if f == 1.0:
                 for k, v in sol.parts_rad.items():
                     budget_acc.setdefault(k, []).append(float(v[0]) * ARCSEC_PER_RAD)
@@ -219,8 +230,9 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     m_r_minus, _ = _mid_width(curve, -rated)
     b = (1.0 - LOST_MOTION_FRACTION) * rated
     rig = 0.5 * (b / (m_r_plus - lm_plus) + b / (lm_minus - m_r_minus))
-    zero = [sol for _, sol in sides[1] if _ == 0.0][0], [sol for _, sol in sides[-1] if _ == 0.0][0]
-    backlash = (zero[0].te_rad[0] - zero[1].te_rad[0]) * ARCSEC_PER_RAD / 60.0
+    zero = sides[1][0][1], sides[-1][0][1]                                     # the f = 0 rows
+    # a preloaded case has no play (the rigid limit found an interference): backlash 0
+    backlash = 0.0 if preloaded else (zero[0].te_rad[0] - zero[1].te_rad[0]) * ARCSEC_PER_RAD / 60.0
     budget = {k: float(np.mean(v)) for k, v in budget_acc.items()}
     figures: dict[str, Any] = {
         "torsional_rigidity_Nm_per_arcmin": float(rig),
@@ -236,11 +248,27 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
         "pin_friction_coefficient": mu_p,
         "bearing_friction_coefficient": mu_b,
         "input_angle_deg": float(theta_in_deg),
+        "preloaded": preloaded,
         "solver": solver,
         "datasheet_class": DATASHEET,
         "warnings": warnings,
     }
     return StiffnessResult(curve=curve, elastic=elastic, figures=figures)
+
+
+def _zero_torque(s: QuasiStaticSolver, th: np.ndarray, direction: int):
+    """The curve's zero-torque point in one direction and whether the case is preloaded.
+
+    The rigid limit (the end of the geometric play, under the vanishing load of 1 N mm); a case whose errors
+    make an interference the rigid limit cannot resolve has no play: its parts are preloaded, and the point is
+    the elastic equilibrium under the same vanishing load, in which the preload's normal forces remain (they
+    keep the friction band open at zero torque, docs/physics.md section 9)."""
+    try:
+        return s.solve(th, direction=direction, load_Nm=0.0), False
+    except InterferenceError:
+        if s.law.rigid:
+            raise
+        return s.solve(th, direction=direction, load_Nm=ContactLaw.RIGID_LOAD_NMM / 1e3), True
 
 
 def _friction_torque(s: QuasiStaticSolver, g: ReducerGeometry, rows, theta: np.ndarray, mu_p: float,

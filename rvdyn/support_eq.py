@@ -4,14 +4,16 @@ Two models of the cam bearings of floating discs (docs/physics.md, sections 3 an
 
 - ``option spring`` (the impact law, or ``supports = "rigid"``, with a cam-bearing clearance): each hole
   sits on a linear spring ``model.cam_bearing_stiffness_N_per_um`` beyond the clearance; the cranks are rigid.
-- ``chain`` (the physical law with ``supports = "elastic"``): every disc floats (3 coordinates per disc) and
-  every crank has 4 + 2 nd more: the radial deflections of its two journal bearings and its bending
-  deflections at the cam planes. Each disc hole is held by a needle bearing (Palmgren line contact, radial
+- ``chain`` (the physical law with ``supports = "elastic"``): every disc floats (3 coordinates per disc),
+  every crank has 4 + 2 nd more: the displacements of its two journal nodes and its bending deflections at the
+  cam planes, and the carrier end plate one, ``s = a phi`` (its turn against the output flange, mm at the
+  crank circle a): journal B's bearing deflects by ``u_B - s t_j`` (t_j the crank circle's tangent), the pillars
+  store ``k_t phi^2 / 2`` (``bearings.carrier_torsional_stiffness``). Each disc hole is held by a needle bearing (Palmgren line contact, radial
   law ``F = K_c (|d| - c)^(10/9)`` beyond the clearance c, ``bearings.radial_bearing_K``) against its cam;
   the cam moves with the crank: ``y_k = (1 - l_k) u_A + l_k u_B + w_k`` (journal deflections interpolated at
   the cam plane, l_k its axial position between the journals, plus bending). Journals: the same law without
   clearance; bending: ``w^T K_b w / 2`` with ``K_b`` the inverse of the simply-supported beam's influence
-  matrix at the cam planes (Roark, ``bearings.Supports.bending_deflections``). All of it is an exact
+  matrix at the cam planes (the stepped Timoshenko crank, ``bearings.Supports.bending_deflections``). All of it is an exact
   potential of the state: the equilibrium shares every preload between contacts and supports.
 
 The hole offsets ``d = hole - cam`` (fixed frame) are linearised at each outer iteration like the contact
@@ -103,7 +105,12 @@ class SupportChain:
         self.per_crank = 4 + 2 * nd
         # rigid limit: with a clearance the play dominates and the contacts' penalty is rigid enough
         self.rigid_K = ContactLaw.RIGID_K if clearance > 0.0 else RIGID_SUPPORT_K
-        self.n_dof = nc * self.per_crank
+        # the carrier end plate's turn against the flange, one coordinate s = a phi (mm at the crank circle) after
+        # the cranks' when the carrier is elastic: journal B's bearing is deflected by u_B - s t_j (t_j the unit
+        # tangent of crank j's circle), the pillars store k_s s^2 / 2 with k_s = k_t / a^2 (docs/physics.md, 8)
+        self.k_s = sup.carrier_k / sup.crank_radius ** 2 if np.isfinite(sup.carrier_k) else 0.0
+        self.n_carrier = 1 if self.k_s > 0.0 else 0
+        self.n_dof = nc * self.per_crank + self.n_carrier
         zA, zB = sup.z_journal
         self.lam = (np.asarray(sup.z_cams, dtype=float) - zA) / (zB - zA)       # (nd,)
         # bending: influence matrix at the cam planes (unit load at each plane), its inverse the stiffness
@@ -135,11 +142,25 @@ class SupportChain:
                     Y[k, j, a, self.idx(j, "w", k) + a] = 1.0
         return Y
 
-    def energy(self, x: np.ndarray, dcam: np.ndarray, rigid: bool, derivs: bool = True, newton: float = 0.0):
-        """Support energy (N,) N mm, its gradient (N, ndof) and Hessian (N, ndof, ndof) in the support
-        coordinates and the bearing deflections ``dcam`` (N, nd, nc, 2) (hole minus cam, mm): the
-        cam-bearing part of the gradient and Hessian is returned in ``dcam`` coordinates
-        (``g_cam`` (N, nd, nc, 2), ``H_cam`` (N, nd, nc, 2, 2)) for the caller's chain rule.
+    def journal_deflections(self, x: np.ndarray, tang: np.ndarray | None) -> np.ndarray:
+        """Deflections (N, nc, 2 journals, 2) mm of the journal bearings: the crank's node displacements, journal
+        B's minus the carrier end plate's displacement ``s t_j`` there (``tang`` (N, nc, 2): the unit tangents of
+        the cranks' circle at the linearisation, fixed frame)."""
+        N = x.shape[0]
+        sl = x[:, self.base:self.base + self.nc * self.per_crank].reshape(N, self.nc, self.per_crank)
+        u = sl[:, :, :4].reshape(N, self.nc, 2, 2).copy()
+        if self.n_carrier and tang is not None:
+            u[:, :, 1] -= x[:, self.base + self.n_dof - 1, None, None] * tang
+        return u
+
+    def energy(self, x: np.ndarray, dcam: np.ndarray, rigid: bool, derivs: bool = True, newton: float = 0.0,
+               tang: np.ndarray | None = None):
+        """Support energy (N,) N mm, its gradient (N, ndof) and Hessian in the support coordinates and the
+        bearing deflections ``dcam`` (N, nd, nc, 2) (hole minus cam, mm): the Hessian per crank (N, nc, pc, pc),
+        and with an elastic carrier its coupling to the carrier coordinate s, ``H_qs`` (N, nc, pc), and ``H_ss``
+        (N,); the cam-bearing part of the gradient and Hessian is returned in ``dcam`` coordinates
+        (``g_cam`` (N, nd, nc, 2), ``H_cam`` (N, nd, nc, 2, 2)) for the caller's chain rule. ``tang``: the
+        cranks' unit tangents (N, nc, 2) (:meth:`journal_deflections`).
 
         ``rigid``: the rigid limit, every support a linear penalty ``RIGID_SUPPORT_K``. ``newton`` > 0 (N):
         the Hessian of a Newton model, each bearing's stiffness at least its tangent under that load (a power
@@ -147,23 +168,27 @@ class SupportChain:
         N = x.shape[0]
         s = self.sup
         if rigid:
-            Kc = Kj = self.rigid_K
+            Kc = Kj = ks = self.rigid_K
             p = 1.0
             Kb = self.rigid_K * np.eye(self.nd)
         else:
-            Kc, Kj, p, Kb = s.cam_K, s.journal_K, BEARING_EXP, self.Kb
-        sl = x[:, self.base:self.base + self.n_dof].reshape(N, self.nc, self.per_crank)
-        u = sl[:, :, :4].reshape(N, self.nc, 2, 2)                              # journals A, B
+            Kc, Kj, p, Kb, ks = s.cam_K, s.journal_K, BEARING_EXP, self.Kb, self.k_s
+        nq = self.nc * self.per_crank
+        sl = x[:, self.base:self.base + nq].reshape(N, self.nc, self.per_crank)
+        u = self.journal_deflections(x, tang)                                   # journals A, B
         w = sl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
         scale, F = (1.0, newton) if newton > 0 else (1e-9, NEWTON_FORCE_N)
         Ec, gc, Hc = radial_law(dcam, Kc, p, self.c, derivs, scale * Kc * p * (F / Kc) ** ((p - 1.0) / p))
         Ej, gj, Hj = radial_law(u, Kj, p, 0.0, derivs, scale * Kj * p * (F / Kj) ** ((p - 1.0) / p))
         Kw = np.matmul(Kb, w)                                                   # (N, nc, nd, 2)
         E = Ec.sum(axis=(1, 2)) + Ej.sum(axis=(1, 2)) + 0.5 * (w * Kw).sum(axis=(1, 2, 3))
+        if self.n_carrier:
+            sc = x[:, self.base + nq]
+            E = E + 0.5 * ks * sc * sc
         if not derivs:
-            return E, None, None, None, None
+            return E, None, None, None, None, None, None
         g = np.zeros((N, self.n_dof))
-        gv = g.reshape(N, self.nc, self.per_crank)
+        gv = g[:, :nq].reshape(N, self.nc, self.per_crank)
         gv[:, :, :4] = gj.reshape(N, self.nc, 4)
         gv[:, :, 4:] = Kw.reshape(N, self.nc, 2 * self.nd)
         H = np.zeros((N, self.nc, self.per_crank, self.per_crank))
@@ -173,29 +198,41 @@ class SupportChain:
             for l in range(self.nd):
                 for a in range(2):
                     H[:, :, 4 + 2 * k + a, 4 + 2 * l + a] = Kb[k, l]
-        return E, g, H, gc, Hc
+        Hqs = Hss = None
+        if self.n_carrier:
+            # journal B's deflection u_B - s t_j: d/ds = -t_j
+            HBt = np.einsum("njab,njb->nja", Hj[:, :, 1], tang)                 # (N, nc, 2)
+            g[:, nq] = ks * sc - np.einsum("nja,nja->n", gj[:, :, 1], tang)
+            Hqs = np.zeros((N, self.nc, self.per_crank))
+            Hqs[:, :, 2:4] = -HBt
+            Hss = ks + np.einsum("nja,nja->n", HBt, tang)
+        return E, g, H, gc, Hc, Hqs, Hss
 
     def parts(self, x: np.ndarray, dx: np.ndarray, dcam: np.ndarray, ddcam: np.ndarray,
-              rigid: bool = False) -> dict[str, np.ndarray]:
+              rigid: bool = False, tang: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Unit-load wind-up of the supports (N,) rad: ``sum q . d`` with ``d`` each part's actual
         deflection and ``q`` its force per unit output torque (tangent stiffness times ``dx = dx/dT``,
         ``ddcam`` = d(dcam)/dT)."""
         N = x.shape[0]
-        _, _, _, _, Hc = self.energy(x, dcam, rigid)
+        Hc = self.energy(x, dcam, rigid, tang=tang)[4]
         qc = np.einsum("nkjab,nkjb->nkja", Hc, ddcam)
         cam = np.einsum("nkja,nkja->n", qc, dcam)
         s = self.sup
         p = BEARING_EXP
-        sl = x[:, self.base:self.base + self.n_dof].reshape(N, self.nc, self.per_crank)
-        dsl = dx[:, self.base:self.base + self.n_dof].reshape(N, self.nc, self.per_crank)
-        u = sl[:, :, :4].reshape(N, self.nc, 2, 2)
-        du = dsl[:, :, :4].reshape(N, self.nc, 2, 2)
+        nq = self.nc * self.per_crank
+        sl = x[:, self.base:self.base + nq].reshape(N, self.nc, self.per_crank)
+        dsl = dx[:, self.base:self.base + nq].reshape(N, self.nc, self.per_crank)
+        u = self.journal_deflections(x, tang)
+        du = self.journal_deflections(dx, tang)
         _, _, Hj = radial_law(u, s.journal_K, p)
         journal = np.einsum("njaxy,njay,njax->n", Hj, du, u)
         w = sl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
         dw = dsl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
         bend = np.einsum("kl,njlx,njkx->n", self.Kb, dw, w)
-        return {"cam_bearings": cam, "journal_bearings": journal, "crank_bending": bend}
+        out = {"cam_bearings": cam, "journal_bearings": journal, "crank_bending": bend}
+        if self.n_carrier:                                                      # the pillars: k_s s ds/dT
+            out["carrier"] = self.k_s * x[:, self.base + nq] * dx[:, self.base + nq]
+        return out
 
 
 class SupportMixin:
@@ -265,7 +302,9 @@ class SupportMixin:
 
     def _chain_raw(self, th_in: np.ndarray, x: np.ndarray, law: ContactLaw | None) -> np.ndarray:
         """The bearing deflections linearised at x, ``d = c0 + D x`` (hole minus cam minus the crank's
-        displacement at the cam plane), packed per row: ``[rigid flag, c0 (nd nc 2), D (nd nc 2 ndof)]``."""
+        displacement at the cam plane), packed per row: ``[rigid flag, c0 (nd nc 2), D (nd nc 2 ndof),
+        t (nc 2)]`` with t the unit tangents of the cranks' circle at x (the direction in which the carrier end
+        plate's turn carries journal B, frozen at the linearisation like the offsets)."""
         N, nd, nc, D = x.shape[0], self.nd, self.nc, self.ndof
         nk = 1 + nc
         to, ps, _, _ = self._unpack(th_in, x)
@@ -300,7 +339,9 @@ class SupportMixin:
         d0 = d0 - np.einsum("kjad,nd->nkja", self._Y, x)                  # bearing deflection: minus the crank's
         c0 = d0 - np.einsum("nkjad,nd->nkja", Dm, x)
         rigid = np.full((N, 1), 1.0 if (law is not None and law.rigid) else 0.0)
-        return np.concatenate([rigid, c0.reshape(N, -1), Dm.reshape(N, -1)], axis=1)
+        ax = self.geom.crank_axes(to)                                      # (N, nc, 2)
+        tang = np.stack([-ax[..., 1], ax[..., 0]], axis=-1) / np.linalg.norm(ax, axis=-1)[..., None]
+        return np.concatenate([rigid, c0.reshape(N, -1), Dm.reshape(N, -1), tang.reshape(N, -1)], axis=1)
 
     def _condense(self, x: np.ndarray, raw: np.ndarray, newton: float = 0.0) -> np.ndarray:
         """Second-order model of the supports at x with their own coordinates q eliminated (static
@@ -309,25 +350,41 @@ class SupportMixin:
         With the gradient ``(g_a, g_q)`` and Hessian blocks of the exact support energy at x (a: the contacts'
         coordinates), ``dq = -H_qq^-1 (g_q + H_qa da)`` and the energy of a step da is
         ``E - g_q H_qq^-1 g_q / 2 + (g_a - H_aq Z_g) da + da^T (H_aa - H_aq Z_a) da / 2`` with
-        ``Z_g = H_qq^-1 g_q``, ``Z_a = H_qq^-1 H_qa`` (H_qq is block-diagonal: one block per crank). Packed per row:
+        ``Z_g = H_qq^-1 g_q``, ``Z_a = H_qq^-1 H_qa``. The cranks' blocks of H_qq do not couple; the carrier
+        coordinate (which couples them) is eliminated after them, as a scalar. Packed per row:
         ``[x_a (nj), constant, gradient (nj), Hessian (nj nj), Z_g (nq), Z_a (nq nj)]``."""
         N = x.shape[0]
         nj, nc, pc = self.nj, self.nc, self.chain.per_crank
+        ns = self.chain.n_carrier
+        nq0, no = nc * pc, nj + ns                                          # crank coordinates; outer set [a, s]
+        oidx = np.r_[np.arange(nj), [nj + nq0] * ns].astype(int)
         E, g, A = self._chain_energy(x, raw, True, newton)
         Ass = np.empty((N, nc, pc, pc))
-        R = np.empty((N, nc, pc, nj + 1))
+        R = np.empty((N, nc, pc, no + 1))
         for j in range(nc):
             b = nj + j * pc
             Ass[:, j] = A[:, b:b + pc, b:b + pc]
-            R[:, j, :, :nj] = A[:, b:b + pc, :nj]
-            R[:, j, :, nj] = g[:, b:b + pc]
-        Z = np.linalg.solve(Ass, R).reshape(N, nc * pc, nj + 1)              # [Z_a | Z_g]
-        corr = np.matmul(A[:, :nj, nj:], Z)                                   # (N, nj, nj + 1)
-        Ha = A[:, :nj, :nj] - corr[:, :, :nj]
-        ga = g[:, :nj] - corr[:, :, nj]
-        const = E - 0.5 * np.einsum("nq,nq->n", g[:, nj:], Z[:, :, nj])
-        return np.concatenate([x[:, :nj], const[:, None], ga, Ha.reshape(N, -1), Z[:, :, nj],
-                               Z[:, :, :nj].reshape(N, -1)], axis=1)
+            R[:, j, :, :no] = A[:, b:b + pc][:, :, oidx]
+            R[:, j, :, no] = g[:, b:b + pc]
+        Z = np.linalg.solve(Ass, R).reshape(N, nq0, no + 1)                 # [Z_o | Z_g] of the cranks
+        corr = np.matmul(A[:, oidx, nj:nj + nq0], Z)                          # (N, no, no + 1)
+        Ho = A[:, oidx][:, :, oidx] - corr[:, :, :no]
+        go = g[:, oidx] - corr[:, :, no]
+        const = E - 0.5 * np.einsum("nq,nq->n", g[:, nj:nj + nq0], Z[:, :, no])
+        Za, Zg = Z[:, :, :nj], Z[:, :, no]
+        if ns:                                                                # the carrier's s, then a alone
+            hss, hsa, gs = Ho[:, nj, nj], Ho[:, nj, :nj], go[:, nj]
+            Zsa, Zsg = hsa / hss[:, None], gs / hss
+            Ha = Ho[:, :nj, :nj] - Ho[:, :nj, nj, None] * Zsa[:, None, :]
+            ga = go[:, :nj] - Ho[:, :nj, nj] * Zsg[:, None]
+            const = const - 0.5 * gs * Zsg
+            Zqs = Z[:, :, nj]
+            Za = np.concatenate([Za - Zqs[:, :, None] * Zsa[:, None, :], Zsa[:, None, :]], axis=1)
+            Zg = np.concatenate([Zg - Zqs * Zsg[:, None], Zsg[:, None]], axis=1)
+        else:
+            Ha, ga = Ho, go
+        return np.concatenate([x[:, :nj], const[:, None], ga, Ha.reshape(N, -1), Zg,
+                               Za.reshape(N, -1)], axis=1)
 
     def _condensed(self, arms: np.ndarray):
         N, nj = arms.shape[0], self.nj
@@ -344,12 +401,14 @@ class SupportMixin:
         ``g_con`` (N, nj), ``H_con`` (N, nj, nj): the contacts' gradient and Hessian in their coordinates; ``b``
         (N, ndof) the load vector; ``mu`` (N,) the Levenberg-Marquardt damping; ``floor`` (N, 1) its floor. The
         Hessian is assembled by blocks (contacts' coordinates a, each crank's support coordinates q) and solved by
-        the Schur complement on a (the q blocks of different cranks do not couple), both solves by
-        :func:`batch_solve`."""
+        the Schur complement on the outer set ``[a, s]`` (the q blocks of different cranks do not couple; the
+        carrier coordinate s couples them and joins a), both solves by :func:`batch_solve`."""
         ch = self.chain
         N, nj, nc, pc = x.shape[0], self.nj, self.nc, ch.per_crank
-        rigid, dcam, Dm = self._chain_unpack(x, raw)
-        _, gs, Hs, gc, Hc = ch.energy(x, dcam, rigid, True, self._newton_N)
+        ns, nq0 = ch.n_carrier, nc * pc
+        no = nj + ns
+        rigid, dcam, Dm, tang = self._chain_unpack(x, raw)
+        _, gs, Hs, gc, Hc, Hqs, Hss = ch.energy(x, dcam, rigid, True, self._newton_N, tang)
         Da = Dm[..., :nj]                                                     # (N, nd, nc, 2, nj)
         HcDa = Hc[..., :, 0, None] * Da[..., 0, None, :] + Hc[..., :, 1, None] * Da[..., 1, None, :]
         D2 = Da.reshape(N, -1, nj)
@@ -358,23 +417,39 @@ class SupportMixin:
         # each hole's terms times the node weights L[r, k] of its crank's nodes (journals A, B, bending at plane k)
         # (tensordot: one matrix product over the cam planes k)
         Aqa = -np.tensordot(HcDa, ch.L, axes=([1], [1])).transpose(0, 1, 4, 2, 3).reshape(N, nc, pc, nj)
-        gq = (gs.reshape(N, nc, pc) - np.tensordot(gc, ch.L, axes=([1], [1])).transpose(0, 1, 3, 2).reshape(N, nc, pc)
-              + b[:, nj:].reshape(N, nc, pc))
+        gq = (gs[:, :nq0].reshape(N, nc, pc)
+              - np.tensordot(gc, ch.L, axes=([1], [1])).transpose(0, 1, 3, 2).reshape(N, nc, pc)
+              + b[:, nj:nj + nq0].reshape(N, nc, pc))
         Aqq = np.tensordot(Hc, ch.LLk, axes=([1], [2])).transpose(0, 1, 4, 2, 5, 3).reshape(N, nc, pc, pc) + Hs
-        grad = np.concatenate([ga, gq.reshape(N, -1)], axis=1)
+        parts = [ga, gq.reshape(N, -1)]
+        if ns:
+            gS = gs[:, nq0] + b[:, nj + nq0]
+            parts.append(gS[:, None])
+        grad = np.concatenate(parts, axis=1)
         da = np.einsum("nii->ni", Aaa) + floor
         dq = np.einsum("njii->nji", Aqq) + floor[:, :, None]
         ia, iq = np.arange(nj), np.arange(pc)
         Aaa[:, ia, ia] += mu[:, None] * da
         Aqq[:, :, iq, iq] += mu[:, None, None] * dq
-        Z = batch_solve(Aqq, np.concatenate([Aqa, gq[..., None]], axis=-1))       # (N, nc, pc, nj + 1)
-        Aaq = Aqa.transpose(0, 3, 1, 2).reshape(N, nj, nc * pc)
-        corr = np.matmul(Aaq, Z.reshape(N, nc * pc, nj + 1))
-        za = batch_solve(Aaa - corr[:, :, :nj], (ga - corr[:, :, nj])[:, :, None])[:, :, 0]
-        zq = Z[..., nj] - np.matmul(Z[..., :nj], za[:, None, :, None])[..., 0]
+        # the outer set o = [a, s]: the contacts' coordinates and the carrier's (which couples the cranks)
+        Aoo = np.zeros((N, no, no))
+        Aoo[:, :nj, :nj] = Aaa
+        rhs = [Aqa]
+        go = ga
+        if ns:
+            Aoo[:, nj, nj] = Hss + mu * (Hss + floor[:, 0])
+            rhs.append(Hqs[..., None])
+            go = np.concatenate([ga, gS[:, None]], axis=1)
+        Z = batch_solve(Aqq, np.concatenate(rhs + [gq[..., None]], axis=-1))    # (N, nc, pc, no + 1)
+        Aoq = Aqa.transpose(0, 3, 1, 2).reshape(N, nj, nq0)
+        if ns:
+            Aoq = np.concatenate([Aoq, Hqs.reshape(N, 1, nq0)], axis=1)
+        corr = np.matmul(Aoq, Z.reshape(N, nq0, no + 1))
+        zo = batch_solve(Aoo - corr[:, :, :no], (go - corr[:, :, no])[:, :, None])[:, :, 0]
+        zq = Z[..., no] - np.matmul(Z[..., :no], zo[:, None, :, None])[..., 0]
         # the forces in play in the supports (for the stationarity test: the gradient relative to them)
         scale = (np.linalg.norm(gc, axis=-1)[..., None] * np.abs(Dm).sum(axis=-1)).sum(axis=(1, 2, 3)) + np.abs(gs).sum(1)
-        return grad, -np.concatenate([za, zq.reshape(N, -1)], axis=1), scale
+        return grad, -np.concatenate([zo[:, :nj], zq.reshape(N, -1), zo[:, nj:]], axis=1), scale
 
     def _chain_recover(self, arms: np.ndarray, step: np.ndarray, tangent: bool = False) -> np.ndarray:
         """Step of the support coordinates (N, nq) that goes with the step ``step`` (N, nj) of the contacts'
@@ -413,17 +488,19 @@ class SupportMixin:
         return E, g, H
 
     def _chain_unpack(self, x: np.ndarray, arms: np.ndarray):
+        """``(rigid, dcam (N, nd, nc, 2), D (N, nd, nc, 2, ndof), t (N, nc, 2))`` of a packed linearisation."""
         N, nd, nc, D = x.shape[0], self.nd, self.nc, self.ndof
         n8 = nd * nc * 2
         rigid = bool(arms[0, 0] > 0.5) if N else False
         c0 = arms[:, 1:1 + n8].reshape(N, nd, nc, 2)
-        Dm = arms[:, 1 + n8:].reshape(N, nd, nc, 2, D)
-        return rigid, c0 + np.matmul(Dm.reshape(N, -1, D), x[:, :, None]).reshape(N, nd, nc, 2), Dm
+        Dm = arms[:, 1 + n8:1 + n8 + n8 * D].reshape(N, nd, nc, 2, D)
+        tang = arms[:, 1 + n8 + n8 * D:].reshape(N, nc, 2)
+        return rigid, c0 + np.matmul(Dm.reshape(N, -1, D), x[:, :, None]).reshape(N, nd, nc, 2), Dm, tang
 
     def _chain_energy(self, x: np.ndarray, arms: np.ndarray, derivs: bool, newton: float = 0.0):
-        rigid, dcam, Dm = self._chain_unpack(x, arms)
+        rigid, dcam, Dm, tang = self._chain_unpack(x, arms)
         ch = self.chain
-        E, g, H, gc, Hc = ch.energy(x, dcam, rigid, derivs, newton)
+        E, g, H, gc, Hc, Hqs, Hss = ch.energy(x, dcam, rigid, derivs, newton, tang)
         if not derivs:
             return E, None, None
         N, D = x.shape[0], self.ndof
@@ -435,17 +512,22 @@ class SupportMixin:
         for j in range(self.nc):
             b = ch.base + j * ch.per_crank
             Ht[:, b:b + ch.per_crank, b:b + ch.per_crank] += H[:, j]
+        if ch.n_carrier:
+            i = D - 1
+            Ht[:, ch.base:i, i] += Hqs.reshape(N, -1)
+            Ht[:, i, ch.base:i] += Hqs.reshape(N, -1)
+            Ht[:, i, i] += Hss
         return E, G, Ht
 
     def _chain_parts(self, th: np.ndarray, x: np.ndarray, dx: np.ndarray, law: ContactLaw) -> dict[str, np.ndarray]:
         """Wind-up of the supports at the solution per unit-load state derivative ``dx`` (N, ndof) = dx/dT."""
-        _, dcam, Dm = self._chain_unpack(x, self._finish_raw(th, x, law))
+        _, dcam, Dm, tang = self._chain_unpack(x, self._finish_raw(th, x, law))
         ddcam = np.einsum("nkjad,nd->nkja", Dm, dx)
-        return self.chain.parts(x, dx, dcam, ddcam, law.rigid)
+        return self.chain.parts(x, dx, dcam, ddcam, law.rigid, tang)
 
     def chain_cam_forces(self, th: np.ndarray, x: np.ndarray, law: ContactLaw) -> np.ndarray:
         """Forces of the cams on the discs (N, nd, nc, 2) N, fixed frame, at the states x."""
-        rigid, dcam, _ = self._chain_unpack(x, self._finish_raw(th, x, law))
+        rigid, dcam, _, _ = self._chain_unpack(x, self._finish_raw(th, x, law))
         ch = self.chain
         K, p = (ch.rigid_K, 1.0) if rigid else (ch.sup.cam_K, BEARING_EXP)
         return -radial_law(dcam, K, p, ch.c)[1]

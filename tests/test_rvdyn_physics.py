@@ -302,7 +302,7 @@ def test_crank_beam_and_cam_statics_closed_forms() -> None:
 
     s = Supports.from_design(Design())
     L = s.z_journal[1] - s.z_journal[0]
-    mid = replace(s, z_cams=(s.z_journal[0] + L / 2, s.z_journal[0] + L / 2))
+    mid = replace(s, z_cams=(s.z_journal[0] + L / 2, s.z_journal[0] + L / 2), sections=())   # uniform Euler beam
     B = np.zeros((1, 2, 2, 2))
     B[0, 0, 0] = (0.0, -500.0)                                  # disc 0 pushes crank 0 by +500 N in y
     y = mid.bending_deflections(B)
@@ -331,7 +331,7 @@ def physical_nominal():
 def test_physical_budget_is_the_wind_up(physical_nominal) -> None:
     """Virtual work: the TE is the sum of every part's deflection work per unit torque (to 1e-3): with
     rigid supports the pins' and the gears', with elastic supports also the bearings', the crank bending,
-    the pin seats (in series with the pins), the carrier (series, after the equilibrium) and the crank torsion
+    the pin seats (in series with the pins), the carrier (inside the equilibrium) and the crank torsion
     (a spring in series with the mesh, inside the equilibrium: its share of the stage I deflection is
     c_torsion / (c_mesh + c_torsion)). The supports
     and the Hertz contact make the wind-up grow slightly less than linearly with the load."""
@@ -345,7 +345,7 @@ def test_physical_budget_is_the_wind_up(physical_nominal) -> None:
     assert el.parts_rad["journal_bearings"].min() > 0 and el.parts_rad["crank_bending"].min() > 0
     g = ReducerGeometry(Case.from_dict({"model": {"contact": "physical"}}))
     s = QuasiStaticSolver(g, AnalyticContacts(g))
-    k_t = s.supports.GJ / (s.supports.torsion_lever_mm() * g.planet.base_radius ** 2)
+    k_t = 1.0 / (s.supports.torsion_compliance() * g.planet.base_radius ** 2)
     assert s.k_stage1 == pytest.approx(s.k_mesh * k_t / (s.k_mesh + k_t), rel=1e-12)
     ratio = el.parts_rad["crank_torsion"] / (el.parts_rad["crank_torsion"] + el.parts_rad["gears"])
     assert ratio == pytest.approx(s.k_mesh / (s.k_mesh + k_t), rel=1e-9)
