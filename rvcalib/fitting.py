@@ -23,6 +23,10 @@ from rvcalib.screening import Screening
 class Fitting(Screening):
     """The fitting stage of the loop (methods on the loop's model and screening)."""
 
+    #: Start Jacobians of the joint refits taken from the last joint fit: ``"removals"`` (its own state
+    #: only: refits of the same effects with members removed), ``"all"`` (any kept column, stale) or ``"off"``.
+    jacobian_reuse: str = "removals"
+
     def refine_coarse(self, e: Effect, p0: np.ndarray, rc_raw: list[np.ndarray],
                       Ec: np.ndarray | None, ms: int | None = None) -> tuple[float, np.ndarray]:
         """Fit one candidate's parameters through the nonlinear model at the current state on its
@@ -106,17 +110,77 @@ class Fitting(Screening):
             r = fun(np.zeros(0))
             return [], float(r @ r), np.zeros(0), fun, np.zeros((r.size, 0))
         x0 = np.clip(np.concatenate([np.asarray(p, dtype=float) for p in p0]) / scales, lo, hi)
-        got = chord_fit(fun, x0, lo, hi, deadline=self._deadline())
+        J0, known = self._cached_jacobian(effects, p0, terms, P)
+        got = chord_fit(fun, x0, lo, hi, deadline=self._deadline(), J0=J0, known=known)
         if got is not None:
             x, r, J, nfev = got
-            self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord", "nfev": nfev})
-            return [p for _, p in unpack(x)], float(r @ r), x, fun, J
+            self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord", "nfev": nfev,
+                                   "reused_columns": int(known.sum()) if known is not None else 0})
+            params = [p for _, p in unpack(x)]
+            self._keep_jacobian(effects, params, terms, J)
+            return params, float(r @ r), x, fun, J
         sol = optimize.least_squares(fun, x0, jac=lambda x: fd_jac(fun, x, lo, hi, h=0.01), bounds=(lo, hi),
                                      method="trf", x_scale=1.0, max_nfev=max_nfev, xtol=1e-5, ftol=1e-7)
         self.fit_stats.append({"effects": [e.name for e in effects], "method": "trf", "nfev": int(sol.nfev),
                                "njev": int(sol.njev or 0), "status": int(sol.status)})
         params = [p for _, p in unpack(sol.x)]
+        self._keep_jacobian(effects, params, terms, np.asarray(sol.jac, dtype=float))
         return params, float(2.0 * sol.cost), sol.x, fun, sol.jac
+
+    def _cached_jacobian(self, effects: list[Effect], p0: list[np.ndarray], terms: list[EmpiricalTerm],
+                         P) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """A start Jacobian for :meth:`fit_full` from the last joint fit's final Jacobian
+        (:meth:`_keep_jacobian`), and the mask of the columns it holds.
+
+        Columns are reused only at that fit's own state: every effect of this fit was in it, at the
+        same parameters (``p0`` equal to its solution), and its empirical terms are all among
+        ``terms`` (the projector of ``terms`` applied to a column projected with fewer terms is the
+        column projected with ``terms``). That is a refit of the same effects with members removed
+        (the backward elimination, the term-limit checks): its start Jacobian is the kept one's
+        columns; otherwise (new members, moved sizes) every column is differenced as before. With
+        ``jacobian_reuse = "all"`` any kept column of an effect is reused wherever it was taken (a
+        stale start: faster, but the fits then stop at other points within their tolerance and the
+        loop's discrete choices can change; measured in docs/calibration.md)."""
+        kept = self.__dict__.get("_jac_kept")
+        mode = getattr(self, "jacobian_reuse", "removals")
+        if kept is None or mode == "off":
+            return None, None
+        cols, kterms, kparams = kept
+        tset = set(terms)
+        if not kterms <= tset:
+            return None, None
+        if mode != "all":
+            for e, p in zip(effects, p0):
+                q = kparams.get(e.name)
+                if q is None or q.shape != np.shape(p) or not np.array_equal(q, np.asarray(p, dtype=float)):
+                    return None, None
+        blocks, mask = [], []
+        for e in effects:
+            got = cols.get(e.name)
+            if got is not None and got.shape == (self.n, e.n_params):
+                blocks.append(P(got) if kterms != tset else got)
+                mask += [True] * e.n_params
+            else:
+                blocks.append(np.zeros((self.n, e.n_params)))
+                mask += [False] * e.n_params
+        if not any(mask):
+            return None, None
+        return np.column_stack(blocks), np.array(mask)
+
+    def _keep_jacobian(self, effects: list[Effect], params: list[np.ndarray], terms: list[EmpiricalTerm],
+                       J: np.ndarray) -> None:
+        """Keep a joint fit's final Jacobian (scaled parameters, residual projected with ``terms``) per
+        effect, with the fit's solution, for the start of later fits (:meth:`_cached_jacobian`)."""
+        if J is None or J.ndim != 2 or J.shape[0] != self.n:
+            return
+        cols: dict[str, np.ndarray] = {}
+        if getattr(self, "jacobian_reuse", "removals") == "all" and "_jac_kept" in self.__dict__:
+            cols.update(self._jac_kept[0])
+        i = 0
+        for e in effects:
+            cols[e.name] = np.array(J[:, i:i + e.n_params])
+            i += e.n_params
+        self._jac_kept = (cols, frozenset(terms), {e.name: np.array(p, dtype=float) for e, p in zip(effects, params)})
 
     def _declared_total(self, e: Effect, p: np.ndarray) -> tuple[float | None, float | None]:
         """For a correction to a declared error (the runs declare the default instance of ``e.key``,

@@ -57,10 +57,13 @@ def fit_option(r: np.ndarray, A: np.ndarray, nonneg: bool) -> tuple[float, np.nd
 
 
 def fd_jac(fun, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, h: float = 0.02,
-            f0: np.ndarray | None = None, central: bool = False) -> np.ndarray:
+            f0: np.ndarray | None = None, central: bool = False, only=None) -> np.ndarray:
+    """Forward-difference Jacobian of ``fun`` at ``x`` (step ``h * max(1, |x_j|)``, backward where the
+    forward step leaves the bounds or cannot be evaluated; ``central`` differences where both fit).
+    ``only``: difference only these column indices (the returned array has just those columns)."""
     f0 = fun(x) if (f0 is None and not central) else f0
     cols = []
-    for j in range(x.size):
+    for j in (range(x.size) if only is None else only):
         step = h * max(1.0, abs(x[j]))
         xp = x.copy()
         xm = x.copy()
@@ -95,7 +98,8 @@ def broyden_update(J: np.ndarray, s: np.ndarray, dr: np.ndarray) -> np.ndarray:
 
 def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int = 8,
               h: float = 0.01, xtol: float = 1e-3, r0: np.ndarray | None = None,
-              ref: tuple[np.ndarray, np.ndarray] | None = None, deadline: float | None = None):
+              ref: tuple[np.ndarray, np.ndarray] | None = None, deadline: float | None = None,
+              J0: np.ndarray | None = None, known: np.ndarray | None = None):
     """Gauss-Newton on a Jacobian kept up to date by Broyden's rank-one updates from every evaluation
     (accepted steps and rejected trial points alike): the start is already the coarse-grid estimate,
     so a few solves suffice and the Jacobian is differenced (forward, step ``h``) only at the start.
@@ -114,6 +118,11 @@ def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int
         Another point and its residual (e.g. the model without the fitted effect): for one parameter
         the start's Jacobian is the secant through it when it lies at least ``h`` from ``x0``, which
         saves the differencing solve.
+    J0, known : ndarray or None
+        A start Jacobian (columns of the scaled parameters) whose columns ``known`` (bool mask) are taken
+        as they are (e.g. from an earlier fit of the same effects near this state); only the other
+        columns are differenced at ``x0``. The Broyden updates of every evaluation then correct it; when
+        its first step gives no decrease, the whole Jacobian is differenced there and the fit goes on.
 
     Returns (x, residual, Jacobian, solves) or None if no decrease could be made."""
     try:
@@ -126,6 +135,17 @@ def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int
         d = float(x0[0] - ref[0][0])
         if abs(d) >= h * max(1.0, abs(float(x0[0]))):
             J = ((r - ref[1]) / d)[:, None]
+    reused = False
+    if J is None and J0 is not None and known is not None and np.any(known):
+        reused = True
+        J = np.array(J0, dtype=float, copy=True)
+        todo = np.flatnonzero(~np.asarray(known, dtype=bool))
+        if todo.size:
+            try:
+                J[:, todo] = fd_jac(fun, x0, lo, hi, h=h, f0=r, only=todo)
+            except ModelEvaluationError:
+                return None
+            nfev += int(todo.size)
     if J is None:
         try:
             J = fd_jac(fun, x0, lo, hi, h=h, f0=r)
@@ -160,6 +180,15 @@ def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int
             lim = 0.5 * float(np.linalg.norm(s))
             nd = float(np.linalg.norm(dn))
             dx = dn if nd <= lim else dn * (lim / max(nd, 1e-300))
+        if not accepted and reused:
+            # the reused start Jacobian gave no decrease: difference it here and go on (once)
+            reused = False
+            try:
+                J = fd_jac(fun, x, lo, hi, h=h, f0=r)
+            except ModelEvaluationError:
+                return (x, r, J, nfev) if nfev > n_start else None
+            nfev += x.size
+            continue
         if not accepted:
             return (x, r, J, nfev) if nfev > n_start else None
         step = float(np.max(np.abs(xn - x)))

@@ -34,25 +34,29 @@ SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
 #: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a
 #: long unit late in the queue would leave the other worker idle at the end. The rest follow in
-#: collection order (all below ~5 CPU-s). CPU-s of each unit measured on this 2-core machine at load 3-4
-#: (2026-11-23, ``-n 0`` one module at a time, with a CPU-time plugin; shared fixtures counted once):
-#: the single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions, ~18),
-#: calib-declared 55 (13 + 42; the declared model's own screening), study ~70 (small_study ~37, dask 15,
-#: stackup 13), stackup Monte Carlo 37, rvcad export 35, screening grid 29, scale error 26 (7 with the
-#: screening on disk), calib groups 14, two-effect scenario 14, joint 13, ratio-81 12, stiffness 10, the
+#: collection order (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per
+#: test, with a CPU-time plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load
+#: 3-4 (2026-11-23; shared fixtures counted once): study ~70 (small_study 36, the executor comparison ~15,
+#: the stack-up tests 16), rvcad export 33, fcl against analytic 20 (26 tests), stack-up Monte Carlo 17,
+#: rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up on other reducers 8, stiffness 7, fcl
+#: contacts 7. The loop's scenarios (measured before, ``-n 0`` one module at a time): the
+#: single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions, ~18),
+#: calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
+#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, ratio-81 12, the
 #: zero-offset scenario 8.5. The study runs alone on one worker while the single-pin/off-grid scenario
 #: makes the screening of the loop's three run conditions (280 points) as it starts and the declared pair
 #: screens its declared model, so every later scenario on either worker reads that screening from disk
 #: (:func:`calib_forward_cache`).
-HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "test_stackup_mc", "test_rvcad_export",
-               "test_screening_grid_does_not_alias_whatever_the_steps", "test_calib_groups",
-               "test_two_effects_at_once", "test_calib_joint", "test_calib_design", "test_rvdyn_stiffness",
-               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_reducer",
-               "test_encoder_zero_offset_is_not_disguised_as_physics", "test_direction_dependent_effect",
-               "calib-order3", "test_load_dependent_effect", "test_a_drift_in_time_is_a_drift_term_not_a_scale_error",
-               "test_stackup_failures", "test_rvcad_parts", "test_paper_readings", "test_rsm_plots",
-               "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds", "test_fcl_vs_analytic",
-               "test_fuzz_loaders", "test_rvcad_errors", "test_rsm_augment")
+HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "test_rvcad_export",
+               "test_screening_grid_does_not_alias_whatever_the_steps", "test_fcl_vs_analytic", "test_stackup_mc",
+               "test_calib_groups", "test_two_effects_at_once", "test_calib_joint", "test_calib_design",
+               "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
+               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_reducer", "test_rvdyn_stiffness",
+               "test_fcl_contacts", "test_encoder_zero_offset_is_not_disguised_as_physics",
+               "test_direction_dependent_effect", "calib-order3", "test_load_dependent_effect",
+               "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_stackup_failures",
+               "test_paper_readings", "test_rsm_plots", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
+               "test_fuzz_loaders", "test_rsm_augment")
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -122,10 +126,14 @@ STUDY_STEPS = 24
 #: ``rv-stackup`` options of the design stage alone: 27 runs, 25 unique cases, in this process.
 DOE_ARGV = ["--solver", "analytic", "--steps", str(STUDY_STEPS), "--workers", "1", "--stages", "doe",
             "--no-progress", "--no-figures"]
-#: Every stage with small counts, figures included.
+#: Every stage with small counts, figures included. The Monte Carlo on the impact law: the tests of this run
+#: check the pipeline (stages, tables, figures, report, summary), which is the same under either law, and the
+#: impact law costs about a third of the physical one per draw. The physical law (``rv-stackup``'s default)
+#: is tested on the Monte Carlo in tests/test_stackup_dask.py (serial, pool and Dask runs, and one draw
+#: solved again directly) and as the command line's default in tests/test_stackup.py.
 SMALL_STUDY_ARGV = ["--solver", "analytic", "--steps", str(STUDY_STEPS), "--workers", "1", "--sweep-points", "3",
                     "--validation-cases", "4", "--mc-check", "1", "--mc-draws", "6", "--mc-sobol", "2",
-                    "--no-progress"]
+                    "--mc-contact", "impact", "--no-progress"]
 
 
 def _run_stackup(argv: list[str]) -> str:
@@ -152,6 +160,7 @@ def doe_reference(tmp_path_factory) -> tuple[Path, dict]:
 
 @pytest.fixture(scope="session")
 def small_study(tmp_path_factory) -> tuple[Path, str]:
-    """One ``rv-stackup`` run of every stage with small counts and figures: (output folder, printed summary)."""
+    """One ``rv-stackup`` run of every stage with small counts and figures (the Monte Carlo on the impact law,
+    see :data:`SMALL_STUDY_ARGV`): (output folder, printed summary)."""
     out = tmp_path_factory.mktemp("small_study") / "run"
     return out, _run_stackup(["--out", str(out), *SMALL_STUDY_ARGV])

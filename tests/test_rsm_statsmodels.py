@@ -7,13 +7,20 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import statsmodels.api as sm
-import statsmodels.formula.api as smf
 
 import rsm
 from rvpaper import DATA_DIR as PAPER_DATA
 
 DATA = PAPER_DATA
+
+
+def _statsmodels():
+    """statsmodels.api and statsmodels.formula.api, imported when a test runs, not at collection (both
+    pytest-xdist workers collect every module; only the one running these tests needs statsmodels)."""
+    import statsmodels.api as sm
+    import statsmodels.formula.api as smf
+
+    return sm, smf
 
 
 def _sm_name(term: str) -> str:
@@ -33,6 +40,7 @@ def _sm_name(term: str) -> str:
 def _compare(ours: rsm.RSMResults, data: pd.DataFrame, response: str) -> None:
     terms = ours.term_names[1:]
     formula = f"{response} ~ " + " + ".join(_sm_name(t) for t in terms)
+    sm, smf = _statsmodels()
     ref = smf.ols(formula, data).fit()
     a3 = sm.stats.anova_lm(ref, typ=3)
     for t in terms:
@@ -116,6 +124,7 @@ def test_prediction_intervals_match_statsmodels():
     res = rsm.fit(data, ["a", "b", "c"], "y")
     new = pd.DataFrame(rng.uniform(-1, 1, size=(6, 3)), columns=["a", "b", "c"])
     ours = res.predict(new, alpha=0.1)
+    smf = _statsmodels()[1]
     ref = smf.ols("y ~ a + b + c + a:b + a:c + b:c + I(a ** 2) + I(b ** 2) + I(c ** 2)", data).fit()
     sf = ref.get_prediction(new).summary_frame(alpha=0.1)
     for col in ["mean", "mean_se", "mean_ci_lower", "mean_ci_upper", "obs_ci_lower", "obs_ci_upper"]:
@@ -125,6 +134,7 @@ def test_prediction_intervals_match_statsmodels():
 def test_r2_pred_and_adequate_precision_from_statsmodels_quantities():
     data = pd.read_csv(DATA / "paper_table6_bbd_runs.csv")
     res = rsm.fit(data, ["EA", "EB", "EC", "ED"], "te_arcmin")
+    smf = _statsmodels()[1]
     ref = smf.ols("te_arcmin ~ (EA + EB + EC + ED)**2 + I(EA ** 2) + I(EB ** 2) + I(EC ** 2) + I(ED ** 2)",
                   data).fit()
     press = np.sum(ref.get_influence().resid_press ** 2)

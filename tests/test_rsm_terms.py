@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-import statsmodels.formula.api as smf
 
 import rsm
 from rsm.surface import PolynomialSurface
@@ -81,6 +80,8 @@ def test_actual_coefficients_equal_a_fit_in_actual_units_with_offset_centres():
     act["y"] = (0.01 * act["p"] + 0.3 * act["q"] * act["r"] + 0.2 * act["r"] ** 2
                 + rng.normal(scale=0.1, size=len(act)))
     res = rsm.fit(act, ["p", "q", "r"], "y", levels=levels, units="actual")
+    import statsmodels.formula.api as smf  # here, not at collection (see test_rsm_statsmodels._statsmodels)
+
     ref = smf.ols("y ~ p + q + r + p:q + p:r + q:r + I(p ** 2) + I(q ** 2) + I(r ** 2)", act).fit()
     tab = res.coefficients("actual")
     for t in res.term_names:

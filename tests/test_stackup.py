@@ -265,6 +265,7 @@ def test_full_pipeline_small(small_study):
     for link in [line.split("](")[1].rstrip(")") for line in rep.splitlines() if line.startswith("![")]:
         assert (out / link).is_file(), link
     s = json.loads((out / "summary.json").read_text())
+    assert s["contact_models"]["monte_carlo"].startswith("impact: F = ")  # --mc-contact reaches the summary
     assert s["monte_carlo"]["te_pp_arcmin"]["n_solver_draws"] == 6
     assert s["monte_carlo"]["fcl_check"]["te_pp_arcmin"]["n"] == 1
     assert text.strip().splitlines()[2].startswith("  full solver, 6 draws: te_pp_arcmin")  # the solver's figures lead
@@ -275,6 +276,18 @@ def test_full_pipeline_small(small_study):
 
 
 # ---------------------------------------------------------------------------------------------- options
+def test_mc_contact_defaults_to_the_physical_law():
+    """The Monte Carlo's law is rvdyn's physical law unless ``--mc-contact`` says otherwise (the shared small
+    study runs it with ``--mc-contact impact``; tests/test_stackup_dask.py solves the physical default)."""
+    from rvstudy.study import PHYSICAL_LAW_TEXT
+
+    cfg = cli.config_from_args(cli.build_parser().parse_args(["--out", "x"]))
+    assert cfg.mc_contact == "physical" == StudyConfig().mc_contact
+    assert cfg.contact_models()["monte_carlo"] == PHYSICAL_LAW_TEXT + " (--mc-contact)"
+    assert cli.config_from_args(cli.build_parser().parse_args(["--out", "x", "--mc-contact", "impact"])
+                                ).mc_contact == "impact"
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["--steps", "1"], "--steps"),
     (["--workers", "0"], "--workers"),

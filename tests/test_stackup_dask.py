@@ -41,10 +41,12 @@ def serial(doe_reference) -> pd.DataFrame:
 
 
 def _mc_cfg(tmp_path, **kw) -> StudyConfig:
-    """A tiny full-solver Monte Carlo: every feature of three tolerances, 4 draws, a designed sample of 2."""
-    tols = {k: parse_tolerance(f"{k}=normal:{v}") for k, v in
-            (("pin_radius", 1.5), ("pin_pitch", 0.003), ("disc_hole_eccentricity", 3.0))}
-    return _cfg(tmp_path, stages=("mc",), mc_draws=4, mc_sobol=2, mc_check=0, tolerances=tols, **kw)
+    """A tiny full-solver Monte Carlo under the default (physical) law: every feature of two tolerances (one
+    per pin, one per disc hole), 2 draws and a designed sample of 2 (10 draws of 5 solves). The physical law
+    stays: its damping floor depends on the batch, so equal numbers also show that every executor solves each
+    draw's five cases as the one batch."""
+    tols = {k: parse_tolerance(f"{k}=normal:{v}") for k, v in (("pin_radius", 1.5), ("disc_hole_eccentricity", 3.0))}
+    return _cfg(tmp_path, stages=("mc",), mc_draws=2, mc_sobol=2, mc_check=0, tolerances=tols, **kw)
 
 
 @pytest.fixture(scope="module")
@@ -96,3 +98,25 @@ def test_monte_carlo_same_numbers_serial_pool_and_dask(serial_mc, cluster_addres
     pd.testing.assert_frame_equal(dk["draws"], serial_mc["draws"], check_exact=True)
     pd.testing.assert_frame_equal(dk["sobol"], serial_mc["sobol"], check_exact=True)
     assert dk["responses"]["te_pp_arcmin"]["mean"] == serial_mc["responses"]["te_pp_arcmin"]["mean"]
+
+
+def test_monte_carlo_default_law_is_the_physical_one(serial_mc):
+    """The Monte Carlo of a default configuration solves its draws with rvdyn's physical law: the first
+    draw's TE equals that draw's case solved directly under the physical law (within run_te_many's bound:
+    the draw's five solves are one batch) and not under the impact law."""
+    from rvcad.params import Design
+    from rvdyn.contacts import ContactLaw
+    from rvdyn.te import run_te
+    from rvstudy.features import features
+    from rvstudy.stackup import draw_cases
+
+    cfg = _mc_cfg(None)
+    assert cfg.mc_contact == "physical"
+    feats = features(cfg.tolerances, Design())
+    X = serial_mc["draws"][[f.name for f in feats]]
+    case = draw_cases(feats, X.iloc[:1], Design(), "mc", cfg.load_Nm, {}, [])[0]
+    pp = {law: float(run_te(case, "analytic", STEPS, law=ContactLaw(kind=law)).stats["pp"]) / 60.0
+          for law in ("physical", "impact")}
+    got = serial_mc["draws"]["te_pp_arcmin"].iloc[0]
+    assert got == pytest.approx(pp["physical"], abs=2e-4 / 60)  # run_te_many's bound, 1e-4 arcsec per step
+    assert abs(got - pp["impact"]) > 100 * 2e-4 / 60

@@ -157,9 +157,11 @@ def test_mc_rerun_is_bit_identical_and_reports(tmp_path, capsys):
     tol = tmp_path / "tol.json"  # two tolerances only (a small designed sample): pin radii and a model effect
     tol.write_text(json.dumps({**{k: "none" for k in default_tolerances()}, "pin_radius": "normal:1.5",
                                "model.torsional_compliance_arcsec_per_Nm": "uniform:0:0.5"}))
+    # the rerun check is the law's own (the physical MC runs in small_study); no figures: this test reads the
+    # report's text, and the Monte Carlo's figures (drawn from the same tables) are checked in small_study
     argv = ["--solver", "analytic", "--steps", "24", "--workers", "1", "--stages", "mc", "--mc-draws", "6",
             "--mc-sobol", "2", "--mc-check", "0", "--no-progress", "--json", "--tolerances", str(tol),
-            "--mc-contact", "impact"]  # the rerun check is the law's own; the physical MC runs in small_study
+            "--mc-contact", "impact", "--no-figures"]
     assert cli.main(["--out", str(tmp_path / "a"), *argv]) == 0
     s1 = json.loads(capsys.readouterr().out)
     assert cli.main(["--out", str(tmp_path / "b"), *argv, "--no-cache"]) == 0
