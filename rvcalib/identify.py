@@ -134,6 +134,7 @@ class Calibrator(Groups):
                 break
             it += 1
             t_it = time.perf_counter()
+            names_before = {a.effect.name for a in self.active}
             if self.rescreen_every and self.rescreen_due >= self.rescreen_every:
                 n_sol = self.solve_signatures([e for e in self.lib.templates() if not e.expensive], self._pairs())
                 self.rescreen_due = 0
@@ -263,6 +264,18 @@ class Calibrator(Groups):
                 log["decision"] = "stop: no candidate passes the F test and the BIC"
             r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
             self.rss_full = float(r_full @ r_full)
+            entered = {a.effect.name for a in self.active} - names_before
+            if self.joint and entered and not self.over_budget():
+                # the instance of a family (which pin) is chosen by the refit too (rvcalib.joint.sibling_refit)
+                rc_new = np.concatenate([coarse_values(r, y - q, self.m, self.period)
+                                         for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))])
+                swapped = self.sibling_refit(entered, rc_new)
+                if swapped:
+                    log["sibling_refit"] = [{"replaced": o, "by": n} for o, n in swapped]
+                    log["decision"] = log.get("decision", "") + "; refitted in place of " + ", ".join(
+                        f"{o}: {n}" for o, n in swapped)
+                    r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+                    self.rss_full = float(r_full @ r_full)
             log["seconds"] = time.perf_counter() - t_it
             iterations.append(log)
             self.log(f"iteration {it}: {log['decision']} (RMS {math.sqrt(self.rss_full / self.n):.4g} arcsec, "

@@ -94,6 +94,9 @@ EMPIRICAL_LEAVES_NOISE = 2.0
 REFIT_RETRIES = 2
 #: Subsets whose BIC differ by less than this are ties (twin instances: float noise of ~1e-10).
 BIC_TIE = 1e-4
+#: Siblings refitted in place of an instance that has just entered the model (see
+#: :meth:`JointSelection.sibling_refit`).
+SIBLING_REFITS = 2
 
 
 def aic(rss: float, n: int, k: int) -> float:
@@ -231,6 +234,125 @@ class JointSelection(Selection):
             if F < factor * F_crit:
                 out.add(a.effect.name)
         return out
+
+    def siblings(self, a: Active, rc: np.ndarray, n: int = SIBLING_REFITS,
+                 sigma2: float = 0.0) -> list[tuple[Effect, np.ndarray]]:
+        """The other instances of an effect's family (one pin's pitch among the pins, a cam error of one
+        crank and disc among the others) closest to it on these data, with a start for their refit.
+
+        The target is the residual on the screening grid with the effect's part given back (``rc`` plus
+        its contribution at its fitted size). Instances related by the rotational symmetry of the pins
+        (:attr:`Effect.shift_deg`) are ranked by how well the effect's own contribution rotated by their
+        pin-pitch difference reproduces it (its fitted size, not the typical one: under rvdyn's physical
+        law a pin's TE change is far from proportional to its error); other families by their screening
+        signatures at the state (:meth:`screen_effect`). A sibling whose column reproduces the effect's
+        own within the noise (``sigma2``, arcsec^2: the chi-square rule of :meth:`_alternatives`; twins such
+        as pins 20 apart) is left out: the data cannot prefer it, and the groups report it. Returns at most
+        ``n`` (effect, start parameters), best first; an effect of no family, an empty list."""
+        e = a.effect
+        if e.family == "measurement":
+            return []
+        fam = e.template or e.name
+        in_model = {b.effect.name for b in self.active}
+        sibs = [x for x in self.lib if (x.template or x.name) == fam and x.name not in in_model and not x.expensive]
+        if not sibs:
+            return []
+        p = np.asarray(a.p, dtype=float)
+        contrib = self._grid_cat(self._pairs()) - self._grid_cat([(b.effect, b.p) for b in self.active if b is not a])
+        target = rc + contrib
+        tt = float(target @ target)
+        if tt <= 0:
+            return []
+        ranked: list[tuple[float, Effect, np.ndarray]] = []
+        if e.n_params == 1 and e.screen == "two_sided" and abs(float(p[0])) > 0 and all(x.n_params == 1 for x in sibs):
+            blocks = contrib.reshape(len(self.runs), self.m)
+            for x in sibs:
+                roll = (x.shift_deg - e.shift_deg) / 360.0 * self.m
+                if abs(roll - round(roll)) > 1e-9:
+                    continue
+                col = np.roll(blocks, int(round(roll)), axis=1).ravel()
+                dd = col - contrib
+                if float(dd @ dd) * self.n / self.nc < 3.84 * sigma2:
+                    continue  # the same on these data (a twin)
+                c = float(col @ target) / max(float(col @ col), 1e-300)
+                r = target - c * col
+                ranked.append((1.0 - float(r @ r) / tt, x, p * c))
+        else:
+            groups: dict[int, tuple] = {}
+            own = self.screen_effect(e, groups, target, None)
+            for x in sibs:
+                d = self.screen_effect(x, groups, target, None)
+                if d is None:
+                    continue
+                if own is not None and own.fit is not None and d.fit is not None:
+                    dd = d.fit - own.fit
+                    if float(dd @ dd) * self.n / self.nc < 3.84 * sigma2:
+                        continue
+                ranked.append((d.explained, x, np.asarray(d.p, dtype=float)))
+        ranked.sort(key=lambda t: -t[0])
+        return [(x, q) for _, x, q in ranked[:n]]
+
+    def sibling_refit(self, names: set[str], rc: np.ndarray) -> list[tuple[str, str]]:
+        """Refit the model with each of an instance's nearest siblings in its place (the instances of
+        ``names`` that have just entered) and keep the one that leaves the smallest residual on all
+        samples (the same number of parameters: the BIC and the F test rank them alike), when it lowers
+        the BIC by more than :data:`JOINT_BIC_MARGIN` (twin instances tie and keep the first).
+
+        Which instance of a family ranks first is decided by linear screening at a state where other
+        effects may still be missing; neighbouring instances have close signatures (under rvdyn's
+        physical law a pin's lies 0.87 arcsec RMS from its neighbour's, 1.70 under the impact law), so
+        the first-ranked can be a neighbour of the truth, and nothing later replaces it (the subset
+        search sees one instance per family, and the residual beyond it no longer ranks the truth).
+        The instance index is a discrete parameter of the effect: it is chosen here by the same
+        nonlinear refit as the sizes, among the :data:`SIBLING_REFITS` siblings ranked by
+        :meth:`siblings`, and again from the new instance while a swap lowers the residual (a descent over
+        the instance index; instances already tried are not tried again). ``rc``: the residual on the
+        screening grid at the state. Returns the (old, new) names swapped, in order."""
+        swapped: list[tuple[str, str]] = []
+        todo = [b for b in self.active if b.effect.name in names]
+        tried: set[str] = set()
+        while todo:
+            a = todo.pop(0)
+            tried.add(a.effect.name)
+            if self.over_budget():
+                break
+            r_now, _ = self.full_residual(self._pairs(), self.empirical)
+            sibs = [(x, q) for x, q in self.siblings(a, rc, SIBLING_REFITS + len(tried), self._noise2(r_now))
+                    if x.name not in tried]
+            sibs = sibs[:SIBLING_REFITS]
+            if not sibs:
+                continue
+            best = None
+            for x, q in sibs:
+                if self.over_budget():
+                    break
+                effects = [x if b is a else b.effect for b in self.active]
+                p0 = [np.clip(q, x.lower, x.upper) if b is a else b.p for b in self.active]
+                try:
+                    params, rss, *_ = self.fit_full(effects, p0, self.empirical)
+                except ModelEvaluationError:
+                    continue
+                # a swap must be worth the joint choice's margin (twin instances, pins 20 apart, tie)
+                worth = self.n * math.log(max(self.rss_full, 1e-300) / max(rss, 1e-300)) > JOINT_BIC_MARGIN
+                if worth and (best is None or rss < best[0]):
+                    best = (rss, x, params)
+            if best is None:
+                continue
+            rss, x, params = best
+            old = a.effect.name
+            a.effect = x
+            for b, p in zip(self.active, params):
+                b.p = p
+            a.info = dict(a.info or {}, sibling_refit={"replaced": old, "rss_before": self.rss_full, "rss": rss})
+            r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+            self.rss_full = float(r_full @ r_full)
+            swapped.append((old, x.name))
+            # the new instance's own siblings next (a descent over the instance index): the first choice
+            # can be several pins from the truth (pin 15 for 12 beside a drift stand-in)
+            rc = np.concatenate([coarse_values(r, y - q, self.m, self.period)
+                                 for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))])
+            todo.insert(0, a)
+        return swapped
 
     # ------------------------------------------------------------------ subsets
     def best_subsets(self, pool: list[PoolMember], rc: np.ndarray, max_members: int) -> list[SubsetFit]:
