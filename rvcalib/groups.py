@@ -39,7 +39,6 @@ from scipy import stats
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
-from rvcalib.screening import coarse_values
 from rvcalib.joint import JointSelection
 
 #: Joint-fit correlation above which two effects are reported as one group.
@@ -103,8 +102,7 @@ class Groups(JointSelection):
             return fitted, []
         t0 = time.perf_counter()
         pairs = self._pairs()
-        rc_raw = [coarse_values(r, y - q, self.m, self.period)
-                  for r, y, q in zip(self.runs, self.y, self.predict(pairs))]
+        rc_raw = self.coarse_residual()
         rc_cat = np.concatenate(rc_raw)
         Ec = self._emp_matrix(self.empirical, coarse=True)
         members = self.active_members()

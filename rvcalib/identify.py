@@ -58,7 +58,6 @@ from rvcalib.lsq import bic, ftest, projector
 from rvcalib.residual import Diagnostics, diagnose, structured_noise
 from rvcalib.results import (Active, CalibrationResult, Candidate, EmpiricalTerm, FittedEffect, HarmonicCandidate,
                              Unexplained, Validated)
-from rvcalib.screening import coarse_values
 from rvcalib.groups import Groups
 
 __all__ = ["Calibrator", "calibrate", "CalibrationResult", "FittedEffect", "Unexplained", "EmpiricalTerm",
@@ -144,8 +143,7 @@ class Calibrator(Groups):
             # the residual at the readings (the model solved there) taken to the coarse grid: where the
             # readings are off the grid only this smooth remainder is interpolated, not the TE's kinks
             Ec = self._emp_matrix(self.empirical, coarse=True)
-            rc_raw = [coarse_values(r, y - q, self.m, self.period)
-                      for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))]
+            rc_raw = self.coarse_residual()
             rc_cat = np.concatenate(rc_raw)
             Pc = projector(Ec)
             rc = Pc(rc_cat)
@@ -267,8 +265,7 @@ class Calibrator(Groups):
             entered = {a.effect.name for a in self.active} - names_before
             if self.joint and entered and not self.over_budget():
                 # the instance of a family (which pin) is chosen by the refit too (rvcalib.joint.sibling_refit)
-                rc_new = np.concatenate([coarse_values(r, y - q, self.m, self.period)
-                                         for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))])
+                rc_new = np.concatenate(self.coarse_residual())
                 swapped = self.sibling_refit(entered, rc_new)
                 if swapped:
                     log["sibling_refit"] = [{"replaced": o, "by": n} for o, n in swapped]

@@ -57,7 +57,6 @@ from rvcalib.forward import ModelEvaluationError
 from rvcalib.lsq import bic, ftest
 from rvcalib.results import (Active, Candidate, EmpiricalTerm, HarmonicCandidate, PoolMember, SubsetFit,
                              Validated)
-from rvcalib.screening import coarse_values
 from rvcalib.selection import Selection
 
 #: Most effects already in the model that one joint step may drop.
@@ -209,8 +208,7 @@ class JointSelection(Selection):
         from scipy import stats
         members = self.active_members()
         Ec = self._emp_matrix(self.empirical, coarse=True)
-        rc = np.concatenate([coarse_values(r, y - q, self.m, self.period)
-                             for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))])
+        rc = np.concatenate(self.coarse_residual())
         blocks = [m.cols for m in members] + ([Ec] if Ec is not None else [])
         X = np.column_stack(blocks)
         coef, *_ = np.linalg.lstsq(X, rc, rcond=None)
@@ -349,8 +347,7 @@ class JointSelection(Selection):
             swapped.append((old, x.name))
             # the new instance's own siblings next (a descent over the instance index): the first choice
             # can be several pins from the truth (pin 15 for 12 beside a drift stand-in)
-            rc = np.concatenate([coarse_values(r, y - q, self.m, self.period)
-                                 for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))])
+            rc = np.concatenate(self.coarse_residual())
             todo.insert(0, a)
         return swapped
 
