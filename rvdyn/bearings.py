@@ -326,6 +326,3 @@ class Supports:
                 c += (hi - lo) / GJ
         return c
 
-    def torsion_lever_mm(self) -> float:
-        """Length of crankshaft twisted by the planet torque: planet plane to the mean cam plane, mm."""
-        return float(np.mean(self.z_cams) - self.z_planet)
