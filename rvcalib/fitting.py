@@ -26,6 +26,9 @@ class Fitting(Screening):
     #: Start Jacobians of the joint refits taken from the last joint fit: ``"removals"`` (its own state
     #: only: refits of the same effects with members removed), ``"all"`` (any kept column, stale) or ``"off"``.
     jacobian_reuse: str = "removals"
+    #: The last joint fit's Jacobian columns per effect, its empirical terms and its solution
+    #: (:meth:`_keep_jacobian`); None before the first joint fit.
+    _jac_kept: tuple | None = None
 
     def refine_coarse(self, e: Effect, p0: np.ndarray, rc_raw: list[np.ndarray],
                       Ec: np.ndarray | None, ms: int | None = None) -> tuple[float, np.ndarray]:
@@ -141,8 +144,8 @@ class Fitting(Screening):
         ``jacobian_reuse = "all"`` any kept column of an effect is reused wherever it was taken (a
         stale start: faster, but the fits then stop at other points within their tolerance and the
         loop's discrete choices can change; measured in docs/calibration.md)."""
-        kept = self.__dict__.get("_jac_kept")
-        mode = getattr(self, "jacobian_reuse", "removals")
+        kept = self._jac_kept
+        mode = self.jacobian_reuse
         if kept is None or mode == "off":
             return None, None
         cols, kterms, kparams = kept
@@ -174,7 +177,7 @@ class Fitting(Screening):
         if J is None or J.ndim != 2 or J.shape[0] != self.n:
             return
         cols: dict[str, np.ndarray] = {}
-        if getattr(self, "jacobian_reuse", "removals") == "all" and "_jac_kept" in self.__dict__:
+        if self.jacobian_reuse == "all" and self._jac_kept is not None:
             cols.update(self._jac_kept[0])
         i = 0
         for e in effects:
