@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rvcad.params import Design
-from rvdyn.materials import MATERIALS, LineContact
+from rvdyn.materials import MATERIALS, LineContact, Material
 
 #: Palmgren's line-contact constant, mm N^-0.9 mm^0.8.
 PALMGREN_LINE = 3.84e-5
@@ -91,14 +91,29 @@ def circle_shear_coefficient(nu: float) -> float:
     return 6.0 * (1.0 + nu) / (7.0 + 6.0 * nu)
 
 
-def guided_beam_stiffness(E: float, nu: float, radius: float, length: float) -> float:
-    """Lateral stiffness (N/mm) of a round Timoshenko beam clamped at one end and guided at the other (ends
-    displaced parallel, no end rotation): ``1/k = L^3/(12 E I) + L/(kappa G A)``, ``I = pi r^4/4``,
-    ``A = pi r^2``, ``G = E/(2 (1 + nu))``. E in MPa, lengths in mm."""
+def root_rotational_stiffness(E: float, nu: float, radius: float) -> float:
+    """Rotational stiffness (N mm/rad) of the root of a round bar of radius a built into an elastic body, taken as
+    a rigid circular punch rocking on an elastic half-space (Sneddon's tilted flat punch; the static rocking
+    stiffness of a rigid circular foundation, Richart, Hall & Woods 1970, Gazetas 1991):
+    ``k_theta = 8 G a^3 / (3 (1 - nu)) = 4 E a^3 / (3 (1 - nu^2))``. E in MPa, a in mm."""
+    return 4.0 * E * radius ** 3 / (3.0 * (1.0 - nu * nu))
+
+
+def guided_beam_stiffness(E: float, nu: float, radius: float, length: float,
+                          root_k: float = math.inf) -> float:
+    """Lateral stiffness (N/mm) of a round Timoshenko beam whose ends are built into two bodies that move parallel
+    (guided: the bodies do not turn): ``1/k = L^3/(12 E I) + L/(kappa G A) + L^2/(2 k_theta)``, ``I = pi r^4/4``,
+    ``A = pi r^2``, ``G = E/(2 (1 + nu))``. ``root_k`` (N mm/rad): the rotational stiffness ``k_theta`` of each
+    built-in end (:func:`root_rotational_stiffness`; ``inf``: rigidly clamped). By symmetry both end moments are
+    ``F L/2``; each root turns by ``F L/(2 k_theta)`` in the same sense, which moves one end against the other by
+    ``F L^2/(2 k_theta)`` (slope-deflection equations). E in MPa, lengths in mm."""
     I = math.pi * radius ** 4 / 4.0
     A = math.pi * radius ** 2
     G = E / (2.0 * (1.0 + nu))
-    return 1.0 / (length ** 3 / (12.0 * E * I) + length / (circle_shear_coefficient(nu) * G * A))
+    c = length ** 3 / (12.0 * E * I) + length / (circle_shear_coefficient(nu) * G * A)
+    if math.isfinite(root_k):
+        c += length ** 2 / (2.0 * root_k)
+    return 1.0 / c
 
 
 def stepped_beam_influence(L: float, sections: tuple, xs) -> np.ndarray:
@@ -154,13 +169,17 @@ def pillar_length_mm(d: Design) -> float:
     return 2.0 * AXIAL_CLEARANCE_MM + 2.0 * d.disc_width_mm + d.disc_gap_mm
 
 
-def carrier_torsional_stiffness(d: Design) -> float:
+def carrier_torsional_stiffness(d: Design, root: bool = True) -> float:
     """Torsional stiffness (N mm/rad) of the carrier end plate relative to the output flange through the
     pillars: ``n_p k r_p^2`` with ``k`` of :func:`guided_beam_stiffness` (material of the carrier, paper
-    Table 2) and ``r_p`` the crank circle (the pillars stand midway between the cranks). The plates are
-    taken rigid."""
+    Table 2) and ``r_p`` the crank circle (the pillars stand midway between the cranks). The plates move as
+    rigid bodies; each pillar root turns in its plate against :func:`root_rotational_stiffness` (``root``
+    False: rigidly clamped roots, the earlier model). Both plates are of the carrier's material (ZG65Mn)."""
     m = MATERIALS["carrier"]
-    k = guided_beam_stiffness(m.E, m.nu, d.carrier_pillar_radius_mm, pillar_length_mm(d))
+    if MATERIALS["flange_plate"] != Material(MATERIALS["flange_plate"].name, m.E, m.nu):
+        raise ValueError("the pillar roots assume the flange plate and the carrier of one material")
+    rk = root_rotational_stiffness(m.E, m.nu, d.carrier_pillar_radius_mm) if root else math.inf
+    k = guided_beam_stiffness(m.E, m.nu, d.carrier_pillar_radius_mm, pillar_length_mm(d), rk)
     return d.carrier_pillars * k * d.center_distance_mm ** 2
 
 
