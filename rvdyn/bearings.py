@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rvcad.layout import PLATE_RIM_CLEARANCE_MM
 from rvcad.params import Design
 from rvdyn.materials import MATERIALS, LineContact, Material
 
@@ -163,6 +164,57 @@ def crank_sections(d: Design, z_journal: tuple[float, float], discs: tuple) -> t
     return (sec(zA, e0, rj), sec(e0, e1, re), sec(e1, zB, rj))
 
 
+def annulus_seat_compliance(E: float, nu: float, a: float, b: float, t: float) -> float:
+    """Compliance (mm/N) of a bearing seat: a rigid disc of radius a bonded in a plate annulus of outer radius b
+    (held fixed) and thickness t, translated in the plane by a force (generalised plane stress):
+
+        U / F = [kappa ln(b/a) - (b^2 - a^2) / (kappa (b^2 + a^2))] / (2 pi G (1 + kappa) t),
+        kappa = (3 - nu)/(1 + nu),  G = E / (2 (1 + nu))
+
+    from Muskhelishvili's potentials of a resultant force on a contour (``phi = alpha ln z + lambda z^2``,
+    ``psi = -kappa alpha ln z + zeta / z^2``, ``alpha = -F/(2 pi (1 + kappa) t)``; the constant and the
+    ``e^{2 i theta}`` parts of the displacement matched at r = a and r = b; docs/physics.md, section 8). E in
+    MPa, lengths in mm."""
+    if not (0.0 < a < b):
+        raise ValueError(f"annulus radii a = {a!r} mm, b = {b!r} mm must satisfy 0 < a < b")
+    G = E / (2.0 * (1.0 + nu))
+    k = (3.0 - nu) / (1.0 + nu)
+    return ((k * math.log(b / a) - (b * b - a * a) / (k * (b * b + a * a)))
+            / (2.0 * math.pi * G * (1.0 + k) * t))
+
+
+def plate_outer_radius_mm(d: Design) -> float:
+    """Outer radius of the flange plate and the carrier end plate, mm (rvcad.plates: the pin circle less the
+    eccentricity, the pin radius and ``PLATE_RIM_CLEARANCE_MM``)."""
+    return d.pin_circle_radius_mm - d.eccentricity_mm - d.pin_radius_mm - PLATE_RIM_CLEARANCE_MM
+
+
+def cam_seat_compliance(d: Design) -> float:
+    """Compliance (mm/N) of a disc hole around its needle bearing (the outer raceway's elastic support):
+    :func:`annulus_seat_compliance` with the hole radius ``cam_radius_mm``, the outer radius the distance from
+    the hole's centre to the pin circle (where the disc is held, by the pins), the disc's width and material."""
+    m = MATERIALS["cycloid_disc"]
+    b = d.pin_circle_radius_mm - d.center_distance_mm
+    if not b > d.cam_radius_mm:
+        raise ValueError(f"design.cam_radius_mm {d.cam_radius_mm!r} must be < pin circle radius - centre distance "
+                         f"= {b!r} mm (the disc around the crank hole)")
+    return annulus_seat_compliance(m.E, m.nu, d.cam_radius_mm, b, d.disc_width_mm)
+
+
+def journal_seat_compliance(d: Design) -> float:
+    """Compliance (mm/N) of a plate bore around a journal bearing: :func:`annulus_seat_compliance` with the
+    radius of the outer raceway (``crank_journal_radius_mm + journal_bearing_roller_diameter_mm``; the cup is
+    counted as plate material), the outer radius the distance from the bore's centre to the plate's rim (where
+    the main bearing holds it), the plate's width and material (ZG65Mn, both plates)."""
+    m = MATERIALS["flange_plate"]
+    a = d.crank_journal_radius_mm + d.journal_bearing_roller_diameter_mm
+    b = plate_outer_radius_mm(d) - d.center_distance_mm
+    if not b > a:
+        raise ValueError(f"design.crank_journal_radius_mm + journal_bearing_roller_diameter_mm = {a!r} mm must be < "
+                         f"plate rim - centre distance = {b!r} mm (the plate around the journal bearing)")
+    return annulus_seat_compliance(m.E, m.nu, a, b, d.plate_width_mm)
+
+
 def pillar_length_mm(d: Design) -> float:
     """Free length of a pillar between the inner faces of the flange plate and the carrier end plate, mm:
     both discs, the gap between them and the axial clearance on either side."""
@@ -228,6 +280,9 @@ class Supports:
     crank_radius : mm, radius of the crank circle (the carrier's turn moves journal B by crank_radius * phi)
     GJ_sections : ``(z0, z1, GJ)`` tuples (axial positions, mm; N mm^2) of the crank from its planet end: the
         journal radius up to the first disc, the eccentric radius beyond (:meth:`torsion_compliance`)
+    cam_seat_c, journal_seat_c : mm/N, compliance of the disc hole around a cam bearing and of the plate bore
+        around a journal bearing, in series with the bearing (:func:`cam_seat_compliance`,
+        :func:`journal_seat_compliance`; 0: rigidly backed rings)
     """
 
     cam_K: float
@@ -243,6 +298,8 @@ class Supports:
     sections: tuple = ()
     crank_radius: float = 1.0
     GJ_sections: tuple = ()
+    cam_seat_c: float = 0.0
+    journal_seat_c: float = 0.0
 
     @classmethod
     def from_design(cls, d: Design) -> "Supports":
@@ -267,7 +324,8 @@ class Supports:
                    EI=EI, GJ=GJ, z_planet=g1 / 2.0, z_journal=zj,
                    z_cams=(sum(d0) / 2.0, sum(d1) / 2.0), carrier_k=carrier_torsional_stiffness(d),
                    sections=crank_sections(d, zj, (d0, d1)), crank_radius=d.center_distance_mm,
-                   GJ_sections=((0.0, d0[0], GJ), (d0[0], d1[1], GJ * (re / r) ** 4)))
+                   GJ_sections=((0.0, d0[0], GJ), (d0[0], d1[1], GJ * (re / r) ** 4)),
+                   cam_seat_c=cam_seat_compliance(d), journal_seat_c=journal_seat_compliance(d))
 
     # ------------------------------------------------------------------ statics
     @staticmethod
