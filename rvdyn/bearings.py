@@ -215,6 +215,20 @@ def journal_seat_compliance(d: Design) -> float:
     return annulus_seat_compliance(m.E, m.nu, a, b, d.plate_width_mm)
 
 
+def journal_load_centre_offset_mm(d: Design) -> float:
+    """Axial offset (mm) of a tapered journal bearing's effective load centre from its mid-plane, inwards (towards
+    the discs) positive: the load line of the outer ring (normal to the cup raceway through the roller's
+    mid-length, at the outer raceway radius ``R_o = crank_journal_radius_mm + journal_bearing_roller_diameter_mm``)
+    crosses the axis ``R_o tan(alpha)`` from the roller's mid-plane, towards the cup's wide end (NSK, *Rolling
+    Bearings*, "effective load centre": the intersection of the shaft's axis with the line of the load the outer
+    ring applies to the rolling elements; the catalogues' ``a = T/2 + (d + D) e/6`` is the same with the mean
+    radius and ``e = 1.5 tan(alpha)``). Face to face (X) the wide ends face each other: +R_o tan(alpha); back to
+    back (O): -R_o tan(alpha); 0 for a cylindrical bearing (alpha = 0)."""
+    ro = d.crank_journal_radius_mm + d.journal_bearing_roller_diameter_mm
+    off = ro * math.tan(math.radians(d.journal_bearing_contact_angle_deg))
+    return off if d.journal_bearing_arrangement == "face_to_face" else -off
+
+
 def pillar_length_mm(d: Design) -> float:
     """Free length of a pillar between the inner faces of the flange plate and the carrier end plate, mm:
     both discs, the gap between them and the axial clearance on either side."""
@@ -315,7 +329,11 @@ class Supports:
         EI = m.E * math.pi * r ** 4 / 4.0
         GJ = m.E / (2.0 * (1.0 + m.nu)) * math.pi * r ** 4 / 2.0
         re = d.cam_radius_mm - d.cam_bearing_roller_diameter_mm                # the eccentric (needle raceway)
-        zj = (sum(f) / 2.0, sum(cr) / 2.0)
+        off = journal_load_centre_offset_mm(d)
+        zj = (sum(f) / 2.0 + off, sum(cr) / 2.0 - off)                        # effective load centres
+        if not (zj[0] < sum(d0) / 2.0 and sum(d1) / 2.0 < zj[1]):
+            raise ValueError(f"design.journal_bearing_arrangement {d.journal_bearing_arrangement!r}: the journal "
+                             f"bearings' load centres ({zj[0]:.3f}, {zj[1]:.3f} mm) must lie outside the cam planes")
         return cls(cam_K=radial_bearing_K(d.cam_bearing_rollers, d.cam_bearing_roller_length_mm),
                    journal_K=radial_bearing_K(d.journal_bearing_rollers, d.journal_bearing_roller_length_mm,
                                               d.journal_bearing_contact_angle_deg),

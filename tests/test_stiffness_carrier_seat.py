@@ -131,10 +131,11 @@ def test_carrier_end_plate_is_in_equilibrium(rated) -> None:
 
 def test_far_journal_share_is_the_lever_rule() -> None:
     """Equal disc shares: beta = mean axial position of the cam planes between the journals, 1/2 for the
-    default layout (cam planes at 1/3 and 2/3 of the 31.5 mm span)."""
+    default layout (cam planes symmetric between the load centres of the tapered bearings, 31.5 - 2 x 2.333 mm
+    apart)."""
     sup = Supports.from_design(Design())
     zA, zB = sup.z_journal
-    assert zB - zA == pytest.approx(31.5)
+    assert zB - zA == pytest.approx(31.5 - 2 * 10.0 * math.tan(math.radians(13.13)), rel=1e-12)
     assert sup.far_journal_share() == pytest.approx(0.5, rel=1e-12)
     wide = Supports.from_design(Design(disc_gap_mm=10.5))
     zA, zB = wide.z_journal
