@@ -25,10 +25,19 @@ Formulas and sources:
   stepped sections (journal radius to the first disc, eccentric beyond), i.e. a spring
   ``1 / (sum l_i/(G J_p,i) r_b2^2)`` along the stage I line of action, in series with the mesh (in the
   equilibrium).
+- Tapered journal bearings' effective load centres (NSK, *Rolling Bearings*): ``R_o tan(alpha)`` from the roller's
+  mid-plane towards the cup's wide end, inwards face to face (the default), outwards back to back; the crank's
+  beam spans the load centres.
+- Bearing seats (Palmgren assumes rigidly backed rings): the disc hole around a cam bearing and the plate bore
+  around a journal bearing as a rigid disc bonded in a plate annulus held at radius b, generalised plane stress,
+  ``U/F = [kappa ln(b/a) - (b^2 - a^2)/(kappa (b^2 + a^2))]/(2 pi G (1 + kappa) t)`` (from Muskhelishvili's
+  potentials), in series with the bearing (rvdyn.support_eq.radial_law).
 - Carrier: the far (carrier) end plate reaches the output flange through the pillars. A pillar is a Timoshenko
-  beam clamped in both plates, its ends displaced parallel (guided): ``1/k = L^3/(12 E I) + L/(kappa G A)``
-  (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a solid circle ``kappa = 6 (1 + nu)/(7 +
-  6 nu)``, Cowper 1966); the plate turns by ``phi`` relative to the flange against ``k_t = n_p k r_p^2``
+  beam built into both plates, its ends displaced parallel (guided): ``1/k = L^3/(12 E I) + L/(kappa G A) +
+  L^2/(2 k_theta)`` (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a solid circle ``kappa = 6
+  (1 + nu)/(7 + 6 nu)``, Cowper 1966), each root turning in its plate as a rigid disc rocking on a half-space,
+  ``k_theta = 4 E a^3/(3 (1 - nu^2))`` (Richart, Hall & Woods 1970; Gazetas 1991); the plate turns by ``phi``
+  relative to the flange against ``k_t = n_p k r_p^2``
   (pillars on the circle r_p). The turn is a coordinate of the equilibrium (rvdyn.support_eq: it carries
   journal B of every crank along the crank circle), so the torque split between the journals is solved;
   :meth:`Supports.far_journal_share` is the lever-rule statics of equal discs (1/2 by default), for reference.
