@@ -484,6 +484,10 @@ class JointSelection(Selection):
             # with the empirical terms' parts given back (half as many more)
             raw = [d for d in self.rank(rc_cat, None, None) if d.effect.family != "measurement"]
             short += self.shortlist(raw, max(1, self.joint_new // 2), {d.family_key for d in short})
+        if self.active and self.joint_new:
+            # candidates that could take a weak member's place, screened with the others refitted
+            short += self.replacement_shortlist(self.active_members(), rc, Ec, max(1, self.joint_new // 2),
+                                                {d.family_key for d in short})
         temps = {}
         for d in short:
             if d.effect.screen != "analytic":
