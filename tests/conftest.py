@@ -42,15 +42,16 @@ SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: contacts 7. The loop's scenarios (measured before, ``-n 0`` one module at a time): the
 #: single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions, ~18),
 #: calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
-#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, ratio-81 12, the
-#: zero-offset scenario 8.5. The study runs alone on one worker while the single-pin/off-grid scenario
+#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, the sibling refit under
+#: the physical law (test_calib_physical) 23 (alone, its module with its imports; 58 at 200 readings per
+#: revolution), ratio-81 12, the zero-offset scenario 8.5. The study runs alone on one worker while the single-pin/off-grid scenario
 #: makes the screening of the loop's three run conditions (280 points) as it starts and the declared pair
 #: screens its declared model, so every later scenario on either worker reads that screening from disk
 #: (:func:`calib_forward_cache`).
 HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "test_rvcad_export",
                "test_screening_grid_does_not_alias_whatever_the_steps", "test_fcl_vs_analytic", "test_stackup_mc",
-               "test_calib_groups", "test_two_effects_at_once", "test_calib_joint", "test_calib_design",
-               "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
+               "test_calib_groups", "test_two_effects_at_once", "test_calib_joint", "test_calib_physical",
+               "test_calib_design", "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
                "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_reducer", "test_rvdyn_stiffness",
                "test_fcl_contacts", "test_encoder_zero_offset_is_not_disguised_as_physics",
                "test_direction_dependent_effect", "calib-order3", "test_load_dependent_effect",
