@@ -32,23 +32,23 @@ SHARED_SESSION_FIXTURES = ("small_study", "doe_reference")
 #: loop's run conditions) come from the forward runner's disk cache (:func:`calib_forward_cache`).
 SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
-#: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a
-#: long unit late in the queue would leave the other worker idle at the end. The rest follow in
-#: collection order (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per
-#: test, with a CPU-time plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load
-#: 3-4 (2026-11-23; shared fixtures counted once): study ~70 (small_study 36, the executor comparison ~15,
-#: the stack-up tests 16), rvcad export 33, fcl against analytic 20 (26 tests), stack-up Monte Carlo 17,
-#: rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up on other reducers 8, stiffness 7, fcl
-#: contacts 7. The loop's scenarios (measured before, ``-n 0`` one module at a time): the
-#: single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions, ~18),
-#: calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
-#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, the sibling refit under
-#: the physical law (test_calib_physical) 23 (alone, its module with its imports; 58 at 200 readings per
-#: revolution), ratio-81 12, the zero-offset scenario 8.5. The study runs alone on one worker while the single-pin/off-grid scenario
-#: makes the screening of the loop's three run conditions (280 points) as it starts and the declared pair
-#: screens its declared model, so every later scenario on either worker reads that screening from disk
-#: (:func:`calib_forward_cache`).
-HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "test_rvcad_export",
+#: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a long
+#: unit late in the queue would leave the other worker idle at the end. The rest follow in collection order
+#: (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per test, with a CPU-time
+#: plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load 3-4 (2026-11-23; shared
+#: fixtures counted once): study ~70 (small_study 36, the executor comparison ~15, the stack-up tests 16),
+#: rvcad export 33 (group build123d, with rvcad build: one import of build123d, ~6.5 CPU-s), fcl against
+#: analytic 20 (26 tests), stack-up Monte Carlo 17, rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up
+#: on other reducers 8, stiffness 7, fcl contacts 7. The loop's scenarios (measured before, ``-n 0`` one module
+#: at a time): the single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions,
+#: ~18), calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
+#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, the sibling refit under the
+#: physical law (test_calib_physical) 23 (alone, its module with its imports; 58 at 200 readings per
+#: revolution), ratio-81 12, the zero-offset scenario 8.5. The study runs alone on one worker while the
+#: single-pin/off-grid scenario makes the screening of the loop's three run conditions (280 points) as it
+#: starts and the declared pair screens its declared model, so every later scenario on either worker reads that
+#: screening from disk (:func:`calib_forward_cache`).
+HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "build123d",
                "test_screening_grid_does_not_alias_whatever_the_steps", "test_fcl_vs_analytic", "test_stackup_mc",
                "test_calib_groups", "test_two_effects_at_once", "test_calib_joint", "test_calib_physical",
                "test_calib_design", "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
