@@ -56,7 +56,7 @@ HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "build123d",
                "test_fcl_contacts", "test_encoder_zero_offset_is_not_disguised_as_physics",
                "test_direction_dependent_effect", "calib-order3", "test_load_dependent_effect",
                "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_stackup_failures",
-               "test_paper_readings", "test_rsm_plots", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
+               "test_rsm_plots", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
                "test_fuzz_loaders", "test_rsm_augment")
 
 
