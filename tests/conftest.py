@@ -57,7 +57,7 @@ HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "build123d",
                "test_direction_dependent_effect", "calib-order3", "test_load_dependent_effect",
                "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_stackup_failures",
                "test_rsm_plots", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
-               "test_fuzz_loaders", "test_rsm_augment")
+               "test_fuzz_loaders")
 
 
 def pytest_configure(config: pytest.Config) -> None:
