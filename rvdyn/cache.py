@@ -119,6 +119,16 @@ class Job:
              "version": CACHE_VERSION}
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:32]
 
+    def neighbour_key(self) -> str:
+        """Key of the job's neighbourhood for warm starts (:class:`rvdyn.runner.StateStore`): sha256 (32 hex) of
+        the case's design, load and direction and the settings (solver, law, angles), not its errors or model
+        options: the jobs of one neighbourhood solve the same equations at the same angles for nearby parameters
+        (a start of another model's coordinates is not used, :func:`rvdyn.te.run_te`)."""
+        c = self.case.to_dict()
+        d = {"design": c.get("design"), "load_Nm": c.get("load_Nm"), "direction": c.get("direction"),
+             **self.settings()}
+        return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
     def to_payload(self) -> dict[str, Any]:
         """Picklable, JSON-ready description for a worker (see :func:`rvdyn.runner.solve_job`)."""
         d = {"case": self.case.to_dict(), **self.settings(), "key": self.key()}

@@ -65,7 +65,7 @@ from rvdyn.executors import (PARENT_POLL_S, DaskExecutor, Executor, LocalPoolExe
 from rvdyn.solver import law_from_model
 from rvdyn.te import SOLVERS, run_te
 
-__all__ = ["Runner", "run_cases", "solve_job", "solve_group", "MemoryCache", "ENTRY_OVERHEAD_BYTES",
+__all__ = ["Runner", "run_cases", "solve_job", "solve_group", "MemoryCache", "StateStore", "ENTRY_OVERHEAD_BYTES",
            # executors (rvdyn.executors), re-exported: the runner is where users meet them
            "Executor", "SerialExecutor", "LocalPoolExecutor", "DaskExecutor", "SchedulerError", "make_executor",
            "PARENT_POLL_S", "SolveFn"]
@@ -79,12 +79,15 @@ def _failed(key: str, exc: BaseException, secs: float) -> dict[str, Any]:
     return {"key": key, "status": "failed", "stats": stats, "te_arcsec": [], "error": f"{type(exc).__name__}: {exc}"}
 
 
-def _ok(key: str, r: Any, secs: float | None = None) -> dict[str, Any]:
+def _ok(key: str, r: Any, secs: float | None = None, state: bool = False) -> dict[str, Any]:
     stats = {k: float(r.stats[k]) for k in _STAT_KEYS}
     if secs is not None:
         stats["seconds"] = float(secs)
-    return {"key": key, "status": "ok", "stats": stats,
-            "te_arcsec": [float(x) for x in r.table["te_arcsec"].to_numpy()], "error": ""}
+    out = {"key": key, "status": "ok", "stats": stats,
+           "te_arcsec": [float(x) for x in r.table["te_arcsec"].to_numpy()], "error": ""}
+    if state and getattr(r, "state", None) is not None:
+        out["state"] = np.asarray(r.state, dtype=np.float64)  # the runner's warm starts (never cached)
+    return out
 
 
 _SOLVE_ERRORS = (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError)
@@ -97,7 +100,9 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     ----------
     payload : dict
         ``case`` (case dict), ``solver``, ``steps``, ``revolutions``, ``law`` ({K, n, rigid}), ``key``
-        and optionally ``theta_in_deg`` (list of input angles, deg, replacing steps and revolutions).
+        and optionally ``theta_in_deg`` (list of input angles, deg, replacing steps and revolutions),
+        ``x_init`` (start states of the solve, a nearby case's converged states: a warm start) and
+        ``want_state`` (True: return the converged states as ``state``).
 
     Returns
     -------
@@ -105,7 +110,8 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
         ``key``, ``status`` (``ok`` or ``failed``), ``stats`` (``pp, mean, mean_abs, rms`` in arcsec,
         ``ratio``, ``seconds``), ``te_arcsec`` (list, one value per step; empty when failed) and
         ``error`` (message of a failed solve: an interference the contact law cannot resolve or a
-        solver that did not converge; both are properties of the case and are cached as such).
+        solver that did not converge; both are properties of the case and are cached as such); with
+        ``want_state``, ``state`` (ndarray (steps, ndof), :attr:`rvdyn.te.TEResult.state`).
         Missing software (e.g. the fcl provider) raises instead and is never cached.
     """
     case = Case.from_dict(payload["case"])
@@ -114,10 +120,10 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     th = payload.get("theta_in_deg")
     try:
         r = run_te(case, payload["solver"], int(payload["steps"]), float(payload["revolutions"]), law=law,
-                   theta_in_deg=None if th is None else np.asarray(th, dtype=float))
+                   theta_in_deg=None if th is None else np.asarray(th, dtype=float), x_init=payload.get("x_init"))
     except _SOLVE_ERRORS as exc:  # ImportError (missing software) is none of these and propagates
         return _failed(payload["key"], exc, time.perf_counter() - t0)
-    return _ok(payload["key"], r)
+    return _ok(payload["key"], r, state=payload.get("want_state", False))
 
 
 def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dict[str, Any]:
@@ -170,28 +176,30 @@ def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str,
         loads = [(float(jobs[i]["case"].get("load_Nm", 20.0)), int(jobs[i]["case"].get("direction", 1))) for i in idx]
         steps = [int(jobs[i]["steps"]) for i in idx]
         given = [jobs[i].get("theta_in_deg") for i in idx]
+        starts = [jobs[i].get("x_init") for i in idx]
         if len(idx) > 1 and all(load > 0 for load, _ in loads):
             t0 = time.perf_counter()
             try:  # a pair that cannot be solved comes back as its error, the others as results
                 rs = te.run_te_many(case, payload["solver"], steps, loads=loads, revolutions=revs, law=law, geom=geom,
-                                    errors="return", theta_in_deg=given)
+                                    errors="return", theta_in_deg=given, x_init=starts)
             except _SOLVE_ERRORS:
                 rs = None  # solved job by job below
             if rs is not None:
                 secs = (time.perf_counter() - t0) / len(idx)
                 for i, r in zip(idx, rs):
                     k = jobs[i]["key"]
-                    results[i] = _failed(k, r, secs) if isinstance(r, BaseException) else _ok(k, r)
+                    results[i] = (_failed(k, r, secs) if isinstance(r, BaseException)
+                                  else _ok(k, r, state=jobs[i].get("want_state", False)))
                 continue
-        for i, n, (load, d), th in zip(idx, steps, loads, given):
+        for i, n, (load, d), th, xi in zip(idx, steps, loads, given, starts):
             t0 = time.perf_counter()
             try:
                 r = te.run_te(case, payload["solver"], n, revs, load, d, law, geom=geom,
-                              theta_in_deg=None if th is None else np.asarray(th, dtype=float))
+                              theta_in_deg=None if th is None else np.asarray(th, dtype=float), x_init=xi)
             except _SOLVE_ERRORS as exc:
                 results[i] = _failed(jobs[i]["key"], exc, time.perf_counter() - t0)
                 continue
-            results[i] = _ok(jobs[i]["key"], r)
+            results[i] = _ok(jobs[i]["key"], r, state=jobs[i].get("want_state", False))
     return {"key": payload["key"], "results": results}
 
 
@@ -289,6 +297,58 @@ class MemoryCache:
         self.bytes = self.pinned_bytes = 0
 
 
+class StateStore:
+    """Converged solver states of this process for warm starts (:attr:`rvdyn.te.TEResult.state`), one per
+    neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`: the same design, load, direction, solver, law and
+    angles, any errors and model options), the newest replacing the older; the least recently used
+    neighbourhoods dropped first beyond ``max_bytes``.
+
+    Parameters
+    ----------
+    max_bytes : int
+        Budget, bytes (>= 0; each state counts its array's bytes).
+    """
+
+    def __init__(self, max_bytes: int) -> None:
+        if isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, np.integer)) or max_bytes < 0:
+            raise ValueError(f"warm_bytes {max_bytes!r} must be an integer >= 0")
+        self.max_bytes = int(max_bytes)
+        self._d: OrderedDict[str, np.ndarray] = OrderedDict()
+        self.bytes = self.hits = self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._d)
+
+    def get(self, key: str) -> np.ndarray | None:
+        """The newest state of a neighbourhood (read-only, now the most recently used), or None."""
+        x = self._d.get(key)
+        if x is None:
+            self.misses += 1
+            return None
+        self._d.move_to_end(key)
+        self.hits += 1
+        return x
+
+    def put(self, key: str, state: np.ndarray) -> None:
+        """Keep a state (a read-only float64 copy) as its neighbourhood's newest; drop the oldest beyond the budget."""
+        x = np.array(state, dtype=np.float64)
+        x.setflags(write=False)
+        old = self._d.pop(key, None)
+        if old is not None:
+            self.bytes -= old.nbytes
+        if x.nbytes > self.max_bytes:
+            return
+        self._d[key] = x
+        self.bytes += x.nbytes
+        while self.bytes > self.max_bytes:
+            self.bytes -= self._d.popitem(last=False)[1].nbytes
+
+    def clear(self) -> None:
+        """Forget every state."""
+        self._d.clear()
+        self.bytes = 0
+
+
 def _check_steps(steps: Any, what: str = "steps") -> int:
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 2:
         raise ValueError(f"{what} {steps!r} must be an integer >= 2")
@@ -328,6 +388,15 @@ class Runner:
     memory_bytes : int
         Budget of the in-memory cache, bytes (:class:`MemoryCache`; default 0: it keeps only what
         :meth:`prefetch` pins). Looked up before the disk cache and filled from it and from every solve.
+    warm_bytes : int
+        Budget of the warm starts, bytes (:class:`StateStore`; default 0: none, every solve starts cold as
+        :func:`rvdyn.te.run_te` does). With a budget, every solve returns its converged states, kept per
+        neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`), and a solve whose neighbourhood has a state
+        starts from it (``x_init``): a closed loop's solves are small perturbations of solved cases (its
+        finite-difference columns, trial steps, candidates at the current state), which then take fewer
+        outer and Newton iterations. Each result equals the cold solve's within the solver tolerance
+        (``Tolerances.solver_angle_rad``); which state a solve starts from depends on the order of the
+        solves, so results are reproducible to that tolerance, not bit for bit.
 
     Attributes
     ----------
@@ -347,7 +416,7 @@ class Runner:
     def __init__(self, executor: Executor | int | str | None = None, cache: CaseCache | str | Path | None = None,
                  solver: str = "analytic", steps: int = 720, law: ContactLaw | None = None,
                  revolutions: float = 1.0, progress: bool = False, solve_fn: SolveFn = solve_job,
-                 memory_bytes: int = 0) -> None:
+                 memory_bytes: int = 0, warm_bytes: int = 0) -> None:
         if solver not in SOLVERS:
             raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
         self.steps = _check_steps(steps)
@@ -362,6 +431,7 @@ class Runner:
             executor = make_executor(workers=executor)
         self.executor: Executor = executor
         self.memory = MemoryCache(memory_bytes)
+        self.states = StateStore(warm_bytes)
         self.cache = cache if isinstance(cache, CaseCache) else CaseCache(cache)
         self.solver = solver
         self.law = law
@@ -456,6 +526,15 @@ class Runner:
         tasks = self._tasks(todo, keys, group, len(jobs))
         payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
                     for t in tasks]
+        near: dict[str, str] = {}
+        if self.states.max_bytes > 0:  # warm starts: each job from its neighbourhood's newest state, if any
+            for t, p in zip(tasks, payloads):
+                for k, q in zip(t, p["jobs"] if "jobs" in p else [p]):
+                    near[k] = unique[k].neighbour_key()
+                    q["want_state"] = True
+                    x0 = self.states.get(near[k])
+                    if x0 is not None:
+                        q["x_init"] = x0
         fn = self.solve_fn if all(len(t) == 1 for t in tasks) else functools.partial(_solve_task,
                                                                                      solve_fn=self.solve_fn)
         bar = tqdm(total=len(unique), initial=len(results), desc=desc, unit="case", file=sys.stderr,
@@ -469,6 +548,9 @@ class Runner:
                 for k, r in zip(tasks[i], got):
                     if r.get("key") != k:
                         raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
+                    state = r.pop("state", None)
+                    if state is not None and k in near:
+                        self.states.put(near[k], state)
                     self.cache.put(k, r)
                     results[k] = {**self._keep(k, r), "cached": False}
                     self.computed += 1

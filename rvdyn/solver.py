@@ -266,8 +266,10 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             Steps solved together. ``None``: all at once (analytic provider); 1: step by step, each
             started from the previous solution (fcl provider: fewer distance queries).
         x_init : (N, ndof) or None
-            Start states (scaled coordinates); default the ideal kinematics, or with the supports inside and
-            ``chunk`` None, at least ``PILOT_MIN_ROWS`` angles, the pilot start (:meth:`_pilot_start`).
+            Start states (scaled coordinates, e.g. :attr:`Solution.x` of a nearby solve at these angles: a warm
+            start, with the Levenberg-Marquardt damping ``WARM_MU``); default the ideal kinematics, or with the
+            supports inside and ``chunk`` None, at least ``PILOT_MIN_ROWS`` angles, the pilot start
+            (:meth:`_pilot_start`). The equilibrium is the same within the solver tolerance.
         """
         th = self._check_solve_args(theta_in, direction, load_Nm)
         N = th.size
@@ -275,8 +277,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         B = np.zeros((N, self.ndof))
         B[:, 0] = direction * self._load_Nmm(load_Nm) / self.Rp
         dirs = np.full(N, direction)
-        x = np.zeros((N, self.ndof)) if x_init is None else np.array(x_init, dtype=float)
-        mu0 = 1.0
+        x = np.zeros((N, self.ndof)) if x_init is None else self._check_start(x_init, N, "x_init")
+        mu0 = 1.0 if x_init is None else WARM_MU
         if x_init is None and chunk is None and self.chain is not None and N >= PILOT_MIN_ROWS:
             x[:], mu0 = self._pilot_start(th, direction, load_Nm, law)
         chunk = N if chunk is None else max(1, int(chunk))
@@ -292,6 +294,14 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             iters = max(iters, used[0])
             prev = xs[-1].copy()
         return self._finish_rows(th, x, direction, load_Nm, law, iters, out, slice(0, N))
+
+    def _check_start(self, x_init, n: int, field: str) -> np.ndarray:
+        """A copy of start states (n, ndof) as float64; ValueError naming ``field`` if the shape or a value is wrong."""
+        xi = np.array(x_init, dtype=float)
+        if xi.shape != (n, self.ndof) or not np.all(np.isfinite(xi)):
+            raise ValueError(f"{field} must be a finite array of shape {(n, self.ndof)} (angles, state coordinates); "
+                             f"got shape {xi.shape}")
+        return xi
 
     def _pilot_start(self, th_in: np.ndarray, direction: int, load_Nm: float,
                      law: ContactLaw) -> tuple[np.ndarray, float]:
@@ -390,11 +400,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             for i, ((a, b), xi) in enumerate(zip(bounds, x_init)):
                 if xi is None:
                     continue
-                xi = np.asarray(xi, dtype=float)
-                if xi.shape != (b - a, self.ndof) or not np.all(np.isfinite(xi)):
-                    raise ValueError(f"x_init[{i}] must be a finite array of shape {(b - a, self.ndof)}; got "
-                                     f"shape {xi.shape}")
-                x[a:b] = xi
+                x[a:b] = self._check_start(xi, b - a, f"x_init[{i}]")
                 mu0[a:b] = WARM_MU
         out = self._outputs(N)
         used = self._outer(th, x, dirs, B, law, bounds, out, 0, list(loads_Nm), expand=expand_trust,
