@@ -319,6 +319,9 @@ class StateStore:
     def __len__(self) -> int:
         return len(self._d)
 
+    def __contains__(self, key: str) -> bool:
+        return key in self._d
+
     def get(self, key: str) -> np.ndarray | None:
         """The newest state of a neighbourhood (read-only, now the most recently used), or None."""
         x = self._d.get(key)
@@ -527,35 +530,43 @@ class Runner:
         payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
                     for t in tasks]
         near: dict[str, str] = {}
+        waves = [list(range(len(tasks)))]
         if self.states.max_bytes > 0:  # warm starts: each job from its neighbourhood's newest state, if any
             for t, p in zip(tasks, payloads):
                 for k, q in zip(t, p["jobs"] if "jobs" in p else [p]):
                     near[k] = unique[k].neighbour_key()
                     q["want_state"] = True
-                    x0 = self.states.get(near[k])
-                    if x0 is not None:
-                        q["x_init"] = x0
+            waves = self._waves(tasks, near)
         fn = self.solve_fn if all(len(t) == 1 for t in tasks) else functools.partial(_solve_task,
                                                                                      solve_fn=self.solve_fn)
         bar = tqdm(total=len(unique), initial=len(results), desc=desc, unit="case", file=sys.stderr,
                    disable=not self.progress, dynamic_ncols=True)
         try:
-            for i, res in self.executor.run(fn, payloads):
-                got = res["results"] if "results" in res else [res]
-                self.worker_seconds += float(res.get("task_seconds", res.get("stats", {}).get("seconds", 0.0)))
-                if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
-                    raise RuntimeError(f"worker returned the result of {res.get('key')!r} for {payloads[i]['key']!r}")
-                for k, r in zip(tasks[i], got):
-                    if r.get("key") != k:
-                        raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
-                    state = r.pop("state", None)
-                    if state is not None and k in near:
-                        self.states.put(near[k], state)
-                    self.cache.put(k, r)
-                    results[k] = {**self._keep(k, r), "cached": False}
-                    self.computed += 1
-                    self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
-                bar.update(len(got))
+            for wave in waves:
+                if near:
+                    for i in wave:
+                        for k, q in zip(tasks[i], payloads[i]["jobs"] if "jobs" in payloads[i] else [payloads[i]]):
+                            x0 = self.states.get(near[k])
+                            if x0 is not None:
+                                q["x_init"] = x0
+                for j, res in self.executor.run(fn, [payloads[i] for i in wave]):
+                    i = wave[j]
+                    got = res["results"] if "results" in res else [res]
+                    self.worker_seconds += float(res.get("task_seconds", res.get("stats", {}).get("seconds", 0.0)))
+                    if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
+                        raise RuntimeError(f"worker returned the result of {res.get('key')!r} for "
+                                           f"{payloads[i]['key']!r}")
+                    for k, r in zip(tasks[i], got):
+                        if r.get("key") != k:
+                            raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
+                        state = r.pop("state", None)
+                        if state is not None and k in near:
+                            self.states.put(near[k], state)
+                        self.cache.put(k, r)
+                        results[k] = {**self._keep(k, r), "cached": False}
+                        self.computed += 1
+                        self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
+                    bar.update(len(got))
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0
@@ -584,6 +595,22 @@ class Runner:
         them without solving, reading the cache or counting them again. A study submits every case it will need at once (no worker waits between
         its stages) and then reads them stage by stage."""
         self(cases, desc, keep=True, **kw)
+
+    def _waves(self, tasks: list[list[str]], near: dict[str, str]) -> list[list[int]]:
+        """Task indices in the order to run them with warm starts: first, for every neighbourhood with no state
+        yet, the first task that has it (the batch's base case, e.g. the state a loop's trials perturb, comes
+        first), then the rest, which start from the states the first wave leaves."""
+        missing = {near[k] for t in tasks for k in t if near[k] not in self.states}
+        if not missing or len(tasks) < 2:
+            return [list(range(len(tasks)))]
+        first: list[int] = []
+        for i, t in enumerate(tasks):
+            new = {near[k] for k in t} & missing
+            if new:
+                first.append(i)
+                missing -= new
+        rest = [i for i in range(len(tasks)) if i not in set(first)]
+        return [first, rest] if rest else [first]
 
     @staticmethod
     def _tasks(todo: list[str], keys: list[str], group: Sequence[Any] | None, n: int) -> list[list[str]]:

@@ -111,6 +111,12 @@ def test_runner_starts_a_neighbour_from_the_newest_state_and_caches_no_state(tmp
         assert np.abs(w["te_arcsec"] - c["te_arcsec"]).max() < TOL_ARCSEC
     single = warm(cases[2:3], "single", steps=STEPS + 2)  # another angle set: its own neighbourhood
     assert single[0]["status"] == "ok" and len(warm.states) == 3
+    # one batch, no state yet: its first group is solved first, the second starts from its states
+    both = Runner(steps=STEPS, warm_bytes=2 ** 20)
+    got = both(cases, "both", group=[0, 0, 1, 1])
+    assert both.states.hits == 2 and both.computed == 4
+    for w, c in zip(got[2:], cold):
+        assert np.abs(w["te_arcsec"] - c["te_arcsec"]).max() < TOL_ARCSEC
 
 
 def test_state_store_keeps_the_newest_state_within_its_budget():
