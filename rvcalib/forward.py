@@ -24,7 +24,9 @@ finite-difference columns of a Jacobian, the trial steps of a fit, the candidate
 state), so the default runner keeps the newest converged state of each run condition and angle set
 (:data:`WARM_BYTES`, ``Runner(warm_bytes=...)``) and starts the next solve of that condition from it. Each
 result equals the cold solve's within the solver tolerance (1e-9 rad, 2e-4 arcsec; measured on the 5-run
-benchmark's conditions: up to 7e-5 arcsec); the benchmark's loop takes about a third less CPU.
+benchmark's conditions: up to 7e-5 arcsec). With each state of a batch on its own convergence test
+(:meth:`rvdyn.solver.QuasiStaticSolver.solve_many`) the 5-run benchmark's loop took 294 -> 178 s CPU under the
+physical law and 74 -> 56 s under the impact law, with the same effects, sizes and RMS (docs/calibration.md).
 :func:`use_runner` puts another in its place, e.g. ``Runner(executor=2, cache="dir",
 memory_bytes=CACHE_BYTES)`` for a local pool and a disk cache shared with later runs.
 
