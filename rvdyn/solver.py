@@ -404,7 +404,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 mu0[a:b] = WARM_MU
         out = self._outputs(N)
         used = self._outer(th, x, dirs, B, law, bounds, out, 0, list(loads_Nm), expand=expand_trust,
-                           collect=errors == "return", mu0=mu0)
+                           collect=errors == "return", mu0=mu0, warm=bool(np.any(mu0 < 1.0)))
         res: list = []
         for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used):
             if isinstance(it, Exception):
@@ -426,7 +426,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
 
     def _outer(self, th, x, dirs, B, law, bounds: list[tuple[int, int]], out: dict, offset: int,
                loads: list[float], expand: bool = False, collect: bool = False,
-               mu0: float | np.ndarray = 1.0) -> list:
+               mu0: float | np.ndarray = 1.0, warm: bool = False) -> list:
         """Outer iterations of the solves whose rows are ``bounds`` (row ranges of th and x, solved together,
         each to its own convergence test; ``loads`` N m, for the messages); x is updated in place, the converged
         linearisation is written to ``out`` at row ``offset + row``. ``expand``: grow the trust radius of states
@@ -451,7 +451,9 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         # (a batch of several solves likewise, each state on its own test: measured on the loop's 5 conditions x
         # 280 angles, one state in 1,400 whose contact flips between linearisations needed ten more outer
         # iterations than the rest, and kept its whole solve of 280 states iterating with it)
-        per_row = self.chain is not None
+        # (and with the impact law a warm batch, some of whose solves have start states: a cold batch of the impact
+        # law iterates each solve to its slowest state, as it always did, bit for bit)
+        per_row = self.chain is not None or (len(bounds) > 1 and warm)
         row_on = np.zeros(N, dtype=bool)
         for a, b in bounds:
             row_on[a:b] = True
