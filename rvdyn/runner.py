@@ -31,6 +31,11 @@ survives the process) and the in-memory one (:class:`MemoryCache`): within its `
 for callers that ask for the same solves again and again within a process (e.g. a fit's trial values),
 and beside it, pinned outside that budget until :meth:`MemoryCache.clear`, the results of :meth:`Runner.prefetch`.
 
+Warm starts (``Runner(warm_bytes=...)``, off by default): the runner keeps the newest converged solver state of each
+neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`: the same design, load, direction, solver, law and angles) in a
+:class:`StateStore` and starts the next solve of that neighbourhood from it (``x_init`` of :func:`rvdyn.te.run_te`);
+results equal the cold solves' within the solver tolerance. The states never enter the result caches.
+
 Executors (:mod:`rvdyn.executors`) run the same worker function, :func:`solve_job`, on JSON-ready job payloads
 (:meth:`rvdyn.cache.Job.to_payload`) and yield ``(index, result)`` pairs as they finish. The results
 come back to this process, which alone writes the cache; Dask workers therefore need the package
