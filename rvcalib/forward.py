@@ -51,7 +51,7 @@ from rvcalib.orders import period_deg
 #: Budget of the default runner's in-memory cache, bytes (least recently used solutions go first).
 CACHE_BYTES = 256 * 2 ** 20
 
-#: Budget of the default runner's warm starts, bytes (:class:`rvdyn.runner.StateStore`: the newest converged
+#: Budget of the default runner's warm starts, bytes (:class:`rvdyn.cache.StateStore`: the newest converged
 #: state of each run condition and angle set, ~80 kB for 360 angles under the physical law; least recently used
 #: first out).
 WARM_BYTES = 32 * 2 ** 20

@@ -33,7 +33,7 @@ and beside it, pinned outside that budget until :meth:`MemoryCache.clear`, the r
 
 Warm starts (``Runner(warm_bytes=...)``, off by default): the runner keeps the newest converged solver state of each
 neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`: the same design, load, direction, solver, law and angles) in a
-:class:`StateStore` and starts the next solve of that neighbourhood from it (``x_init`` of :func:`rvdyn.te.run_te`);
+:class:`rvdyn.cache.StateStore` and starts the next solve of that neighbourhood from it (``x_init`` of :func:`rvdyn.te.run_te`);
 results equal the cold solves' within the solver tolerance. The states never enter the result caches.
 
 Executors (:mod:`rvdyn.executors`) run the same worker function, :func:`solve_job`, on JSON-ready job payloads
@@ -64,7 +64,7 @@ import numpy as np
 
 from rvcad.errors import Case
 from rvdyn.contacts import ContactLaw
-from rvdyn.cache import CaseCache, Job
+from rvdyn.cache import CaseCache, Job, StateStore
 from rvdyn.executors import (PARENT_POLL_S, DaskExecutor, Executor, LocalPoolExecutor, SchedulerError, SerialExecutor,
                              SolveFn, make_executor)
 from rvdyn.solver import law_from_model
@@ -300,61 +300,6 @@ class MemoryCache:
         """Forget every entry (pinned ones too)."""
         self._d.clear()
         self.bytes = self.pinned_bytes = 0
-
-
-class StateStore:
-    """Converged solver states of this process for warm starts (:attr:`rvdyn.te.TEResult.state`), one per
-    neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`: the same design, load, direction, solver, law and
-    angles, any errors and model options), the newest replacing the older; the least recently used
-    neighbourhoods dropped first beyond ``max_bytes``.
-
-    Parameters
-    ----------
-    max_bytes : int
-        Budget, bytes (>= 0; each state counts its array's bytes).
-    """
-
-    def __init__(self, max_bytes: int) -> None:
-        if isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, np.integer)) or max_bytes < 0:
-            raise ValueError(f"warm_bytes {max_bytes!r} must be an integer >= 0")
-        self.max_bytes = int(max_bytes)
-        self._d: OrderedDict[str, np.ndarray] = OrderedDict()
-        self.bytes = self.hits = self.misses = 0
-
-    def __len__(self) -> int:
-        return len(self._d)
-
-    def __contains__(self, key: str) -> bool:
-        return key in self._d
-
-    def get(self, key: str) -> np.ndarray | None:
-        """The newest state of a neighbourhood (read-only, now the most recently used), or None."""
-        x = self._d.get(key)
-        if x is None:
-            self.misses += 1
-            return None
-        self._d.move_to_end(key)
-        self.hits += 1
-        return x
-
-    def put(self, key: str, state: np.ndarray) -> None:
-        """Keep a state (a read-only float64 copy) as its neighbourhood's newest; drop the oldest beyond the budget."""
-        x = np.array(state, dtype=np.float64)
-        x.setflags(write=False)
-        old = self._d.pop(key, None)
-        if old is not None:
-            self.bytes -= old.nbytes
-        if x.nbytes > self.max_bytes:
-            return
-        self._d[key] = x
-        self.bytes += x.nbytes
-        while self.bytes > self.max_bytes:
-            self.bytes -= self._d.popitem(last=False)[1].nbytes
-
-    def clear(self) -> None:
-        """Forget every state."""
-        self._d.clear()
-        self.bytes = 0
 
 
 def _check_steps(steps: Any, what: str = "steps") -> int:
