@@ -68,6 +68,10 @@ class Design:
     journal_bearing_contact_angle_deg : float
         Contact angle of the crank journal bearings, degrees: tapered roller bearings as in the RV-E series
         (default 13.13 deg, ISO 281 e = 1.5 tan(alpha) = 0.35 of a small 302-series bearing); 0 = cylindrical.
+    journal_bearing_arrangement : str
+        ``"face_to_face"`` (X, the default) or ``"back_to_back"`` (O): how the tapered journal bearings of a
+        crank face each other, which moves their effective load centres inwards or outwards by
+        ``(crank_journal_radius_mm + journal_bearing_roller_diameter_mm) tan(contact angle)`` (rvdyn.bearings).
     carrier_pillars, carrier_pillar_radius_mm : int, float
         Pillars joining the output flange and the carrier end plate (round bars on the crank circle, midway
         between the cranks), mm; their bending and shear twist the carrier (rvdyn.bearings.carrier_torsional_stiffness).
@@ -114,6 +118,13 @@ class Design:
     # cylindrical roller bearing). 13.13 deg: ISO 281's e = 1.5 tan(alpha) with e = 0.35 of the small 302-series
     # tapered roller bearings (e.g. 30203, 17 mm bore; catalogue Y = 1.7 = 0.4 cot(alpha) agrees).
     journal_bearing_contact_angle_deg: float = 13.13
+    # How the two tapered bearings of a crank face each other (JOURNAL_ARRANGEMENTS): the effective load centre
+    # of a tapered roller bearing lies where the load line of the outer ring crosses the axis, offset from the
+    # roller's mid-plane by (journal radius + roller diameter) tan(alpha) towards the cup's wide end; face to
+    # face (X) the load centres move inwards (shorter effective span), back to back (O) outwards. Assumption:
+    # face to face, the cups pushed inwards by the plates' outer shoulders (the plates clamped onto the
+    # pillars set the preload); the arrangement of the RV-E's crank bearings is not published.
+    journal_bearing_arrangement: str = "face_to_face"
     # Carrier: the output flange and the carrier end plate joined by pillars through the discs, on the crank
     # circle midway between the cranks (not in the paper; README "Assumptions"). The pillar holes of the discs
     # are taken as large as the crank holes (cam_radius_mm), so a pillar is a round bar of radius
@@ -224,6 +235,10 @@ class Design:
                 as_int(v, where, cls=DesignError)
             elif isinstance(default, float):
                 as_real(v, where, cls=DesignError)
+            elif f.name == "journal_bearing_arrangement":
+                if not (isinstance(v, str) and v in JOURNAL_ARRANGEMENTS):
+                    reject(where, v, f"one of {list(JOURNAL_ARRANGEMENTS)}",
+                           "is not a tapered-bearing arrangement", DesignError)
 
     def _check_ranges(self) -> None:
         for name, (lo, hi, lo_open, why) in FIELD_RANGES.items():
@@ -358,6 +373,9 @@ class Design:
                 kw[f.name] = v
         return cls(**kw).validate()
 
+
+#: Arrangements of the two tapered journal bearings of a crank (``Design.journal_bearing_arrangement``).
+JOURNAL_ARRANGEMENTS = ("face_to_face", "back_to_back")
 
 #: Physical range of every Design field: (low, high, low bound open?, reason). Relations between
 #: fields are checked in :meth:`Design.validate` after these.

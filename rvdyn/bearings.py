@@ -25,10 +25,19 @@ Formulas and sources:
   stepped sections (journal radius to the first disc, eccentric beyond), i.e. a spring
   ``1 / (sum l_i/(G J_p,i) r_b2^2)`` along the stage I line of action, in series with the mesh (in the
   equilibrium).
+- Tapered journal bearings' effective load centres (NSK, *Rolling Bearings*): ``R_o tan(alpha)`` from the roller's
+  mid-plane towards the cup's wide end, inwards face to face (the default), outwards back to back; the crank's
+  beam spans the load centres.
+- Bearing seats (Palmgren assumes rigidly backed rings): the disc hole around a cam bearing and the plate bore
+  around a journal bearing as a rigid disc bonded in a plate annulus held at radius b, generalised plane stress,
+  ``U/F = [kappa ln(b/a) - (b^2 - a^2)/(kappa (b^2 + a^2))]/(2 pi G (1 + kappa) t)`` (from Muskhelishvili's
+  potentials), in series with the bearing (rvdyn.support_eq.radial_law).
 - Carrier: the far (carrier) end plate reaches the output flange through the pillars. A pillar is a Timoshenko
-  beam clamped in both plates, its ends displaced parallel (guided): ``1/k = L^3/(12 E I) + L/(kappa G A)``
-  (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a solid circle ``kappa = 6 (1 + nu)/(7 +
-  6 nu)``, Cowper 1966); the plate turns by ``phi`` relative to the flange against ``k_t = n_p k r_p^2``
+  beam built into both plates, its ends displaced parallel (guided): ``1/k = L^3/(12 E I) + L/(kappa G A) +
+  L^2/(2 k_theta)`` (Timoshenko & Gere, *Mechanics of Materials*; shear coefficient of a solid circle ``kappa = 6
+  (1 + nu)/(7 + 6 nu)``, Cowper 1966), each root turning in its plate as a rigid disc rocking on a half-space,
+  ``k_theta = 4 E a^3/(3 (1 - nu^2))`` (Richart, Hall & Woods 1970; Gazetas 1991); the plate turns by ``phi``
+  relative to the flange against ``k_t = n_p k r_p^2``
   (pillars on the circle r_p). The turn is a coordinate of the equilibrium (rvdyn.support_eq: it carries
   journal B of every crank along the crank circle), so the torque split between the journals is solved;
   :meth:`Supports.far_journal_share` is the lever-rule statics of equal discs (1/2 by default), for reference.
@@ -44,8 +53,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rvcad.layout import PLATE_RIM_CLEARANCE_MM
 from rvcad.params import Design
-from rvdyn.materials import MATERIALS, LineContact
+from rvdyn.materials import MATERIALS, LineContact, Material
 
 #: Palmgren's line-contact constant, mm N^-0.9 mm^0.8.
 PALMGREN_LINE = 3.84e-5
@@ -91,14 +101,29 @@ def circle_shear_coefficient(nu: float) -> float:
     return 6.0 * (1.0 + nu) / (7.0 + 6.0 * nu)
 
 
-def guided_beam_stiffness(E: float, nu: float, radius: float, length: float) -> float:
-    """Lateral stiffness (N/mm) of a round Timoshenko beam clamped at one end and guided at the other (ends
-    displaced parallel, no end rotation): ``1/k = L^3/(12 E I) + L/(kappa G A)``, ``I = pi r^4/4``,
-    ``A = pi r^2``, ``G = E/(2 (1 + nu))``. E in MPa, lengths in mm."""
+def root_rotational_stiffness(E: float, nu: float, radius: float) -> float:
+    """Rotational stiffness (N mm/rad) of the root of a round bar of radius a built into an elastic body, taken as
+    a rigid circular punch rocking on an elastic half-space (Sneddon's tilted flat punch; the static rocking
+    stiffness of a rigid circular foundation, Richart, Hall & Woods 1970, Gazetas 1991):
+    ``k_theta = 8 G a^3 / (3 (1 - nu)) = 4 E a^3 / (3 (1 - nu^2))``. E in MPa, a in mm."""
+    return 4.0 * E * radius ** 3 / (3.0 * (1.0 - nu * nu))
+
+
+def guided_beam_stiffness(E: float, nu: float, radius: float, length: float,
+                          root_k: float = math.inf) -> float:
+    """Lateral stiffness (N/mm) of a round Timoshenko beam whose ends are built into two bodies that move parallel
+    (guided: the bodies do not turn): ``1/k = L^3/(12 E I) + L/(kappa G A) + L^2/(2 k_theta)``, ``I = pi r^4/4``,
+    ``A = pi r^2``, ``G = E/(2 (1 + nu))``. ``root_k`` (N mm/rad): the rotational stiffness ``k_theta`` of each
+    built-in end (:func:`root_rotational_stiffness`; ``inf``: rigidly clamped). By symmetry both end moments are
+    ``F L/2``; each root turns by ``F L/(2 k_theta)`` in the same sense, which moves one end against the other by
+    ``F L^2/(2 k_theta)`` (slope-deflection equations). E in MPa, lengths in mm."""
     I = math.pi * radius ** 4 / 4.0
     A = math.pi * radius ** 2
     G = E / (2.0 * (1.0 + nu))
-    return 1.0 / (length ** 3 / (12.0 * E * I) + length / (circle_shear_coefficient(nu) * G * A))
+    c = length ** 3 / (12.0 * E * I) + length / (circle_shear_coefficient(nu) * G * A)
+    if math.isfinite(root_k):
+        c += length ** 2 / (2.0 * root_k)
+    return 1.0 / c
 
 
 def stepped_beam_influence(L: float, sections: tuple, xs) -> np.ndarray:
@@ -148,19 +173,88 @@ def crank_sections(d: Design, z_journal: tuple[float, float], discs: tuple) -> t
     return (sec(zA, e0, rj), sec(e0, e1, re), sec(e1, zB, rj))
 
 
+def annulus_seat_compliance(E: float, nu: float, a: float, b: float, t: float) -> float:
+    """Compliance (mm/N) of a bearing seat: a rigid disc of radius a bonded in a plate annulus of outer radius b
+    (held fixed) and thickness t, translated in the plane by a force (generalised plane stress):
+
+        U / F = [kappa ln(b/a) - (b^2 - a^2) / (kappa (b^2 + a^2))] / (2 pi G (1 + kappa) t),
+        kappa = (3 - nu)/(1 + nu),  G = E / (2 (1 + nu))
+
+    from Muskhelishvili's potentials of a resultant force on a contour (``phi = alpha ln z + lambda z^2``,
+    ``psi = -kappa alpha ln z + zeta / z^2``, ``alpha = -F/(2 pi (1 + kappa) t)``; the constant and the
+    ``e^{2 i theta}`` parts of the displacement matched at r = a and r = b; docs/physics.md, section 8). E in
+    MPa, lengths in mm."""
+    if not (0.0 < a < b):
+        raise ValueError(f"annulus radii a = {a!r} mm, b = {b!r} mm must satisfy 0 < a < b")
+    G = E / (2.0 * (1.0 + nu))
+    k = (3.0 - nu) / (1.0 + nu)
+    return ((k * math.log(b / a) - (b * b - a * a) / (k * (b * b + a * a)))
+            / (2.0 * math.pi * G * (1.0 + k) * t))
+
+
+def plate_outer_radius_mm(d: Design) -> float:
+    """Outer radius of the flange plate and the carrier end plate, mm (rvcad.plates: the pin circle less the
+    eccentricity, the pin radius and ``PLATE_RIM_CLEARANCE_MM``)."""
+    return d.pin_circle_radius_mm - d.eccentricity_mm - d.pin_radius_mm - PLATE_RIM_CLEARANCE_MM
+
+
+def cam_seat_compliance(d: Design) -> float:
+    """Compliance (mm/N) of a disc hole around its needle bearing (the outer raceway's elastic support):
+    :func:`annulus_seat_compliance` with the hole radius ``cam_radius_mm``, the outer radius the distance from
+    the hole's centre to the pin circle (where the disc is held, by the pins), the disc's width and material."""
+    m = MATERIALS["cycloid_disc"]
+    b = d.pin_circle_radius_mm - d.center_distance_mm
+    if not b > d.cam_radius_mm:
+        raise ValueError(f"design.cam_radius_mm {d.cam_radius_mm!r} must be < pin circle radius - centre distance "
+                         f"= {b!r} mm (the disc around the crank hole)")
+    return annulus_seat_compliance(m.E, m.nu, d.cam_radius_mm, b, d.disc_width_mm)
+
+
+def journal_seat_compliance(d: Design) -> float:
+    """Compliance (mm/N) of a plate bore around a journal bearing: :func:`annulus_seat_compliance` with the
+    radius of the outer raceway (``crank_journal_radius_mm + journal_bearing_roller_diameter_mm``; the cup is
+    counted as plate material), the outer radius the distance from the bore's centre to the plate's rim (where
+    the main bearing holds it), the plate's width and material (ZG65Mn, both plates)."""
+    m = MATERIALS["flange_plate"]
+    a = d.crank_journal_radius_mm + d.journal_bearing_roller_diameter_mm
+    b = plate_outer_radius_mm(d) - d.center_distance_mm
+    if not b > a:
+        raise ValueError(f"design.crank_journal_radius_mm + journal_bearing_roller_diameter_mm = {a!r} mm must be < "
+                         f"plate rim - centre distance = {b!r} mm (the plate around the journal bearing)")
+    return annulus_seat_compliance(m.E, m.nu, a, b, d.plate_width_mm)
+
+
+def journal_load_centre_offset_mm(d: Design) -> float:
+    """Axial offset (mm) of a tapered journal bearing's effective load centre from its mid-plane, inwards (towards
+    the discs) positive: the load line of the outer ring (normal to the cup raceway through the roller's
+    mid-length, at the outer raceway radius ``R_o = crank_journal_radius_mm + journal_bearing_roller_diameter_mm``)
+    crosses the axis ``R_o tan(alpha)`` from the roller's mid-plane, towards the cup's wide end (NSK, *Rolling
+    Bearings*, "effective load centre": the intersection of the shaft's axis with the line of the load the outer
+    ring applies to the rolling elements; the catalogues' ``a = T/2 + (d + D) e/6`` is the same with the mean
+    radius and ``e = 1.5 tan(alpha)``). Face to face (X) the wide ends face each other: +R_o tan(alpha); back to
+    back (O): -R_o tan(alpha); 0 for a cylindrical bearing (alpha = 0)."""
+    ro = d.crank_journal_radius_mm + d.journal_bearing_roller_diameter_mm
+    off = ro * math.tan(math.radians(d.journal_bearing_contact_angle_deg))
+    return off if d.journal_bearing_arrangement == "face_to_face" else -off
+
+
 def pillar_length_mm(d: Design) -> float:
     """Free length of a pillar between the inner faces of the flange plate and the carrier end plate, mm:
     both discs, the gap between them and the axial clearance on either side."""
     return 2.0 * AXIAL_CLEARANCE_MM + 2.0 * d.disc_width_mm + d.disc_gap_mm
 
 
-def carrier_torsional_stiffness(d: Design) -> float:
+def carrier_torsional_stiffness(d: Design, root: bool = True) -> float:
     """Torsional stiffness (N mm/rad) of the carrier end plate relative to the output flange through the
     pillars: ``n_p k r_p^2`` with ``k`` of :func:`guided_beam_stiffness` (material of the carrier, paper
-    Table 2) and ``r_p`` the crank circle (the pillars stand midway between the cranks). The plates are
-    taken rigid."""
+    Table 2) and ``r_p`` the crank circle (the pillars stand midway between the cranks). The plates move as
+    rigid bodies; each pillar root turns in its plate against :func:`root_rotational_stiffness` (``root``
+    False: rigidly clamped roots, the earlier model). Both plates are of the carrier's material (ZG65Mn)."""
     m = MATERIALS["carrier"]
-    k = guided_beam_stiffness(m.E, m.nu, d.carrier_pillar_radius_mm, pillar_length_mm(d))
+    if MATERIALS["flange_plate"] != Material(MATERIALS["flange_plate"].name, m.E, m.nu):
+        raise ValueError("the pillar roots assume the flange plate and the carrier of one material")
+    rk = root_rotational_stiffness(m.E, m.nu, d.carrier_pillar_radius_mm) if root else math.inf
+    k = guided_beam_stiffness(m.E, m.nu, d.carrier_pillar_radius_mm, pillar_length_mm(d), rk)
     return d.carrier_pillars * k * d.center_distance_mm ** 2
 
 
@@ -209,6 +303,9 @@ class Supports:
     crank_radius : mm, radius of the crank circle (the carrier's turn moves journal B by crank_radius * phi)
     GJ_sections : ``(z0, z1, GJ)`` tuples (axial positions, mm; N mm^2) of the crank from its planet end: the
         journal radius up to the first disc, the eccentric radius beyond (:meth:`torsion_compliance`)
+    cam_seat_c, journal_seat_c : mm/N, compliance of the disc hole around a cam bearing and of the plate bore
+        around a journal bearing, in series with the bearing (:func:`cam_seat_compliance`,
+        :func:`journal_seat_compliance`; 0: rigidly backed rings)
     """
 
     cam_K: float
@@ -224,6 +321,8 @@ class Supports:
     sections: tuple = ()
     crank_radius: float = 1.0
     GJ_sections: tuple = ()
+    cam_seat_c: float = 0.0
+    journal_seat_c: float = 0.0
 
     @classmethod
     def from_design(cls, d: Design) -> "Supports":
@@ -239,7 +338,11 @@ class Supports:
         EI = m.E * math.pi * r ** 4 / 4.0
         GJ = m.E / (2.0 * (1.0 + m.nu)) * math.pi * r ** 4 / 2.0
         re = d.cam_radius_mm - d.cam_bearing_roller_diameter_mm                # the eccentric (needle raceway)
-        zj = (sum(f) / 2.0, sum(cr) / 2.0)
+        off = journal_load_centre_offset_mm(d)
+        zj = (sum(f) / 2.0 + off, sum(cr) / 2.0 - off)                        # effective load centres
+        if not (zj[0] < sum(d0) / 2.0 and sum(d1) / 2.0 < zj[1]):
+            raise ValueError(f"design.journal_bearing_arrangement {d.journal_bearing_arrangement!r}: the journal "
+                             f"bearings' load centres ({zj[0]:.3f}, {zj[1]:.3f} mm) must lie outside the cam planes")
         return cls(cam_K=radial_bearing_K(d.cam_bearing_rollers, d.cam_bearing_roller_length_mm),
                    journal_K=radial_bearing_K(d.journal_bearing_rollers, d.journal_bearing_roller_length_mm,
                                               d.journal_bearing_contact_angle_deg),
@@ -248,7 +351,8 @@ class Supports:
                    EI=EI, GJ=GJ, z_planet=g1 / 2.0, z_journal=zj,
                    z_cams=(sum(d0) / 2.0, sum(d1) / 2.0), carrier_k=carrier_torsional_stiffness(d),
                    sections=crank_sections(d, zj, (d0, d1)), crank_radius=d.center_distance_mm,
-                   GJ_sections=((0.0, d0[0], GJ), (d0[0], d1[1], GJ * (re / r) ** 4)))
+                   GJ_sections=((0.0, d0[0], GJ), (d0[0], d1[1], GJ * (re / r) ** 4)),
+                   cam_seat_c=cam_seat_compliance(d), journal_seat_c=journal_seat_compliance(d))
 
     # ------------------------------------------------------------------ statics
     @staticmethod

@@ -46,22 +46,54 @@ RIGID_LIMIT_SPRING_K = 1.0e6
 NEWTON_FORCE_N = 0.1
 
 
-def radial_law(d: np.ndarray, K: float, p: float, c: float = 0.0, derivs: bool = True, kfloor: float = 0.0):
+#: Newton iterations at most of the series inversion of a bearing with an elastic seat (:func:`series_deflection`).
+SERIES_MAX_ITER = 40
+
+
+def series_deflection(t: np.ndarray, K: float, p: float, cs: float) -> np.ndarray:
+    """The bearing's own deflection x (mm) of a power-law bearing ``F = K x^p`` (p > 1) in series with a linear
+    seat of compliance ``cs`` (mm/N) under the total deflection t: the root of ``g(x) = x + cs K x^p - t``.
+    g is increasing and convex, so Newton's method started from an upper bound of the root
+    (``min(t, (t/(cs K))^(1/p))``, each term alone at most t) decreases monotonically onto it; stopped when no
+    x moves by more than 4 ulp of t (at most ``SERIES_MAX_ITER`` steps)."""
+    x = np.minimum(t, (t / (cs * K)) ** (1.0 / p))
+    ckp = cs * K * p
+    for _ in range(SERIES_MAX_ITER):
+        xp1 = x ** (p - 1.0)
+        dx = (x + cs * K * x * xp1 - t) / (1.0 + ckp * xp1)
+        x = np.maximum(x - dx, 0.0)
+        if not np.any(np.abs(dx) > 4.0 * np.finfo(float).eps * np.maximum(t, 1e-300)):
+            break
+    return x
+
+
+def radial_law(d: np.ndarray, K: float, p: float, c: float = 0.0, derivs: bool = True, kfloor: float = 0.0,
+               cs: float = 0.0):
     """Energy (...), force vector (..., 2) and Hessian (..., 2, 2) of a radial spring ``F = K (|d| - c)^p``
     along ``d`` beyond the clearance c (isotropic: the full Hessian ``F' u u^T + F/|d| (I - u u^T)``).
-    ``kfloor`` (N/mm): least stiffness of the Hessian (a Newton model only; the energy and force are exact)."""
+    ``kfloor`` (N/mm): least stiffness of the Hessian (a Newton model only; the energy and force are exact).
+    ``cs`` (mm/N, p > 1): a linear seat in series, ``|d| - c = x + cs F`` with ``F = K x^p``
+    (:func:`series_deflection`): energy ``F x/(p + 1) + cs F^2/2``, radial stiffness
+    ``1/(x/(p F) + cs) = p K x^(p-1)/(1 + cs p K x^(p-1))``."""
     d0, d1 = d[..., 0], d[..., 1]
     r = np.sqrt(d0 * d0 + d1 * d1)
     t = np.maximum(r - c, 0.0)
     if p == 1.0:
         F = K * t
         kr = np.where(t > 0, K, 0.0) if derivs else None
+        E = F * t / (p + 1.0)
+    elif cs > 0.0:
+        x = series_deflection(t, K, p, cs)
+        xp1 = x ** (p - 1.0)
+        F = K * x * xp1
+        kr = (K * p) * xp1 / (1.0 + (cs * K * p) * xp1) if derivs else None
+        E = F * x / (p + 1.0) + 0.5 * cs * F * F
     else:
         # one power: t^(p-1), then F = K t t^(p-1) and the radial stiffness p K t^(p-1) (t = 0: both 0)
         tp1 = t ** (p - 1.0)
         F = K * t * tp1
         kr = (K * p) * tp1 if derivs else None
-    E = F * t / (p + 1.0)
+        E = F * t / (p + 1.0)
     if not derivs:
         return E, None, None
     rs = np.maximum(r, 1e-300)
@@ -76,6 +108,13 @@ def radial_law(d: np.ndarray, K: float, p: float, c: float = 0.0, derivs: bool =
     h01 = dk * u0 * u1
     H = np.stack([dk * u0 * u0 + kt, h01, h01, dk * u1 * u1 + kt], axis=-1).reshape(d.shape + (2,))
     return E, fv, H
+
+
+def _tangent(K: float, p: float, F: float, cs: float) -> float:
+    """Radial tangent stiffness (N/mm) of the law ``F = K x^p`` under the load F, with a seat of compliance cs in
+    series: ``1/(1/(p K (F/K)^((p-1)/p)) + cs)``."""
+    kb = K * p * (F / K) ** ((p - 1.0) / p)
+    return kb / (1.0 + cs * kb) if cs > 0.0 else kb
 
 
 def batch_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -193,15 +232,17 @@ class SupportChain:
             Kc = Kj = ks = self.rigid_K
             p = 1.0
             Kb = self.rigid_K * np.eye(self.nd)
+            csc = csj = 0.0
         else:
             Kc, Kj, p, Kb, ks = s.cam_K, s.journal_K, BEARING_EXP, self.Kb, self.k_s
+            csc, csj = s.cam_seat_c, s.journal_seat_c
         nq = self.nc * self.per_crank
         sl = x[:, self.base:self.base + nq].reshape(N, self.nc, self.per_crank)
         u = self.journal_deflections(x, tang)                                   # journals A, B
         w = sl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
         scale, F = (1.0, newton) if newton > 0 else (1e-9, NEWTON_FORCE_N)
-        Ec, gc, Hc = radial_law(dcam, Kc, p, self.c, derivs, scale * Kc * p * (F / Kc) ** ((p - 1.0) / p))
-        Ej, gj, Hj = radial_law(u, Kj, p, 0.0, derivs, scale * Kj * p * (F / Kj) ** ((p - 1.0) / p))
+        Ec, gc, Hc = radial_law(dcam, Kc, p, self.c, derivs, scale * _tangent(Kc, p, F, csc), csc)
+        Ej, gj, Hj = radial_law(u, Kj, p, 0.0, derivs, scale * _tangent(Kj, p, F, csj), csj)
         Kw = _small_matmul(Kb, w)                                               # (N, nc, nd, 2)
         E = Ec.sum(axis=(1, 2)) + Ej.sum(axis=(1, 2)) + 0.5 * (w * Kw).sum(axis=(1, 2, 3))
         if self.n_carrier:
@@ -236,22 +277,31 @@ class SupportChain:
         deflection and ``q`` its force per unit output torque (tangent stiffness times ``dx = dx/dT``,
         ``ddcam`` = d(dcam)/dT)."""
         N = x.shape[0]
-        Hc = self.energy(x, dcam, rigid, tang=tang)[4]
+        s = self.sup
+        csc, csj = (0.0, 0.0) if rigid else (s.cam_seat_c, s.journal_seat_c)
+        _, _, _, gc, Hc, _, _ = self.energy(x, dcam, rigid, tang=tang)
         qc = np.einsum("nkjab,nkjb->nkja", Hc, ddcam)
         cam = np.einsum("nkja,nkja->n", qc, dcam)
-        s = self.sup
+        # the seat's share of a bearing's deflection is cs F along it, i.e. cs times the force vector
+        cam_seat = csc * np.einsum("nkja,nkja->n", qc, gc)
         p = BEARING_EXP
         nq = self.nc * self.per_crank
         sl = x[:, self.base:self.base + nq].reshape(N, self.nc, self.per_crank)
         dsl = dx[:, self.base:self.base + nq].reshape(N, self.nc, self.per_crank)
         u = self.journal_deflections(x, tang)
         du = self.journal_deflections(dx, tang)
-        _, _, Hj = radial_law(u, s.journal_K, p)
-        journal = np.einsum("njaxy,njay,njax->n", Hj, du, u)
+        _, fj, Hj = radial_law(u, s.journal_K, p, cs=csj)
+        qj = np.einsum("njaxy,njay->njax", Hj, du)
+        journal = np.einsum("njax,njax->n", qj, u)
+        journal_seat = csj * np.einsum("njax,njax->n", qj, fj)
         w = sl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
         dw = dsl[:, :, 4:].reshape(N, self.nc, self.nd, 2)
         bend = np.einsum("kl,njlx,njkx->n", self.Kb, dw, w)
-        out = {"cam_bearings": cam, "journal_bearings": journal, "crank_bending": bend}
+        out = {"cam_bearings": cam - cam_seat, "journal_bearings": journal - journal_seat, "crank_bending": bend}
+        if csc > 0.0:
+            out["cam_bearing_seats"] = cam_seat
+        if csj > 0.0:
+            out["journal_bearing_seats"] = journal_seat
         if self.n_carrier:                                                      # the pillars: k_s s ds/dT
             out["carrier"] = self.k_s * x[:, self.base + nq] * dx[:, self.base + nq]
         return out
@@ -551,5 +601,5 @@ class SupportMixin:
         """Forces of the cams on the discs (N, nd, nc, 2) N, fixed frame, at the states x."""
         rigid, dcam, _, _ = self._chain_unpack(x, self._finish_raw(th, x, law))
         ch = self.chain
-        K, p = (ch.rigid_K, 1.0) if rigid else (ch.sup.cam_K, BEARING_EXP)
-        return -radial_law(dcam, K, p, ch.c)[1]
+        K, p, cs = (ch.rigid_K, 1.0, 0.0) if rigid else (ch.sup.cam_K, BEARING_EXP, ch.sup.cam_seat_c)
+        return -radial_law(dcam, K, p, ch.c, cs=cs)[1]

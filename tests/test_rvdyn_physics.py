@@ -337,7 +337,8 @@ def test_physical_budget_is_the_wind_up(physical_nominal) -> None:
     and the Hertz contact make the wind-up grow slightly less than linearly with the load."""
     for sup, parts in (("rigid", {"pins", "gears"}),
                        ("elastic", {"pins", "pin_seats", "gears", "cam_bearings", "journal_bearings",
-                                    "crank_bending", "crank_torsion", "carrier"})):
+                                    "crank_bending", "crank_torsion", "carrier", "cam_bearing_seats",
+                                    "journal_bearing_seats"})):
         for L, sol in physical_nominal[sup].items():
             assert set(sol.parts_rad) == parts
             assert -sol.te_rad == pytest.approx(sum(sol.parts_rad.values()), rel=1e-3)

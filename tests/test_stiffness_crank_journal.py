@@ -10,7 +10,8 @@ import pytest
 
 from rvcad.params import Design
 from rvcad.validation import DesignError
-from rvdyn.bearings import (Supports, circle_shear_coefficient, crank_sections, radial_bearing_K,
+from rvdyn.bearings import (Supports, circle_shear_coefficient, crank_sections, journal_load_centre_offset_mm,
+                            radial_bearing_K,
                             radial_bearing_K_discrete, stepped_beam_influence)
 from rvdyn.materials import MATERIALS
 
@@ -49,14 +50,19 @@ def test_stepped_beam_with_shear_central_load_closed_form() -> None:
 
 
 def test_default_crank_is_journal_and_eccentric_sections() -> None:
-    """Default design: journal radius 7 mm from journal A (x = 0) to the first disc (x = 5.5 mm) and from the
-    second disc (x = 26 mm) to journal B (x = 31.5 mm); the eccentric radius 9 - 2.5 = 6.5 mm over both discs
-    and their gap; 20CrMnMo, Cowper's kappa. The beam of Supports uses them."""
+    """Default design: the beam spans the tapered bearings' effective load centres, each o = (7 + 3) tan(13.13 deg)
+    = 2.333 mm inside its bearing's mid-plane (face to face): journal radius 7 mm from load centre A (x = 0) to
+    the first disc (x = 5.5 - o) and from the second disc (x = 26 - o) to load centre B (x = 31.5 - 2 o); the
+    eccentric radius 9 - 2.5 = 6.5 mm over both discs and their gap; 20CrMnMo, Cowper's kappa. The beam of
+    Supports uses them."""
     d = Design()
     s = Supports.from_design(d)
+    o = 10.0 * math.tan(math.radians(13.13))
+    assert o == pytest.approx(2.3326, abs=1e-4)
+    L = 31.5 - 2 * o
     m = MATERIALS["crankshaft"]
     G, kap = m.E / (2 * (1 + m.nu)), circle_shear_coefficient(m.nu)
-    want = [(0.0, 5.5, 7.0), (5.5, 26.0, 6.5), (26.0, 31.5, 7.0)]
+    want = [(0.0, 5.5 - o, 7.0), (5.5 - o, 26.0 - o, 6.5), (26.0 - o, L, 7.0)]
     assert len(s.sections) == 3
     for (x0, x1, EI, kGA), (w0, w1, r) in zip(s.sections, want):
         assert (x0, x1) == pytest.approx((w0, w1), abs=1e-12)
@@ -67,11 +73,30 @@ def test_default_crank_is_journal_and_eccentric_sections() -> None:
     B[0, 0, 0] = (0.0, -1.0)                                    # disc 0 pushes crank 0 by +1 N in y
     y = s.bending_deflections(B)[0, 0, :, 1]
     xs = np.asarray(s.z_cams) - s.z_journal[0]
-    assert y == pytest.approx(stepped_beam_influence(31.5, s.sections, xs)[:, 0], rel=1e-12)
+    assert y == pytest.approx(stepped_beam_influence(L, s.sections, xs)[:, 0], rel=1e-12)
     # without sections: the uniform Euler beam of the journal section (Roark)
     y0 = replace(s, sections=()).bending_deflections(B)[0, 0, :, 1]
-    assert y0 == pytest.approx([_roark(31.5, s.EI, x, xs[0]) for x in xs], rel=1e-12)
+    assert y0 == pytest.approx([_roark(L, s.EI, x, xs[0]) for x in xs], rel=1e-12)
     assert np.all(y > y0)                                       # thinner eccentrics and shear: softer
+
+
+def test_tapered_bearing_load_centres_set_the_span() -> None:
+    """The effective load centre of a tapered bearing lies R_o tan(alpha) from its mid-plane (R_o = journal radius +
+    roller diameter = 10 mm): face to face (the default) inwards, back to back outwards, none for a cylindrical
+    bearing; the beam spans the load centres (mid-planes 31.5 mm apart)."""
+    o = 10.0 * math.tan(math.radians(13.13))
+    for arr, sign in (("face_to_face", 1.0), ("back_to_back", -1.0)):
+        d = Design(journal_bearing_arrangement=arr)
+        assert journal_load_centre_offset_mm(d) == pytest.approx(sign * o, rel=1e-12)
+        zA, zB = Supports.from_design(d).z_journal
+        assert zB - zA == pytest.approx(31.5 - 2 * sign * o, rel=1e-12)
+    cyl = Design(journal_bearing_contact_angle_deg=0.0)
+    assert journal_load_centre_offset_mm(cyl) == 0.0
+    zA, zB = Supports.from_design(cyl).z_journal
+    assert zB - zA == pytest.approx(31.5, rel=1e-12)
+    with pytest.raises(DesignError, match=r"design\.journal_bearing_arrangement 'tandem'.*allowed: one of "
+                                          r"\['face_to_face', 'back_to_back'\]"):
+        Design().replace(journal_bearing_arrangement="tandem")
 
 
 def test_tapered_journal_bearing_contact_angle() -> None:
