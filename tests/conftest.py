@@ -100,9 +100,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session")
 def calib_forward_cache(tmp_path_factory) -> Path:
-    """rvcalib's forward model for the session: rvdyn's runner with the in-memory cache of the default
-    one and a disk cache shared by the pytest-xdist workers (entries are written atomically; a solve
-    one worker made is read by the other). Returns the cache folder.
+    """rvcalib's forward model for the session: rvdyn's runner with the in-memory cache and the warm
+    starts of the default one (:data:`rvcalib.forward.WARM_BYTES`: each solve starts from the newest
+    state of its neighbourhood, equal to the cold solve within the solver tolerance) and a disk cache
+    shared by the pytest-xdist workers (entries are written atomically; a solve one worker made is read
+    by the other). Returns the cache folder.
 
     The runner names its contact law: the paper's impact law (``ContactLaw()``). These tests check the
     loop's identification logic on data whose truth and model are solved on this one runner, so one law
@@ -116,7 +118,8 @@ def calib_forward_cache(tmp_path_factory) -> Path:
 
     base = tmp_path_factory.getbasetemp()
     root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "rvcalib-forward-cache"
-    prev = forward.use_runner(Runner(cache=root, memory_bytes=forward.CACHE_BYTES, law=ContactLaw()))
+    prev = forward.use_runner(Runner(cache=root, memory_bytes=forward.CACHE_BYTES, warm_bytes=forward.WARM_BYTES,
+                                     law=ContactLaw()))
     yield root
     forward.use_runner(prev)
 

@@ -51,7 +51,8 @@ KEYS = ("pin_pitch", "torsional_compliance_arcsec_per_Nm", "drift_arcsec_per_rev
 
 @pytest.fixture(scope="module")
 def physical_runner():
-    prev = forward.use_runner(Runner(solver="analytic", memory_bytes=forward.CACHE_BYTES))  # each case's own law
+    # each case's own law; the default runner's cache and warm starts
+    prev = forward.use_runner(Runner(solver="analytic", memory_bytes=forward.CACHE_BYTES, warm_bytes=forward.WARM_BYTES))
     yield forward.forward_runner()
     forward.use_runner(prev)
 
