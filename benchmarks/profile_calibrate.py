@@ -105,12 +105,14 @@ def main() -> int:
     ap.add_argument("--time-budget", type=float, default=None)
     ap.add_argument("--cprofile", default=None, help="write a cProfile here and print its top entries")
     ap.add_argument("--json", default=None, help="write the result JSON here")
+    ap.add_argument("--cold", action="store_true", help="no warm starts (every solve from the ideal kinematics)")
     ap.add_argument("--verbose", action="store_true", help="print the loop's progress")
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     law = ContactLaw() if args.law == "impact" else None
     # the impact law must be named for truth and model alike; None leaves each case's own (physical)
-    forward.use_runner(Runner(solver="analytic", memory_bytes=forward.CACHE_BYTES, law=law))
+    forward.use_runner(Runner(solver="analytic", memory_bytes=forward.CACHE_BYTES, law=law,
+                              warm_bytes=0 if args.cold else forward.WARM_BYTES))
     root = Path(tempfile.mkdtemp(prefix="profile-calibrate-"))
     hidden = None
     if args.realistic_seed is not None:

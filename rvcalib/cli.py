@@ -159,7 +159,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             # the pool keeps the forward model's contact law (None: each case's own, rvdyn's physical default)
             runner = Runner(executor=args.workers, cache=args.cache, memory_bytes=forward.CACHE_BYTES,
-                            law=forward.forward_runner().law)
+                            law=forward.forward_runner().law, warm_bytes=forward.WARM_BYTES)
         prev = forward.use_runner(runner) if runner is not None else None
         try:
             res = calibrate(ds, steps=steps, alpha=args.alpha, max_terms=args.max_terms, log=log,

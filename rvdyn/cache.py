@@ -19,6 +19,7 @@ import hashlib
 import json
 import math
 import os
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -119,6 +120,16 @@ class Job:
              "version": CACHE_VERSION}
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:32]
 
+    def neighbour_key(self) -> str:
+        """Key of the job's neighbourhood for warm starts (:class:`StateStore`): sha256 (32 hex) of
+        the case's design, load and direction and the settings (solver, law, angles), not its errors or model
+        options: the jobs of one neighbourhood solve the same equations at the same angles for nearby parameters
+        (a start of another model's coordinates is not used, :func:`rvdyn.te.run_te`)."""
+        c = self.case.to_dict()
+        d = {"design": c.get("design"), "load_Nm": c.get("load_Nm"), "direction": c.get("direction"),
+             **self.settings()}
+        return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
     def to_payload(self) -> dict[str, Any]:
         """Picklable, JSON-ready description for a worker (see :func:`rvdyn.runner.solve_job`)."""
         d = {"case": self.case.to_dict(), **self.settings(), "key": self.key()}
@@ -217,3 +228,58 @@ class CaseCache:
     def counters(self) -> dict[str, int]:
         """``hits, misses, writes, rejected``."""
         return {"hits": self.hits, "misses": self.misses, "writes": self.writes, "rejected": self.rejected}
+
+
+class StateStore:
+    """Converged solver states of this process for warm starts (:attr:`rvdyn.te.TEResult.state`), one per
+    neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`: the same design, load, direction, solver, law and
+    angles, any errors and model options), the newest replacing the older; the least recently used
+    neighbourhoods dropped first beyond ``max_bytes``.
+
+    Parameters
+    ----------
+    max_bytes : int
+        Budget, bytes (>= 0; each state counts its array's bytes).
+    """
+
+    def __init__(self, max_bytes: int) -> None:
+        if isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, np.integer)) or max_bytes < 0:
+            raise ValueError(f"warm_bytes {max_bytes!r} must be an integer >= 0")
+        self.max_bytes = int(max_bytes)
+        self._d: OrderedDict[str, np.ndarray] = OrderedDict()
+        self.bytes = self.hits = self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._d)
+
+    def __contains__(self, key: str) -> bool:
+        return key in self._d
+
+    def get(self, key: str) -> np.ndarray | None:
+        """The newest state of a neighbourhood (read-only, now the most recently used), or None."""
+        x = self._d.get(key)
+        if x is None:
+            self.misses += 1
+            return None
+        self._d.move_to_end(key)
+        self.hits += 1
+        return x
+
+    def put(self, key: str, state: np.ndarray) -> None:
+        """Keep a state (a read-only float64 copy) as its neighbourhood's newest; drop the oldest beyond the budget."""
+        x = np.array(state, dtype=np.float64)
+        x.setflags(write=False)
+        old = self._d.pop(key, None)
+        if old is not None:
+            self.bytes -= old.nbytes
+        if x.nbytes > self.max_bytes:
+            return
+        self._d[key] = x
+        self.bytes += x.nbytes
+        while self.bytes > self.max_bytes:
+            self.bytes -= self._d.popitem(last=False)[1].nbytes
+
+    def clear(self) -> None:
+        """Forget every state."""
+        self._d.clear()
+        self.bytes = 0

@@ -31,6 +31,11 @@ survives the process) and the in-memory one (:class:`MemoryCache`): within its `
 for callers that ask for the same solves again and again within a process (e.g. a fit's trial values),
 and beside it, pinned outside that budget until :meth:`MemoryCache.clear`, the results of :meth:`Runner.prefetch`.
 
+Warm starts (``Runner(warm_bytes=...)``, off by default): the runner keeps the newest converged solver state of each
+neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`: the same design, load, direction, solver, law and angles) in a
+:class:`rvdyn.cache.StateStore` and starts the next solve of that neighbourhood from it (``x_init`` of :func:`rvdyn.te.run_te`);
+results equal the cold solves' within the solver tolerance. The states never enter the result caches.
+
 Executors (:mod:`rvdyn.executors`) run the same worker function, :func:`solve_job`, on JSON-ready job payloads
 (:meth:`rvdyn.cache.Job.to_payload`) and yield ``(index, result)`` pairs as they finish. The results
 come back to this process, which alone writes the cache; Dask workers therefore need the package
@@ -59,13 +64,13 @@ import numpy as np
 
 from rvcad.errors import Case
 from rvdyn.contacts import ContactLaw
-from rvdyn.cache import CaseCache, Job
+from rvdyn.cache import CaseCache, Job, StateStore
 from rvdyn.executors import (PARENT_POLL_S, DaskExecutor, Executor, LocalPoolExecutor, SchedulerError, SerialExecutor,
                              SolveFn, make_executor)
 from rvdyn.solver import law_from_model
 from rvdyn.te import SOLVERS, run_te
 
-__all__ = ["Runner", "run_cases", "solve_job", "solve_group", "MemoryCache", "ENTRY_OVERHEAD_BYTES",
+__all__ = ["Runner", "run_cases", "solve_job", "solve_group", "MemoryCache", "StateStore", "ENTRY_OVERHEAD_BYTES",
            # executors (rvdyn.executors), re-exported: the runner is where users meet them
            "Executor", "SerialExecutor", "LocalPoolExecutor", "DaskExecutor", "SchedulerError", "make_executor",
            "PARENT_POLL_S", "SolveFn"]
@@ -79,12 +84,15 @@ def _failed(key: str, exc: BaseException, secs: float) -> dict[str, Any]:
     return {"key": key, "status": "failed", "stats": stats, "te_arcsec": [], "error": f"{type(exc).__name__}: {exc}"}
 
 
-def _ok(key: str, r: Any, secs: float | None = None) -> dict[str, Any]:
+def _ok(key: str, r: Any, secs: float | None = None, state: bool = False) -> dict[str, Any]:
     stats = {k: float(r.stats[k]) for k in _STAT_KEYS}
     if secs is not None:
         stats["seconds"] = float(secs)
-    return {"key": key, "status": "ok", "stats": stats,
-            "te_arcsec": [float(x) for x in r.table["te_arcsec"].to_numpy()], "error": ""}
+    out = {"key": key, "status": "ok", "stats": stats,
+           "te_arcsec": [float(x) for x in r.table["te_arcsec"].to_numpy()], "error": ""}
+    if state and getattr(r, "state", None) is not None:
+        out["state"] = np.asarray(r.state, dtype=np.float64)  # the runner's warm starts (never cached)
+    return out
 
 
 _SOLVE_ERRORS = (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError)
@@ -97,7 +105,9 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     ----------
     payload : dict
         ``case`` (case dict), ``solver``, ``steps``, ``revolutions``, ``law`` ({K, n, rigid}), ``key``
-        and optionally ``theta_in_deg`` (list of input angles, deg, replacing steps and revolutions).
+        and optionally ``theta_in_deg`` (list of input angles, deg, replacing steps and revolutions),
+        ``x_init`` (start states of the solve, a nearby case's converged states: a warm start) and
+        ``want_state`` (True: return the converged states as ``state``).
 
     Returns
     -------
@@ -105,7 +115,8 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
         ``key``, ``status`` (``ok`` or ``failed``), ``stats`` (``pp, mean, mean_abs, rms`` in arcsec,
         ``ratio``, ``seconds``), ``te_arcsec`` (list, one value per step; empty when failed) and
         ``error`` (message of a failed solve: an interference the contact law cannot resolve or a
-        solver that did not converge; both are properties of the case and are cached as such).
+        solver that did not converge; both are properties of the case and are cached as such); with
+        ``want_state``, ``state`` (ndarray (steps, ndof), :attr:`rvdyn.te.TEResult.state`).
         Missing software (e.g. the fcl provider) raises instead and is never cached.
     """
     case = Case.from_dict(payload["case"])
@@ -114,10 +125,10 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     th = payload.get("theta_in_deg")
     try:
         r = run_te(case, payload["solver"], int(payload["steps"]), float(payload["revolutions"]), law=law,
-                   theta_in_deg=None if th is None else np.asarray(th, dtype=float))
+                   theta_in_deg=None if th is None else np.asarray(th, dtype=float), x_init=payload.get("x_init"))
     except _SOLVE_ERRORS as exc:  # ImportError (missing software) is none of these and propagates
         return _failed(payload["key"], exc, time.perf_counter() - t0)
-    return _ok(payload["key"], r)
+    return _ok(payload["key"], r, state=payload.get("want_state", False))
 
 
 def solve_group(payload: dict[str, Any], solve_fn: SolveFn | None = None) -> dict[str, Any]:
@@ -170,28 +181,30 @@ def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str,
         loads = [(float(jobs[i]["case"].get("load_Nm", 20.0)), int(jobs[i]["case"].get("direction", 1))) for i in idx]
         steps = [int(jobs[i]["steps"]) for i in idx]
         given = [jobs[i].get("theta_in_deg") for i in idx]
+        starts = [jobs[i].get("x_init") for i in idx]
         if len(idx) > 1 and all(load > 0 for load, _ in loads):
             t0 = time.perf_counter()
             try:  # a pair that cannot be solved comes back as its error, the others as results
                 rs = te.run_te_many(case, payload["solver"], steps, loads=loads, revolutions=revs, law=law, geom=geom,
-                                    errors="return", theta_in_deg=given)
+                                    errors="return", theta_in_deg=given, x_init=starts)
             except _SOLVE_ERRORS:
                 rs = None  # solved job by job below
             if rs is not None:
                 secs = (time.perf_counter() - t0) / len(idx)
                 for i, r in zip(idx, rs):
                     k = jobs[i]["key"]
-                    results[i] = _failed(k, r, secs) if isinstance(r, BaseException) else _ok(k, r)
+                    results[i] = (_failed(k, r, secs) if isinstance(r, BaseException)
+                                  else _ok(k, r, state=jobs[i].get("want_state", False)))
                 continue
-        for i, n, (load, d), th in zip(idx, steps, loads, given):
+        for i, n, (load, d), th, xi in zip(idx, steps, loads, given, starts):
             t0 = time.perf_counter()
             try:
                 r = te.run_te(case, payload["solver"], n, revs, load, d, law, geom=geom,
-                              theta_in_deg=None if th is None else np.asarray(th, dtype=float))
+                              theta_in_deg=None if th is None else np.asarray(th, dtype=float), x_init=xi)
             except _SOLVE_ERRORS as exc:
                 results[i] = _failed(jobs[i]["key"], exc, time.perf_counter() - t0)
                 continue
-            results[i] = _ok(jobs[i]["key"], r)
+            results[i] = _ok(jobs[i]["key"], r, state=jobs[i].get("want_state", False))
     return {"key": payload["key"], "results": results}
 
 
@@ -328,6 +341,15 @@ class Runner:
     memory_bytes : int
         Budget of the in-memory cache, bytes (:class:`MemoryCache`; default 0: it keeps only what
         :meth:`prefetch` pins). Looked up before the disk cache and filled from it and from every solve.
+    warm_bytes : int
+        Budget of the warm starts, bytes (:class:`StateStore`; default 0: none, every solve starts cold as
+        :func:`rvdyn.te.run_te` does). With a budget, every solve returns its converged states, kept per
+        neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`), and a solve whose neighbourhood has a state
+        starts from it (``x_init``): a closed loop's solves are small perturbations of solved cases (its
+        finite-difference columns, trial steps, candidates at the current state), which then take fewer
+        outer and Newton iterations. Each result equals the cold solve's within the solver tolerance
+        (``Tolerances.solver_angle_rad``); which state a solve starts from depends on the order of the
+        solves, so results are reproducible to that tolerance, not bit for bit.
 
     Attributes
     ----------
@@ -347,7 +369,7 @@ class Runner:
     def __init__(self, executor: Executor | int | str | None = None, cache: CaseCache | str | Path | None = None,
                  solver: str = "analytic", steps: int = 720, law: ContactLaw | None = None,
                  revolutions: float = 1.0, progress: bool = False, solve_fn: SolveFn = solve_job,
-                 memory_bytes: int = 0) -> None:
+                 memory_bytes: int = 0, warm_bytes: int = 0) -> None:
         if solver not in SOLVERS:
             raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
         self.steps = _check_steps(steps)
@@ -362,6 +384,7 @@ class Runner:
             executor = make_executor(workers=executor)
         self.executor: Executor = executor
         self.memory = MemoryCache(memory_bytes)
+        self.states = StateStore(warm_bytes)
         self.cache = cache if isinstance(cache, CaseCache) else CaseCache(cache)
         self.solver = solver
         self.law = law
@@ -456,24 +479,44 @@ class Runner:
         tasks = self._tasks(todo, keys, group, len(jobs))
         payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
                     for t in tasks]
+        near: dict[str, str] = {}
+        waves = [list(range(len(tasks)))]
+        if self.states.max_bytes > 0:  # warm starts: each job from its neighbourhood's newest state, if any
+            for t, p in zip(tasks, payloads):
+                for k, q in zip(t, p["jobs"] if "jobs" in p else [p]):
+                    near[k] = unique[k].neighbour_key()
+                    q["want_state"] = True
+            waves = self._waves(tasks, near)
         fn = self.solve_fn if all(len(t) == 1 for t in tasks) else functools.partial(_solve_task,
                                                                                      solve_fn=self.solve_fn)
         bar = tqdm(total=len(unique), initial=len(results), desc=desc, unit="case", file=sys.stderr,
                    disable=not self.progress, dynamic_ncols=True)
         try:
-            for i, res in self.executor.run(fn, payloads):
-                got = res["results"] if "results" in res else [res]
-                self.worker_seconds += float(res.get("task_seconds", res.get("stats", {}).get("seconds", 0.0)))
-                if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
-                    raise RuntimeError(f"worker returned the result of {res.get('key')!r} for {payloads[i]['key']!r}")
-                for k, r in zip(tasks[i], got):
-                    if r.get("key") != k:
-                        raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
-                    self.cache.put(k, r)
-                    results[k] = {**self._keep(k, r), "cached": False}
-                    self.computed += 1
-                    self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
-                bar.update(len(got))
+            for wave in waves:
+                if near:
+                    for i in wave:
+                        for k, q in zip(tasks[i], payloads[i]["jobs"] if "jobs" in payloads[i] else [payloads[i]]):
+                            x0 = self.states.get(near[k])
+                            if x0 is not None:
+                                q["x_init"] = x0
+                for j, res in self.executor.run(fn, [payloads[i] for i in wave]):
+                    i = wave[j]
+                    got = res["results"] if "results" in res else [res]
+                    self.worker_seconds += float(res.get("task_seconds", res.get("stats", {}).get("seconds", 0.0)))
+                    if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
+                        raise RuntimeError(f"worker returned the result of {res.get('key')!r} for "
+                                           f"{payloads[i]['key']!r}")
+                    for k, r in zip(tasks[i], got):
+                        if r.get("key") != k:
+                            raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
+                        state = r.pop("state", None)
+                        if state is not None and k in near:
+                            self.states.put(near[k], state)
+                        self.cache.put(k, r)
+                        results[k] = {**self._keep(k, r), "cached": False}
+                        self.computed += 1
+                        self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
+                    bar.update(len(got))
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0
@@ -502,6 +545,22 @@ class Runner:
         them without solving, reading the cache or counting them again. A study submits every case it will need at once (no worker waits between
         its stages) and then reads them stage by stage."""
         self(cases, desc, keep=True, **kw)
+
+    def _waves(self, tasks: list[list[str]], near: dict[str, str]) -> list[list[int]]:
+        """Task indices in the order to run them with warm starts: first, for every neighbourhood with no state
+        yet, the first task that has it (the batch's base case, e.g. the state a loop's trials perturb, comes
+        first), then the rest, which start from the states the first wave leaves."""
+        missing = {near[k] for t in tasks for k in t if near[k] not in self.states}
+        if not missing or len(tasks) < 2:
+            return [list(range(len(tasks)))]
+        first: list[int] = []
+        for i, t in enumerate(tasks):
+            new = {near[k] for k in t} & missing
+            if new:
+                first.append(i)
+                missing -= new
+        rest = [i for i in range(len(tasks)) if i not in set(first)]
+        return [first, rest] if rest else [first]
 
     @staticmethod
     def _tasks(todo: list[str], keys: list[str], group: Sequence[Any] | None, n: int) -> list[list[str]]:

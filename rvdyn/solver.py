@@ -55,6 +55,10 @@ LOOSE_MIN_STEP = 100.0
 PILOT_MIN_ROWS = 64
 PILOT_MU = 1e-3
 
+#: Levenberg-Marquardt damping a warm-started solve (``x_init`` of :meth:`QuasiStaticSolver.solve_many`, a nearby
+#: solve's converged states) starts with: as the pilot start's, its rows are near their equilibrium.
+WARM_MU = PILOT_MU
+
 #: Largest trust radius (mm) a batch (:meth:`QuasiStaticSolver.solve_many`) grows to: the largest penetration
 #: an elastic solution may have, so one outer step never crosses more than the elastic range.
 MAX_TRUST_MM = 0.1
@@ -262,8 +266,10 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             Steps solved together. ``None``: all at once (analytic provider); 1: step by step, each
             started from the previous solution (fcl provider: fewer distance queries).
         x_init : (N, ndof) or None
-            Start states (scaled coordinates); default the ideal kinematics, or with the supports inside and
-            ``chunk`` None, at least ``PILOT_MIN_ROWS`` angles, the pilot start (:meth:`_pilot_start`).
+            Start states (scaled coordinates, e.g. :attr:`Solution.x` of a nearby solve at these angles: a warm
+            start, with the Levenberg-Marquardt damping ``WARM_MU``); default the ideal kinematics, or with the
+            supports inside and ``chunk`` None, at least ``PILOT_MIN_ROWS`` angles, the pilot start
+            (:meth:`_pilot_start`). The equilibrium is the same within the solver tolerance.
         """
         th = self._check_solve_args(theta_in, direction, load_Nm)
         N = th.size
@@ -271,8 +277,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         B = np.zeros((N, self.ndof))
         B[:, 0] = direction * self._load_Nmm(load_Nm) / self.Rp
         dirs = np.full(N, direction)
-        x = np.zeros((N, self.ndof)) if x_init is None else np.array(x_init, dtype=float)
-        mu0 = 1.0
+        x = np.zeros((N, self.ndof)) if x_init is None else self._check_start(x_init, N, "x_init")
+        mu0 = 1.0 if x_init is None else WARM_MU
         if x_init is None and chunk is None and self.chain is not None and N >= PILOT_MIN_ROWS:
             x[:], mu0 = self._pilot_start(th, direction, load_Nm, law)
         chunk = N if chunk is None else max(1, int(chunk))
@@ -288,6 +294,14 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             iters = max(iters, used[0])
             prev = xs[-1].copy()
         return self._finish_rows(th, x, direction, load_Nm, law, iters, out, slice(0, N))
+
+    def _check_start(self, x_init, n: int, field: str) -> np.ndarray:
+        """A copy of start states (n, ndof) as float64; ValueError naming ``field`` if the shape or a value is wrong."""
+        xi = np.array(x_init, dtype=float)
+        if xi.shape != (n, self.ndof) or not np.all(np.isfinite(xi)):
+            raise ValueError(f"{field} must be a finite array of shape {(n, self.ndof)} (angles, state coordinates); "
+                             f"got shape {xi.shape}")
+        return xi
 
     def _pilot_start(self, th_in: np.ndarray, direction: int, load_Nm: float,
                      law: ContactLaw) -> tuple[np.ndarray, float]:
@@ -331,7 +345,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         return x, PILOT_MU
 
     def solve_many(self, theta_in: list, directions: list, loads_Nm: list,
-                   expand_trust: bool = True, errors: str = "raise") -> list:
+                   expand_trust: bool = True, errors: str = "raise", x_init: list | None = None) -> list:
         """Equilibria of several solves of this case in one batch: solve i has the input angles
         ``theta_in[i]`` (rad, in the order of motion), direction ``directions[i]`` and load ``loads_Nm[i]``
         (N m, > 0: the batch shares the contact law, and load 0 is the rigid limit's).
@@ -352,6 +366,11 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         ``errors``: ``"raise"`` (default) raises the first solve's error (an InterferenceError, or a
         RuntimeError when it does not converge); ``"return"`` puts the error in that solve's place and
         returns the other solutions.
+
+        ``x_init``: per solve, its start states (n_i, ndof) in scaled coordinates (:attr:`Solution.x` of a
+        nearby solve at the same angles, e.g. the state a perturbation is taken from) or None (the default
+        start, zeros: the ideal kinematics). A warm solve starts its Levenberg-Marquardt damping at
+        ``WARM_MU`` (near its equilibrium) and converges to the same equilibrium within the solver tolerance.
         """
         if errors not in ("raise", "return"):
             raise ValueError(f"errors {errors!r} must be 'raise' or 'return'")
@@ -374,9 +393,18 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             dirs[a:b] = d
         law = self._law(loads_Nm[0])
         x = np.zeros((N, self.ndof))
+        mu0 = np.ones(N)
+        if x_init is not None:
+            if len(x_init) != len(bounds):
+                raise ValueError(f"x_init has {len(x_init)} entries for {len(bounds)} solves")
+            for i, ((a, b), xi) in enumerate(zip(bounds, x_init)):
+                if xi is None:
+                    continue
+                x[a:b] = self._check_start(xi, b - a, f"x_init[{i}]")
+                mu0[a:b] = WARM_MU
         out = self._outputs(N)
         used = self._outer(th, x, dirs, B, law, bounds, out, 0, list(loads_Nm), expand=expand_trust,
-                           collect=errors == "return")
+                           collect=errors == "return", mu0=mu0, warm=bool(np.any(mu0 < 1.0)))
         res: list = []
         for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used):
             if isinstance(it, Exception):
@@ -397,7 +425,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 "C": np.empty((N, self.nd * self.zp)), "R": np.empty((N, self.nd * self.zp))}
 
     def _outer(self, th, x, dirs, B, law, bounds: list[tuple[int, int]], out: dict, offset: int,
-               loads: list[float], expand: bool = False, collect: bool = False, mu0: float = 1.0) -> list:
+               loads: list[float], expand: bool = False, collect: bool = False,
+               mu0: float | np.ndarray = 1.0, warm: bool = False) -> list:
         """Outer iterations of the solves whose rows are ``bounds`` (row ranges of th and x, solved together,
         each to its own convergence test; ``loads`` N m, for the messages); x is updated in place, the converged
         linearisation is written to ``out`` at row ``offset + row``. ``expand``: grow the trust radius of states
@@ -419,14 +448,24 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         # one solve with the supports inside: each state leaves the outer loop at its own convergence (the
         # damping floor of the inner loop fixed at the first linearisation's), so a few slow states do not keep
         # the others iterating, and no state's result depends on the others'
-        per_row = len(bounds) == 1 and self.chain is not None
+        # (a batch of several solves likewise, each state on its own test: measured on the loop's 5 conditions x
+        # 280 angles, one state in 1,400 whose contact flips between linearisations needed ten more outer
+        # iterations than the rest, and kept its whole solve of 280 states iterating with it)
+        # (and with the impact law a warm batch, some of whose solves have start states: a cold batch of the impact
+        # law iterates each solve to its slowest state, as it always did, bit for bit)
+        per_row = self.chain is not None or (len(bounds) > 1 and warm)
         row_on = np.zeros(N, dtype=bool)
-        row_on[bounds[0][0]:bounds[0][1]] = True
+        for a, b in bounds:
+            row_on[a:b] = True
         fk0 = None
+        fk_rows = np.full(N, np.nan)                 # a batch's floor stiffness of each state, fixed at its first
         for it in range(self.tol.solver_max_iter):
             if not active:
                 break
-            if per_row and not row_on[bounds[0][0]:bounds[0][1]].all():
+            if per_row and len(bounds) > 1 and not row_on.all():
+                rows = np.nonzero(row_on)[0]
+                n_rows = rows.size
+            elif per_row and len(bounds) == 1 and not row_on[bounds[0][0]:bounds[0][1]].all():
                 rows = np.nonzero(row_on)[0]
                 n_rows = rows.size
             elif len(active) == len(bounds) and len(bounds) == 1:
@@ -448,10 +487,15 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             C = self._line_last()[0] if law.physical else None
             step_law = self._step_law(law, C)
             floor_k = None
-            if per_row and C is not None:
+            if per_row and C is not None and len(bounds) == 1:
                 fk0 = step_law.floor_stiffness() if fk0 is None else fk0
                 floor_k = np.full(n_rows, fk0)
-            if C is not None and len(bounds) > 1:
+            elif per_row and C is not None:
+                if it == 0:
+                    for (a, b), lc in zip(bounds, locs):
+                        fk_rows[a:b] = self._step_law(law, C[lc]).floor_stiffness()
+                floor_k = fk_rows[rows]
+            elif C is not None and len(bounds) > 1:
                 floor_k = np.empty(n_rows)
                 for lc in locs:
                     floor_k[lc] = self._step_law(law, C[lc]).floor_stiffness()
@@ -488,7 +532,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             if per_row:
                 ch = np.abs(dx).max(axis=1)
                 conv = (ch < tol_mm) | ((it >= self.tol.solver_max_iter // 3) & (ch < 10 * tol_mm))
-                used[0] = it + 1
+                if len(bounds) == 1:
+                    used[0] = it + 1
                 if conv.any():
                     rr = np.arange(N)[rows][conv]
                     o = offset + rr
@@ -497,6 +542,21 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                     out["J"][o] = J[conv]
                     out["C"][o], out["R"][o] = self._line_last(np.nonzero(conv)[0])
                     row_on[rr] = False
+                if len(bounds) > 1:
+                    for g in active:
+                        used[g] = it + 1
+                    still = [(g, None) for g in active if row_on[bounds[g][0]:bounds[g][1]].any()]
+                    if still and it + 1 == self.tol.solver_max_iter:
+                        big_g = np.zeros(N)
+                        big_g[np.arange(N)[rows]] = ch
+                        for g, _ in still:
+                            a, b = bounds[g]
+                            used[g] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[g],
+                                                        float(big_g[a:b].max()))
+                            if not collect:
+                                raise used[g]
+                    active = [g for g, _ in still]
+                    continue
                 if row_on.any():
                     still.append((0, locs[0]))
                     if it + 1 == self.tol.solver_max_iter:

@@ -65,12 +65,16 @@ class TEResult:
         ``pp, mean, mean_abs, rms`` (arcsec), ``ratio`` (least-squares slope of input over output
         angle), ``seconds``, ``steps``, ``direction``, ``load_Nm``, ``contact`` (law kind),
         ``peak_pressure_MPa`` (largest Hertzian pin-disc pressure), ``warnings`` (list of str).
+    state : (steps, ndof) ndarray or None
+        The converged solver states (:attr:`rvdyn.solver.Solution.x`, scaled coordinates), one row per step:
+        the start (``x_init``) of a later solve of a nearby case at the same angles (a warm start).
     """
 
     case: Case
     solver: str
     table: pd.DataFrame
     stats: dict[str, Any] = field(default_factory=dict)
+    state: np.ndarray | None = field(default=None, repr=False)
 
     def to_csv(self, path: str | Path) -> Path:
         """Write the table atomically (temporary file in the same folder, then rename)."""
@@ -101,7 +105,8 @@ def input_angles(ratio: float, steps: int, revolutions: float, direction: int) -
 
 def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: float = 1.0,
            load_Nm: float | None = None, direction: int | None = None, law: ContactLaw | None = None,
-           geom: ReducerGeometry | None = None, theta_in_deg: np.ndarray | None = None) -> TEResult:
+           geom: ReducerGeometry | None = None, theta_in_deg: np.ndarray | None = None,
+           x_init: np.ndarray | None = None) -> TEResult:
     """Quasi-static TE of a case.
 
     Parameters
@@ -124,6 +129,10 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
         Explicit input angles, deg, in the order of motion (e.g. the readings of a test rig); they
         replace ``steps`` and ``revolutions``. The analytic provider solves every angle on its own,
         so the values do not depend on the order or the spacing.
+    x_init : (steps, ndof) array or None
+        Start states: :attr:`TEResult.state` of a nearby case (same design, load, direction, law and
+        angles) for a warm start; the equilibrium is the same within the solver tolerance. A start of
+        another shape (another model's coordinates) is not used: the solve starts as without one.
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
@@ -135,8 +144,17 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     th, steps, revolutions = _angles(g, steps, revolutions, d, theta_in_deg)
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, make_contacts(g, solver), law)
-    sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else FCL_CHUNK)
+    sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else FCL_CHUNK,
+                  x_init=_usable_start(x_init, th.size, s.ndof))
     return _te_result(case, solver, s, sol, steps, revolutions, d, load, time.perf_counter() - t0)
+
+
+def _usable_start(x_init, n: int, ndof: int) -> np.ndarray | None:
+    """A start state usable for a solve of n angles and ndof coordinates, else None (start as without one)."""
+    if x_init is None:
+        return None
+    xi = np.asarray(x_init, dtype=float)
+    return xi if xi.shape == (n, ndof) and np.all(np.isfinite(xi)) else None
 
 
 def _angles(g: ReducerGeometry, steps: int, revolutions: float, d: int, theta_in_deg,
@@ -171,13 +189,13 @@ def _te_result(case: Case, solver: str, s: QuasiStaticSolver, sol, steps: int, r
                   "peak_pressure_MPa": float(np.nanmax(sol.peak_pressure_MPa)) if np.any(
                       np.isfinite(sol.peak_pressure_MPa)) else float("nan"),
                   "warnings": list(sol.warnings)})
-    return TEResult(case=case, solver=solver, table=table, stats=stats)
+    return TEResult(case=case, solver=solver, table=table, stats=stats, state=sol.x)
 
 
 def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 720,
                 loads: list[tuple[float, int]] | None = None, revolutions: float = 1.0,
                 law: ContactLaw | None = None, geom: ReducerGeometry | None = None,
-                errors: str = "raise", theta_in_deg: list | None = None) -> list:
+                errors: str = "raise", theta_in_deg: list | None = None, x_init: list | None = None) -> list:
     """Quasi-static TE of one case under several (load, direction) pairs, solved as one batch.
 
     ``run_te_many(case, "analytic", 37, loads=[(5.01, 1), (5.01, -1), (167.0, 1), (167.0, -1)])`` returns
@@ -214,6 +232,9 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     theta_in_deg : list of (array or None), or None
         Per pair, explicit input angles (deg, in the order of motion, at least 2) that replace that pair's
         ``steps`` and ``revolutions``, as in ``run_te``; None (or a None entry): the steps.
+    x_init : list of (array or None), or None
+        Per pair, start states (``run_te``'s ``x_init``: a nearby case's :attr:`TEResult.state` at that pair's
+        angles, a warm start) or None.
 
     Returns
     -------
@@ -251,11 +272,14 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
         th, counts[i], rv = _angles(g, n, revolutions, d, a, field=f"theta_in_deg[{i}]")
         ths.append(th)
         revs.append(float(rv))
+    starts = [None] * len(pairs) if x_init is None else list(x_init)
+    if len(starts) != len(pairs):
+        raise ValueError(f"x_init has {len(starts)} entries for {len(pairs)} loads")
     if solver != "analytic":
         out: list = []
-        for n, (L, d), a in zip(counts, pairs, given):
+        for n, (L, d), a, xi in zip(counts, pairs, given, starts):
             try:
-                out.append(run_te(case, solver, n, revolutions, L, d, law, geom=g, theta_in_deg=a))
+                out.append(run_te(case, solver, n, revolutions, L, d, law, geom=g, theta_in_deg=a, x_init=xi))
             except (InterferenceError, RuntimeError) as err:
                 if errors == "raise":
                     raise
@@ -263,7 +287,9 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
         return out
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, AnalyticContacts(g, per_point=True), law)
-    sols = s.solve_many(ths, [d for _, d in pairs], [L for L, _ in pairs], errors=errors)
+    xs = [_usable_start(xi, th.size, s.ndof) for xi, th in zip(starts, ths)]
+    sols = s.solve_many(ths, [d for _, d in pairs], [L for L, _ in pairs], errors=errors,
+                        x_init=None if all(xi is None for xi in xs) else xs)
     secs = (time.perf_counter() - t0) / len(pairs)
     return [sol if isinstance(sol, Exception) else _te_result(case, solver, s, sol, n, rv, d, L, secs)
             for sol, n, rv, (L, d) in zip(sols, counts, revs, pairs)]

@@ -32,31 +32,32 @@ SHARED_SESSION_FIXTURES = ("small_study", "doe_reference")
 #: loop's run conditions) come from the forward runner's disk cache (:func:`calib_forward_cache`).
 SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
-#: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a
-#: long unit late in the queue would leave the other worker idle at the end. The rest follow in
-#: collection order (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per
-#: test, with a CPU-time plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load
-#: 3-4 (2026-11-23; shared fixtures counted once): study ~70 (small_study 36, the executor comparison ~15,
-#: the stack-up tests 16), rvcad export 33, fcl against analytic 20 (26 tests), stack-up Monte Carlo 17,
-#: rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up on other reducers 8, stiffness 7, fcl
-#: contacts 7. The loop's scenarios (measured before, ``-n 0`` one module at a time): the
-#: single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions, ~18),
-#: calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
-#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, ratio-81 12, the
-#: zero-offset scenario 8.5. The study runs alone on one worker while the single-pin/off-grid scenario
-#: makes the screening of the loop's three run conditions (280 points) as it starts and the declared pair
-#: screens its declared model, so every later scenario on either worker reads that screening from disk
-#: (:func:`calib_forward_cache`).
-HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "test_rvcad_export",
+#: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a long
+#: unit late in the queue would leave the other worker idle at the end. The rest follow in collection order
+#: (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per test, with a CPU-time
+#: plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load 3-4 (2026-11-23; shared
+#: fixtures counted once): study ~70 (small_study 36, the executor comparison ~15, the stack-up tests 16),
+#: rvcad export 33 (group build123d, with rvcad build: one import of build123d, ~6.5 CPU-s), fcl against
+#: analytic 20 (26 tests), stack-up Monte Carlo 17, rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up
+#: on other reducers 8, stiffness 7, fcl contacts 7. The loop's scenarios (measured before, ``-n 0`` one module
+#: at a time): the single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions,
+#: ~18), calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
+#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, the sibling refit under the
+#: physical law (test_calib_physical) 23 (alone, its module with its imports; 58 at 200 readings per
+#: revolution), ratio-81 12, the zero-offset scenario 8.5. The study runs alone on one worker while the
+#: single-pin/off-grid scenario makes the screening of the loop's three run conditions (280 points) as it
+#: starts and the declared pair screens its declared model, so every later scenario on either worker reads that
+#: screening from disk (:func:`calib_forward_cache`).
+HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "build123d",
                "test_screening_grid_does_not_alias_whatever_the_steps", "test_fcl_vs_analytic", "test_stackup_mc",
-               "test_calib_groups", "test_two_effects_at_once", "test_calib_joint", "test_calib_design",
-               "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
+               "test_calib_groups", "test_two_effects_at_once", "test_calib_joint", "test_calib_physical",
+               "test_calib_design", "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
                "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_reducer", "test_rvdyn_stiffness",
                "test_fcl_contacts", "test_encoder_zero_offset_is_not_disguised_as_physics",
                "test_direction_dependent_effect", "calib-order3", "test_load_dependent_effect",
                "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_stackup_failures",
-               "test_paper_readings", "test_rsm_plots", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
-               "test_fuzz_loaders", "test_rsm_augment")
+               "test_rsm_plots", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
+               "test_fuzz_loaders")
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -99,9 +100,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session")
 def calib_forward_cache(tmp_path_factory) -> Path:
-    """rvcalib's forward model for the session: rvdyn's runner with the in-memory cache of the default
-    one and a disk cache shared by the pytest-xdist workers (entries are written atomically; a solve
-    one worker made is read by the other). Returns the cache folder.
+    """rvcalib's forward model for the session: rvdyn's runner with the in-memory cache and the warm
+    starts of the default one (:data:`rvcalib.forward.WARM_BYTES`: each solve starts from the newest
+    state of its neighbourhood, equal to the cold solve within the solver tolerance) and a disk cache
+    shared by the pytest-xdist workers (entries are written atomically; a solve one worker made is read
+    by the other). Returns the cache folder.
 
     The runner names its contact law: the paper's impact law (``ContactLaw()``). These tests check the
     loop's identification logic on data whose truth and model are solved on this one runner, so one law
@@ -115,7 +118,8 @@ def calib_forward_cache(tmp_path_factory) -> Path:
 
     base = tmp_path_factory.getbasetemp()
     root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "rvcalib-forward-cache"
-    prev = forward.use_runner(Runner(cache=root, memory_bytes=forward.CACHE_BYTES, law=ContactLaw()))
+    prev = forward.use_runner(Runner(cache=root, memory_bytes=forward.CACHE_BYTES, warm_bytes=forward.WARM_BYTES,
+                                     law=ContactLaw()))
     yield root
     forward.use_runner(prev)
 

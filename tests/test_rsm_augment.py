@@ -7,9 +7,6 @@ from __future__ import annotations
 import itertools
 import json
 import re
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -21,7 +18,6 @@ from rsm.cli import main
 from rsm.terms import parse_term, term_name
 
 FACTORS = ["EA", "EB", "EC", "ED"]
-REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -156,16 +152,17 @@ def test_cli_augment_json(capsys, paper_data):
     assert t["estimable"] is False and t["F"] is None
 
 
-def test_cli_augment_human(tmp_path, paper_data):
+def test_cli_augment_human(tmp_path, paper_data, capsys):
+    """The human summary of ``rsm fit --augment --new-data`` (in this process: ``python -m rsm`` itself is
+    run in tests/test_rsm_cli.py)."""
     runs, lv = str(paper_data / "paper_table6_bbd_runs.csv"), str(paper_data / "paper_table5_levels.csv")
     new = pd.read_csv(runs).iloc[:4]
     new.to_csv(tmp_path / "new.csv", index=False)
-    r = subprocess.run([sys.executable, "-m", "rsm", "fit", runs, "--factors", *FACTORS, "--response", "te_arcmin",
-                        "--levels", lv, "--augment", "--new-data", str(tmp_path / "new.csv")],
-                       capture_output=True, text=True, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"},
-                       cwd=tmp_path)
-    assert r.returncode == 0, r.stderr
-    assert "the runs support adding EB^2:EC" in r.stdout and "Against 4 new runs" in r.stdout
+    code = main(["fit", runs, "--factors", *FACTORS, "--response", "te_arcmin", "--levels", lv, "--augment",
+                 "--new-data", str(tmp_path / "new.csv")])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "the runs support adding EB^2:EC" in out and "Against 4 new runs" in out
 
 
 def test_cli_augment_errors(tmp_path, capsys, paper_data):

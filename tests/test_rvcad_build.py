@@ -12,6 +12,9 @@ import rvcad
 from rvcad.errors import Case
 from rvcad.validation import CaseError, OptionError
 
+# on the worker of test_rvcad_export: both import build123d (about 6.5 CPU-s per process)
+pytestmark = pytest.mark.xdist_group("build123d")
+
 
 def test_case_forms_and_attributes(tmp_path: Path) -> None:
     d = {"name": "j", "errors": {"pin_radius": 5}}

@@ -21,6 +21,9 @@ from rvcad.step import edge_samples, read_step
 from rvcad.stl import read_stl
 from test_rvcad_helpers import stl_chords, stl_vertices
 
+# on one worker with test_rvcad_build: both import build123d (about 6.5 CPU-s per process)
+pytestmark = pytest.mark.xdist_group("build123d")
+
 TOL = 1e-4  # 0.1 um
 PARTS = (["sun", "planet0", "planet1", "crank0", "crank1", "flange", "disc0", "disc1", "carrier", "housing"]
          + [f"pin{i:02d}" for i in range(40)])
