@@ -484,6 +484,13 @@ class JointSelection(Selection):
             # with the empirical terms' parts given back (half as many more)
             raw = [d for d in self.rank(rc_cat, None, None) if d.effect.family != "measurement"]
             short += self.shortlist(raw, max(1, self.joint_new // 2), {d.family_key for d in short})
+        if self.active and self.joint_new and \
+                self.rss_full / self.n <= EMPIRICAL_LEAVES_NOISE ** 2 * self._noise2(r_full):
+            # near the noise (the linearisation at the state is then good): the candidates that could
+            # take a weak member's place, screened with the others refitted (far from it they led the
+            # linear subset search to stand-ins: seed 1, docs/calibration.md)
+            short += self.replacement_shortlist(self.active_members(), rc, Ec, max(1, self.joint_new // 2),
+                                                {d.family_key for d in short})
         temps = {}
         for d in short:
             if d.effect.screen != "analytic":
