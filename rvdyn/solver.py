@@ -536,9 +536,9 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             big = np.abs(dx).max(axis=1)
             dx = dx * np.minimum(1.0, trust[rows] / np.maximum(big, 1e-300))[:, None]
             # the contraction test (CONTRACTION_MAX): an uncut, exact step whose predecessor was uncut too
-            q = np.maximum(big / prev_ch[rows], CONTRACTION_MAX)
+            q = np.maximum(big / np.maximum(prev_ch[rows], 1e-300), CONTRACTION_MAX)
             settled = ((big <= trust[rows]) & (big < LOOSE_MIN_STEP * tol_mm) & (q <= CONTRACTION_MAX)
-                       & (q / (1.0 - q) * big < tol_mm))
+                       & (CONTRACTION_MAX / (1.0 - CONTRACTION_MAX) * big < tol_mm))
             prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
             if expand:
                 arms = self._hole_arms(th[rows], xs, step_law)
