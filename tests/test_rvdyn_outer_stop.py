@@ -1,12 +1,12 @@
 """The outer iteration's contraction stop and the TE-only finishing of the solver (rvdyn.solver).
 
-* An uncut, exact outer step dx_k no larger than ``(1 - q) / q`` tolerances, with q the measured contraction
-  floored at ``CONTRACTION_MAX``, ends the iteration (docs/physics.md, "When the outer iteration stops"): the
-  TE must equal a solve to a 1000 times tighter tolerance within the solver tolerance (1e-9 rad, 2.06e-4 arcsec),
-  cold and warm, for perturbations that change contacts (cam eccentricity and a pin pitch error of 20 um and
+* An uncut, exact outer step dx_k of a warm solve no larger than ``(1 - q) / q`` tolerances, with q the measured
+  contraction floored at ``CONTRACTION_MAX``, ends the iteration (docs/physics.md, "When the outer iteration
+  stops"; a cold solve keeps the plain step test): the TE must equal a solve to a 1000 times tighter tolerance
+  within the solver tolerance (1e-9 rad, 2.06e-4 arcsec), cold and warm, for perturbations that change contacts (cam eccentricity and a pin pitch error of 20 um and
   0.02 deg, pin radius) under the physical and the impact law. With the measured contraction trusted alone
-  (no floor) the physical cases, cold and warm, miss the tight solve by more than the tolerance: this test
-  fails then (checked).
+  (no floor) the warm physical case misses the tight solve by more than the tolerance: this test fails then
+  (checked).
 * ``want_parts = False`` (what :func:`rvdyn.te.run_te` uses) leaves out the unit-load wind-up parts and the cam
   forces; the TE and the states are the same bit for bit.
 """

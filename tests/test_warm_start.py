@@ -58,13 +58,8 @@ def test_warm_and_cold_reach_the_same_equilibrium(solved):
 
 
 def test_a_warm_solve_takes_fewer_outer_iterations(solved):
-    _, cold, warm, law = solved
-    if law == "physical":
-        assert sum(w.iterations for w in warm) < sum(c.iterations for c in cold)
-    else:
-        # impact law: since the outer loop stops on its contraction (docs/physics.md section 8) the cold solve
-        # takes 3 outer iterations too (the move, the correction, the stop), as the warm one: no more
-        assert sum(w.iterations for w in warm) <= sum(c.iterations for c in cold)
+    _, cold, warm, _ = solved
+    assert sum(w.iterations for w in warm) < sum(c.iterations for c in cold)
 
 
 def test_a_solve_started_at_its_equilibrium_stops_after_one_outer_iteration(solved):
