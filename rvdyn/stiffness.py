@@ -35,6 +35,7 @@ from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvdyn.bearings import Supports
 from rvdyn.contacts import ContactLaw
+from rvdyn import housing
 from rvdyn.results import InterferenceError
 from rvdyn.options import model_value
 from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver
@@ -184,10 +185,15 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
                 for k, v in sol.parts_rad.items():
                     budget_acc.setdefault(k, []).append(float(v[0]) * ARCSEC_PER_RAD)
         sides[sign] = rows
+    # the housing ring in series (rvdyn.housing; elastic supports only, as the other supports): its wind-up
+    # along each side's levels, added to the equilibrium's torsion in the sense of the torque
+    house = {sign: _housing_windup(s, g, sides[sign]) for sign in (1, -1)}
+    if s.supports is not None:
+        budget_acc["housing"] = [float(house[sign][-1]) * ARCSEC_PER_RAD for sign in (1, -1)]
     el_theta, el_tau, el_fric, el_pins = [], [], [], []
     for sign in (-1, 1):
         rows = sides[sign]
-        theta = np.array([sol.te_rad[0] for _, sol in rows])
+        theta = np.array([sol.te_rad[0] for _, sol in rows]) + sign * house[sign]
         tf = _friction_torque(s, g, rows, theta, mu_p, mu_b)
         order = np.argsort(theta) if sign > 0 else np.argsort(theta)
         for i in order:
@@ -269,6 +275,29 @@ def _zero_torque(s: QuasiStaticSolver, th: np.ndarray, direction: int):
         if s.law.rigid:
             raise
         return s.solve(th, direction=direction, load_Nm=ContactLaw.RIGID_LOAD_NMM / 1e3), True
+
+
+def _housing_windup(s: QuasiStaticSolver, g: ReducerGeometry, rows) -> np.ndarray:
+    """Output wind-up (rad, >= 0) of the housing ring at each level of one side (rows ordered by |torque|), the
+    incremental unit-load sum of rvdyn.housing over the pin forces of the equilibrium; zeros without elastic
+    supports (the impact law and rigid supports keep a rigid housing)."""
+    n = len(rows)
+    if s.supports is None:
+        return np.zeros(n)
+    d = g.design
+    hc = np.mean(g.pin_centers, axis=0)                                         # the housing's centre
+    rel = g.pin_centers - hc
+    C = housing.housing_compliance(d, np.arctan2(rel[:, 1], rel[:, 0]))
+    loads, torques = [], []
+    for torque, sol in rows:
+        if sol.pin_force_N is None:                                             # the rigid limit: no force
+            loads.append(np.zeros(2 * d.z_pins))
+        else:
+            cen, _ = g.disc_poses(sol.theta_out, sol.psi)
+            F = housing.pin_force_vectors(g.pin_centers, hc, cen[0], sol.pin_force_N[0], d.z_pins, d.z_disc)
+            loads.append(housing.polar_components(g.pin_centers, hc, F))
+        torques.append(abs(torque) * 1e3)
+    return housing.incremental_windup(C, loads, np.array(torques))
 
 
 def _friction_torque(s: QuasiStaticSolver, g: ReducerGeometry, rows, theta: np.ndarray, mu_p: float,
