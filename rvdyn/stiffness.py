@@ -62,7 +62,8 @@ class StiffnessResult:
         ``unload`` +rated -> -rated).
     elastic : DataFrame
         The friction-free equilibrium: ``torque_Nm``, ``torsion_arcmin``, ``friction_torque_Nm``,
-        ``pins_in_contact`` (pin-disc contacts of both discs that touch).
+        ``pins_in_contact`` (pin-disc contacts of both discs that touch), ``housing_arcmin`` (the housing
+        ring's wind-up in series, included in ``torsion_arcmin``; rvdyn.housing).
     figures : dict
         ``torsional_rigidity_Nm_per_arcmin``, ``lost_motion_arcmin``, ``backlash_arcmin``,
         ``hysteresis_loss_arcmin``, ``rated_torque_Nm``, ``budget`` (part -> arcsec at rated torque),
@@ -190,7 +191,7 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     house = {sign: _housing_windup(s, g, sides[sign]) for sign in (1, -1)}
     if s.supports is not None:
         budget_acc["housing"] = [float(house[sign][-1]) * ARCSEC_PER_RAD for sign in (1, -1)]
-    el_theta, el_tau, el_fric, el_pins = [], [], [], []
+    el_theta, el_tau, el_fric, el_pins, el_house = [], [], [], [], []
     for sign in (-1, 1):
         rows = sides[sign]
         theta = np.array([sol.te_rad[0] for _, sol in rows]) + sign * house[sign]
@@ -201,12 +202,14 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
             el_tau.append(rows[i][0] * 1e3)
             el_fric.append(tf[i])
             el_pins.append(int(rows[i][1].n_pin_contacts[0]))
+            el_house.append(sign * house[sign][i])
     el_theta = np.array(el_theta)
     el_tau = np.array(el_tau)
     el_fric = np.array(el_fric)
     el_pins = np.array(el_pins)
+    el_house = np.array(el_house)
     o = np.lexsort((el_tau, el_theta))
-    el_theta, el_tau, el_fric, el_pins = el_theta[o], el_tau[o], el_fric[o], el_pins[o]
+    el_theta, el_tau, el_fric, el_pins, el_house = el_theta[o], el_tau[o], el_fric[o], el_pins[o], el_house[o]
     U = np.maximum.accumulate(el_tau + el_fric)                                  # loading branch tau(theta)
     D = np.maximum.accumulate(el_tau - el_fric)                                  # unloading branch
     R = rated * 1e3
@@ -228,7 +231,8 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     # the unloading branch from +rated is the first branch's return; sample the load branch of the
     # complete cycle (-rated -> +rated after an unloading from +rated) for the width
     elastic = pd.DataFrame({"torque_Nm": el_tau / 1e3, "torsion_arcmin": el_theta * ARCSEC_PER_RAD / 60.0,
-                            "friction_torque_Nm": el_fric / 1e3, "pins_in_contact": el_pins})
+                            "friction_torque_Nm": el_fric / 1e3, "pins_in_contact": el_pins,
+                            "housing_arcmin": el_house * ARCSEC_PER_RAD / 60.0})
     lm_plus, _ = _mid_width(curve, LOST_MOTION_FRACTION * rated)
     lm_minus, _ = _mid_width(curve, -LOST_MOTION_FRACTION * rated)
     _, width0 = _mid_width(curve, 0.0)
