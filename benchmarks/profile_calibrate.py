@@ -8,7 +8,9 @@ prints per stage: batches, cases asked, unique solves (cache misses), solver sec
 ``--cprofile FILE`` the run is profiled as well and the 25 largest cumulative entries are printed.
 
 Run: ``python benchmarks/profile_calibrate.py [--law impact] [--realistic-seed S --max-terms 12
---time-budget B] [--cprofile out.prof]``. It prints figures only (no asserts).
+--time-budget B] [--cprofile out.prof] [--cache DIR] [--data DIR] [--json FILE]``. ``--cache`` keeps every
+solve on disk (a rerun on the same code reads the same path back; its CPU seconds then count only the new
+solves), ``--data`` writes the dataset to a folder kept for diagnoses. It prints figures only (no asserts).
 """
 from __future__ import annotations
 
