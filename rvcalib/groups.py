@@ -39,7 +39,7 @@ from scipy import stats
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
-from rvcalib.joint import JointSelection
+from rvcalib.replace import ReplacementRefit
 
 #: Joint-fit correlation above which two effects are reported as one group.
 CORRELATION_LIMIT = 0.95
@@ -59,7 +59,7 @@ CHI2_95 = 3.841
 RESOLVE_FACTOR = 25.0
 
 
-class Groups(JointSelection):
+class Groups(ReplacementRefit):
     """Identifiability groups and recommended runs (methods on the loop)."""
 
     def identifiability_groups(self, fitted: list[FittedEffect], unexplained: list[Unexplained]) -> list[dict]:

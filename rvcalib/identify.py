@@ -300,7 +300,7 @@ class Calibrator(Groups):
         return self._finish(r0, before, iterations, t_start)
 
     def _replacement_before_stop(self, it: int, iterations: list[dict] | None = None) -> tuple[str, str] | None:
-        """The replacement refit (:meth:`rvcalib.joint.JointSelection.replacement_refit`) once per model
+        """The replacement refit (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`) once per model
         state before the loop stops at the term limit; the swap made (old, new) or None."""
         if not self.joint or self.over_budget():
             return None

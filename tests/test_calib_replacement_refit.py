@@ -8,7 +8,7 @@ explains 30 % of its part linearly, while refitted through rvdyn the other plane
 session's runner): data made by the simulator at 200 readings per output revolution from 0.37 deg (off
 the loop's 280-point grid), its own noise and seed, four runs, a planet eccentricity, a cam phase, a cam
 eccentricity and a compliance at once. The model state is the stand-in (both planet eccentricities fitted
-from 14 um, no cam phase); :meth:`rvcalib.joint.JointSelection.replacement_refit` must swap a planet
+from 14 um, no cam phase); :meth:`rvcalib.replace.ReplacementRefit.replacement_refit` must swap a planet
 eccentricity for the cam phase and bring every size to its truth.
 """
 from __future__ import annotations
@@ -50,7 +50,7 @@ def stand_in(tmp_path_factory):
     p0 = [np.array([14.0, 0.0]), np.array([14.0, 0.0]), np.array([-4.0]), np.array([0.2])]
     params, *_ = cal.fit_full(eff, p0, [])
     cal.active = [Active(e, p, 1) for e, p in zip(eff, params)]
-    r, cal.emp_coef = cal.full_residual(cal._pairs(), [])
+    r, cal.emp_coef = cal.full_residual([(a.effect, a.p) for a in cal.active], [])
     cal.rss_full = float(r @ r)
     rms_before = math.sqrt(cal.rss_full / cal.n)
     swap = cal.replacement_refit(5)
