@@ -551,7 +551,7 @@ class Groups(ReplacementRefit):
 
 
 def left_out_profile(X: np.ndarray, r: np.ndarray, cands: list[tuple[Effect, np.ndarray, object]], s2: float,
-                     max_add: int) -> tuple[list[dict], np.ndarray, np.ndarray, float, list] | None:
+                     max_add: int, alpha: float = 0.05) -> tuple[list[dict], np.ndarray, np.ndarray, float, list] | None:
     """The library candidates the data support beyond a model, chosen one after another (forward
     selection in the model linearised at its state), and the model's coefficients with them.
 
@@ -573,6 +573,8 @@ def left_out_profile(X: np.ndarray, r: np.ndarray, cands: list[tuple[Effect, np.
         Noise variance per grid point, arcsec^2.
     max_add : int
         Most candidates chosen.
+    alpha : float
+        Family-wise level over the candidates (each is tested at ``alpha / len(cands)``).
 
     Returns
     -------
@@ -603,7 +605,7 @@ def left_out_profile(X: np.ndarray, r: np.ndarray, cands: list[tuple[Effect, np.
                 continue
             g = U.T @ rr
             drop = float(g @ np.linalg.lstsq(uu, g, rcond=None)[0])
-            if drop / s2 > stats.chi2.isf(0.05 / n_cand, S.shape[1]) and (best is None or drop > best[0]):
+            if drop / s2 > stats.chi2.isf(alpha / n_cand, S.shape[1]) and (best is None or drop > best[0]):
                 best = (drop, ci)
         if best is None:
             break
