@@ -202,7 +202,9 @@ def test_play_and_rigidity_equal_rvdyn_stiffness_at_a_locked_input():
     play = play_at_positions(res["dp_3"], res["dm_3"])
     rig = rigidity_at_positions(res, rated)
     h = hysteresis(case, rated_Nm=rated, theta_in_deg=0.0)
-    el = h.elastic.set_index("torque_Nm")["torsion_arcmin"]
+    # the Monte Carlo's solves are the equilibrium alone: rvdyn.stiffness adds the housing ring in series
+    el = h.elastic.set_index("torque_Nm")
+    el = el["torsion_arcmin"] - el["housing_arcmin"]
     th = {f: el[min(el.index, key=lambda t: abs(t - f * rated))] for f in (-1.0, -0.03, 0.03, 1.0)}
     assert play[0] == pytest.approx(th[0.03] - th[-0.03], rel=1e-9)  # the same elastic curve
     b = 0.97 * rated
