@@ -34,7 +34,9 @@ SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
 #: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a long
 #: unit late in the queue would leave the other worker idle at the end. The order holds only without xdist's
-#: reordering of the units by their number of tests (switched off in :func:`pytest_configure`). The rest follow in collection order
+#: reordering of the units by their number of tests (switched off in :func:`pytest_configure`). Measured with
+#: it (2026-11-23, whole suite, load ~5 from other jobs): workers at 269 and 255 CPU-s (this process and its
+#: reaped children), finishing 17 s apart; without it 251 and 258, the loop's single-pin scenario last. The rest follow in collection order
 #: (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per test, with a CPU-time
 #: plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load 3-4 (2026-11-23; shared
 #: fixtures counted once): study ~70 (small_study 36, the executor comparison ~15, the stack-up tests 16),
