@@ -8,7 +8,9 @@ prints per stage: batches, cases asked, unique solves (cache misses), solver sec
 ``--cprofile FILE`` the run is profiled as well and the 25 largest cumulative entries are printed.
 
 Run: ``python benchmarks/profile_calibrate.py [--law impact] [--realistic-seed S --max-terms 12
---time-budget B] [--cprofile out.prof]``. It prints figures only (no asserts).
+--time-budget B] [--cprofile out.prof] [--cache DIR] [--data DIR] [--json FILE]``. ``--cache`` keeps every
+solve on disk (a rerun on the same code reads the same path back; its CPU seconds then count only the new
+solves), ``--data`` writes the dataset to a folder kept for diagnoses. It prints figures only (no asserts).
 """
 from __future__ import annotations
 
@@ -35,7 +37,7 @@ from rvdyn.runner import Runner  # noqa: E402
 
 #: modules whose methods are loop stages (the innermost on the stack names the stage)
 STAGE_MODULES = ("rvcalib/screening.py", "rvcalib/fitting.py", "rvcalib/selection.py", "rvcalib/joint.py",
-                 "rvcalib/groups.py", "rvcalib/identify.py")
+                 "rvcalib/groups.py", "rvcalib/identify.py", "rvcalib/replace.py")
 
 
 def stage_of_stack() -> str:
@@ -126,13 +128,18 @@ def main() -> int:
     ap.add_argument("--json", default=None, help="write the result JSON here")
     ap.add_argument("--cold", action="store_true", help="no warm starts (every solve from the ideal kinematics)")
     ap.add_argument("--verbose", action="store_true", help="print the loop's progress")
+    ap.add_argument("--cache", default=None, metavar="DIR",
+                    help="keep every solve in this disk cache (reruns and diagnoses reuse them)")
+    ap.add_argument("--data", default=None, metavar="DIR",
+                    help="write the dataset here instead of a temporary folder")
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     law = ContactLaw() if args.law == "impact" else None
     # the impact law must be named for truth and model alike; None leaves each case's own (physical)
-    forward.use_runner(Runner(solver="analytic", memory_bytes=forward.CACHE_BYTES, law=law,
+    forward.use_runner(Runner(solver="analytic", memory_bytes=forward.CACHE_BYTES, law=law, cache=args.cache,
                               warm_bytes=0 if args.cold else forward.WARM_BYTES))
-    root = Path(tempfile.mkdtemp(prefix="profile-calibrate-"))
+    root = Path(args.data) if args.data else Path(tempfile.mkdtemp(prefix="profile-calibrate-"))
+    root.mkdir(parents=True, exist_ok=True)
     hidden = None
     if args.realistic_seed is not None:
         folder, hidden = realistic_dataset(root, args.realistic_seed)

@@ -78,6 +78,10 @@ class Design:
     pin_seat_clearance_mm : float
         Radial clearance of a pin in its housing groove (groove radius = pin radius + this), mm; the conformal
         line contact of the seat is in series with the pin-disc contact (rvdyn.bearings.pin_seat_contact).
+    housing_support : str
+        How the pin housing is held against ovalising under the pin forces (rvdyn.housing): ``"main_bearings"``
+        (default: held round at the main bearings on the plates' rims, the wall between the pin band and the
+        bearings a foundation of the band) or ``"free"`` (a free ring: an upper bound).
     profile_equidistant_mm, profile_shift_mm, profile_rotation_deg : float
         Profile modification of both discs: the disc is cut by a wheel of radius ``pin_radius_mm +
         equidistant`` whose centre runs on the circle ``pin_circle_radius + shift``, and the profile is
@@ -133,6 +137,9 @@ class Design:
     carrier_pillars: int = 2
     carrier_pillar_radius_mm: float = 7.0
     pin_seat_clearance_mm: float = 0.01
+    # The housing ring under the pin forces (rvdyn.housing, docs/physics.md section 9): held round at the main
+    # bearings, which ride on the plates' rims (the assumption of rvdyn.bearings.journal_seat_compliance too).
+    housing_support: str = "main_bearings"
     # Profile modification of the cycloid discs (rvcad.profile.modified_profile_parameters): the
     # grinding wheel's radius rp + equidistant, its centre circle Rp + shift, the profile turned by
     # rotation. Zero by default (the paper's unmodified, zero-backlash profile).
@@ -239,6 +246,10 @@ class Design:
                 if not (isinstance(v, str) and v in JOURNAL_ARRANGEMENTS):
                     reject(where, v, f"one of {list(JOURNAL_ARRANGEMENTS)}",
                            "is not a tapered-bearing arrangement", DesignError)
+            elif f.name == "housing_support":
+                if not (isinstance(v, str) and v in HOUSING_SUPPORTS):
+                    reject(where, v, f"one of {list(HOUSING_SUPPORTS)}", "is not a support of the housing ring",
+                           DesignError)
 
     def _check_ranges(self) -> None:
         for name, (lo, hi, lo_open, why) in FIELD_RANGES.items():
@@ -376,6 +387,8 @@ class Design:
 
 #: Arrangements of the two tapered journal bearings of a crank (``Design.journal_bearing_arrangement``).
 JOURNAL_ARRANGEMENTS = ("face_to_face", "back_to_back")
+#: Supports of the pin housing against ovalising (``Design.housing_support``; rvdyn.housing).
+HOUSING_SUPPORTS = ("main_bearings", "free")
 
 #: Physical range of every Design field: (low, high, low bound open?, reason). Relations between
 #: fields are checked in :meth:`Design.validate` after these.

@@ -39,7 +39,7 @@ from scipy import stats
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
-from rvcalib.joint import JointSelection
+from rvcalib.replace import ReplacementRefit
 
 #: Joint-fit correlation above which two effects are reported as one group.
 CORRELATION_LIMIT = 0.95
@@ -59,7 +59,7 @@ CHI2_95 = 3.841
 RESOLVE_FACTOR = 25.0
 
 
-class Groups(JointSelection):
+class Groups(ReplacementRefit):
     """Identifiability groups and recommended runs (methods on the loop)."""
 
     def identifiability_groups(self, fitted: list[FittedEffect], unexplained: list[Unexplained]) -> list[dict]:
@@ -210,6 +210,46 @@ class Groups(JointSelection):
             groups.append({"kind": "instances", "found": f.name, "members": [me] + alts,
                            "note": "instances of the same error that the data cannot tell apart: the size is "
                                    "identified, the instance is not; the interval covers every member's size"})
+        # 1b. a set of instances of one error type in the model (planet eccentricity of crank 0 and of crank
+        #     1) that another error type takes the place of together (a cam phase): the same rule for the set
+        sets: dict[str, list[int]] = {}
+        for i, a in enumerate(self.active):
+            if a.effect.family == "table4" and a.effect.name in by_name and a.effect.name not in unsplit:
+                sets.setdefault(a.effect.key, []).append(i)
+        for key, idx in sorted(sets.items()):
+            if len(idx) < 2:
+                continue
+            t = r_fin.copy()
+            for i in idx:
+                m, a = members[i], self.active[i]
+                t += m.cols @ coef[col0[i]:col0[i + 1]] + (m.contribution if m.contribution is not None
+                                                           else m.cols @ np.asarray(a.p, dtype=float))
+            rest = [blocks[j] for j in range(len(blocks)) if j not in idx]
+            others = np.column_stack(rest) if rest else None
+            r0 = self._group(self.m, t, others)[2]
+            if (r0 - rss_grid) * w / s2 < CHI2_95:
+                continue
+            alts = [ent for ent, _ in replacements(t, others, CHI2_95) if ent["key"] != key]
+            if not alts:
+                continue
+            alts.sort(key=lambda x: x["rms_after_arcsec"])
+            mem = []
+            for i in idx:
+                f = by_name[self.active[i].effect.name]
+                d = {"name": f.name, "key": f.key, "value": f.value, "unit": f.unit, "rms_after_arcsec": rms_model,
+                     "found": True}
+                if f.angle_deg is not None:
+                    d["angle_deg"] = f.angle_deg
+                mem.append(d)
+                unsplit.add(f.name)
+                alt_names.setdefault(f.name, set()).update(x["name"] for x in alts)
+            groups.append({"kind": "unsplit", "found": ", ".join(x["name"] for x in mem), "members": mem + alts,
+                           "note": f"{len(idx)} instances of {key} in the model that another error, each at the size "
+                                   "listed, replaces together within the noise (the others refitted): the data "
+                                   "cannot tell them apart; the model holds the first ones, which are therefore "
+                                   "not named as effects"})
+            self.log(f"instances of {key} in the model ({', '.join(x['name'] for x in mem)}) unsplit from "
+                     + ", ".join(f"{x['name']} {x['value']:.4g} {x['unit']}" for x in alts[:3]))
         # 2. honest intervals: each named effect's interval in the model plus any one candidate left out
         #    (profiled over the size the data give that candidate), the union over candidates
         res_groups: dict[int, tuple] = {}
@@ -240,6 +280,53 @@ class Groups(JointSelection):
                         widen[f.name] = (gain, e.name)
         for name, (_, cand) in widen.items():
             by_name[name].selection["interval_widened_by"] = cand
+        # 2b. ... and over the left-out candidates together: the ones the data support beyond the model,
+        #     chosen one after another at the final state (linear), with every effect refitted beside them
+        excluded = set().union(*alt_names.values()) if alt_names else set()
+        cands = [(e, d.cols, d.to_p) for e, d in screened({}, r_fin, None) if e.name not in excluded]
+        prof = left_out_profile(X, r_fin, cands, s2 / w, self.max_terms)
+        if prof is not None:
+            chosen, b_aug, cov_aug, rss_aug, picked = prof
+            rms_aug = math.sqrt(max(self.rss_full - (rss_grid - rss_aug) * w, 0.0) / self.n)
+            v_lin = {f.name: f.value + float(b_aug[col0[i]]) for i, a in enumerate(self.active)
+                     if (f := by_name.get(a.effect.name)) is not None}
+            how = "linear"
+            # the sizes with them through the full model (one joint fit from the linear estimates; the
+            # linearisation at a state that stands in for several errors can be far from the truth)
+            refit = self._refit_with(picked) if resolve and not self.over_budget() else None
+            if refit is not None:
+                params_nl, rss_nl = refit
+                if rss_nl < self.rss_full:
+                    how = "refitted through rvdyn"
+                    rms_aug = math.sqrt(rss_nl / self.n)
+                    v_lin = {a.effect.name: float(a.effect.value(q)) for a, q in zip(self.active, params_nl)}
+                    for c, (e, q) in zip(chosen, zip([e for e, _ in picked], params_nl[len(self.active):])):
+                        c["value"] = float(e.value(q))
+                        if e.polar:
+                            c["angle_deg"] = float(e.magnitude_angle(q)[1])
+            for i, a in enumerate(self.active):
+                f = by_name.get(a.effect.name)
+                if f is None or f.name in unsplit:
+                    continue
+                j = col0[i]
+                half = tq * math.sqrt(max(cov_aug[j, j], 0.0))
+                v_aug = v_lin[f.name]
+                lo, hi = v_aug - half, v_aug + half
+                f.ci_low, f.ci_high = float(min(f.ci_low, lo)), float(max(f.ci_high, hi))
+                if abs(v_aug - f.value) <= tq * math.sqrt(max(covX[j, j], 0.0)):
+                    continue  # its size does not depend on them beyond its own interval
+                f.selection["size_with_left_out"] = {"value": v_aug, "ci_low": lo, "ci_high": hi,
+                                                     "left_out": [c["name"] for c in chosen], "how": how}
+                me = {"name": f.name, "key": f.key, "value": f.value, "unit": f.unit, "rms_after_arcsec": rms_model,
+                      "found": True, "value_with_left_out": v_aug}
+                groups.append({"kind": "left_out", "found": f.name,
+                               "members": [me] + [dict(c, rms_after_arcsec=rms_aug, found=False) for c in chosen],
+                               "note": "the found effect's size depends on library effects the model leaves out "
+                                       "(the data support each beyond the model, with everything refitted; "
+                                       f"together they leave RMS {rms_aug:.3g} arcsec, {how}): with them at the "
+                                       f"sizes listed it would be {v_aug:.4g} {f.unit}; its interval covers both"})
+            self.log(f"left-out candidates at the final state: {', '.join(c['name'] for c in chosen)} (RMS "
+                     f"{rms_model:.4g} -> {rms_aug:.4g} arcsec, {how})")
         # 3. instance sets: several instances of one error type in the model that one instance replaces
         #    within the noise are one identified error (its combined effect), not several
         merged, combined = self._instance_sets(members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq,
@@ -249,6 +336,19 @@ class Groups(JointSelection):
         self.log(f"identifiability at the final state: {len(groups)} group(s), {len(unsplit)} effect(s) not named, "
                  f"{time.perf_counter() - t0:.1f} s")
         return kept, groups
+
+    def _refit_with(self, extra: list[tuple[Effect, np.ndarray]]) -> tuple[list[np.ndarray], float] | None:
+        """The model with ``extra`` effects added, refitted jointly through the full model at every reading
+        (empirical terms kept) from the present sizes and the extra effects' starts: (parameters of the
+        model's effects then the extra ones, residual sum of squares), or None when rvdyn cannot evaluate it."""
+        effects = [a.effect for a in self.active] + [e for e, _ in extra]
+        p0 = [np.asarray(a.p, dtype=float) for a in self.active] + [
+            np.clip(np.asarray(p, dtype=float), e.lower, e.upper) for e, p in extra]
+        try:
+            params, rss, *_ = self.fit_full(effects, p0, self.empirical)
+        except ModelEvaluationError:
+            return None
+        return params, float(rss)
 
     def _instance_sets(self, members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq, by_name, unsplit
                        ) -> tuple[set[str], list[tuple[dict, FittedEffect]]]:
@@ -396,6 +496,8 @@ class Groups(JointSelection):
                     base_cache[key] = None
             return base_cache[key]
         for gi, g in enumerate(groups):
+            if g["kind"] == "left_out":
+                continue  # not a group the runs fail to split: the model lacks its members (a larger model names them)
             members = [m for m in g["members"] if isinstance(m.get("value"), (int, float)) and m["value"] != 0][:MAX_MEMBERS]
             if len(members) < 2:
                 continue
@@ -446,6 +548,87 @@ class Groups(JointSelection):
                                   "measurement other than the TE is needed (e.g. the parts' geometry)")
             out.append(rec)
         return out
+
+
+def left_out_profile(X: np.ndarray, r: np.ndarray, cands: list[tuple[Effect, np.ndarray, object]], s2: float,
+                     max_add: int, alpha: float = 0.05) -> tuple[list[dict], np.ndarray, np.ndarray, float, list] | None:
+    """The library candidates the data support beyond a model, chosen one after another (forward
+    selection in the model linearised at its state), and the model's coefficients with them.
+
+    Each step adds the candidate whose columns, with the model's and the ones chosen before refitted
+    (Frisch-Waugh), lower the residual sum of squares most, while that drop exceeds the chi-square
+    quantile of a family-wise 5 % level over the candidates (Bonferroni: ``0.05 / len(cands)``; degrees
+    of freedom its columns) in noise variances: a candidate the data support beyond the model, not one of
+    the few that pass a 95 % rule by chance among a library of ~150. At most ``max_add`` are chosen.
+
+    Parameters
+    ----------
+    X : ndarray
+        (n, k) the model's columns (effects linearised at the state, empirical terms), screening grid.
+    r : ndarray
+        The model's residual on the same grid (orthogonal to ``X``), arcsec.
+    cands : list of (Effect, ndarray, callable)
+        Each candidate's signature columns at the state and its map coefficients -> parameters.
+    s2 : float
+        Noise variance per grid point, arcsec^2.
+    max_add : int
+        Most candidates chosen.
+    alpha : float
+        Family-wise level over the candidates (each is tested at ``alpha / len(cands)``).
+
+    Returns
+    -------
+    (chosen, b, cov, rss, effects) or None
+        ``chosen``: each ``{name, key, value, unit[, angle_deg]}`` at its size in the augmented model;
+        ``b``: the coefficients of ``X``'s columns in the augmented model (the change of the model's
+        parameters, per column); ``cov``: their covariance (``s2 (A^T A)^-1`` restricted to ``X``);
+        ``rss``: the augmented model's residual sum of squares on the grid; ``effects``: (Effect,
+        parameters) of the chosen, for a refit. None when no candidate is
+        supported (or ``s2`` is not positive).
+    """
+    if s2 <= 0 or not cands or max_add < 1:
+        return None
+    k0 = X.shape[1]
+    n_cand = len(cands)
+    A = X
+    rr = r.copy()
+    picked: list[int] = []
+    for _ in range(max_add):
+        Q, _ = np.linalg.qr(A)
+        best = None
+        for ci, (e, S, _) in enumerate(cands):
+            if ci in picked or S is None:
+                continue
+            U = S - Q @ (Q.T @ S)
+            uu = U.T @ U
+            if not np.all(np.isfinite(uu)) or float(np.trace(uu)) <= 1e-10 * float(np.sum(S * S)):
+                continue
+            g = U.T @ rr
+            drop = float(g @ np.linalg.lstsq(uu, g, rcond=None)[0])
+            if drop / s2 > stats.chi2.isf(alpha / n_cand, S.shape[1]) and (best is None or drop > best[0]):
+                best = (drop, ci)
+        if best is None:
+            break
+        picked.append(best[1])
+        A = np.column_stack([A, cands[best[1]][1]])
+        c, *_ = np.linalg.lstsq(A, r, rcond=None)
+        rr = r - A @ c
+    if not picked:
+        return None
+    coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+    cov = s2 * np.linalg.pinv(A.T @ A)
+    chosen, effs, j = [], [], k0
+    for ci in picked:
+        e, S, to_p = cands[ci]
+        p = np.asarray(to_p(coef[j:j + S.shape[1]]), dtype=float)
+        j += S.shape[1]
+        ent = {"name": e.name, "key": e.key, "value": float(e.value(p)), "unit": e.unit}
+        if e.polar:
+            ent["angle_deg"] = float(e.magnitude_angle(p)[1])
+        chosen.append(ent)
+        effs.append((e, p))
+    res = r - A @ coef
+    return chosen, coef[:k0], cov[:k0, :k0], float(res @ res), effs
 
 
 def json_key(case: dict) -> str:

@@ -101,6 +101,7 @@ class Calibrator(Groups):
         dec = ""
         swap_only = False       # at the term limit: a joint step may only swap members
         swaps_left = MAX_SWAP_STEPS
+        self._replaced_at: set = set()   # model states at which the replacement refit was tried
         eliminated = False      # the backward elimination ran on the present model (nothing changed since)
         while True:
             swap_only = False
@@ -125,6 +126,11 @@ class Calibrator(Groups):
                     swap_only = True
                     swaps_left -= 1
                 else:
+                    sw = self._replacement_before_stop(it + 1, iterations)
+                    if sw:
+                        r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+                        eliminated, swaps_left = False, MAX_SWAP_STEPS
+                        continue
                     self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search: the "
                                        "residual may hold more that a larger limit would name")
                     break
@@ -234,7 +240,11 @@ class Calibrator(Groups):
                     self.rescreen_due += 1
             if got is not None and got[0]:
                 eliminated = False
-            if got is None and swap_only:
+            sw = self._replacement_before_stop(it) if got is None and swap_only else None
+            if sw:
+                log["decision"] = f"replacement refit at the term limit: {sw[1]} in place of {sw[0]}"
+                eliminated, swaps_left = False, MAX_SWAP_STEPS
+            elif got is None and swap_only:
                 self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search (no swap "
                                    "at the limit improves the model): the residual may hold more that a larger "
                                    "limit would name")
@@ -288,6 +298,24 @@ class Calibrator(Groups):
                                    "decision": "removed " + ", ".join(removed) + ": not needed by the final joint fit"})
         self._drop_empirical(iterations)
         return self._finish(r0, before, iterations, t_start)
+
+    def _replacement_before_stop(self, it: int, iterations: list[dict] | None = None) -> tuple[str, str] | None:
+        """The replacement refit (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`) once per model
+        state before the loop stops at the term limit; the swap made (old, new) or None."""
+        if not self.joint or self.over_budget():
+            return None
+        key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
+        if key in self._replaced_at:
+            return None
+        self._replaced_at.add(key)
+        sw = self.replacement_refit(it)
+        if sw:
+            self.log(f"replacement refit at the term limit: {sw[1]} in place of {sw[0]} (RMS "
+                     f"{math.sqrt(self.rss_full / self.n):.4g} arcsec)")
+            if iterations is not None:
+                iterations.append({"iteration": it, "decision": f"replacement refit at the term limit: {sw[1]} "
+                                                                f"in place of {sw[0]}"})
+        return sw
 
     # ------------------------------------------------------------------ wrap up
     def _finish(self, r0, before: Diagnostics, iterations: list[dict], t_start: float) -> CalibrationResult:

@@ -35,6 +35,7 @@ from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvdyn.bearings import Supports
 from rvdyn.contacts import ContactLaw
+from rvdyn import housing
 from rvdyn.results import InterferenceError
 from rvdyn.options import model_value
 from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver
@@ -61,7 +62,8 @@ class StiffnessResult:
         ``unload`` +rated -> -rated).
     elastic : DataFrame
         The friction-free equilibrium: ``torque_Nm``, ``torsion_arcmin``, ``friction_torque_Nm``,
-        ``pins_in_contact`` (pin-disc contacts of both discs that touch).
+        ``pins_in_contact`` (pin-disc contacts of both discs that touch), ``housing_arcmin`` (the housing
+        ring's wind-up in series, included in ``torsion_arcmin``; rvdyn.housing).
     figures : dict
         ``torsional_rigidity_Nm_per_arcmin``, ``lost_motion_arcmin``, ``backlash_arcmin``,
         ``hysteresis_loss_arcmin``, ``rated_torque_Nm``, ``budget`` (part -> arcsec at rated torque),
@@ -184,10 +186,15 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
                 for k, v in sol.parts_rad.items():
                     budget_acc.setdefault(k, []).append(float(v[0]) * ARCSEC_PER_RAD)
         sides[sign] = rows
-    el_theta, el_tau, el_fric, el_pins = [], [], [], []
+    # the housing ring in series (rvdyn.housing; elastic supports only, as the other supports): its wind-up
+    # along each side's levels, added to the equilibrium's torsion in the sense of the torque
+    house = {sign: _housing_windup(s, g, sides[sign]) for sign in (1, -1)}
+    if s.supports is not None:
+        budget_acc["housing"] = [float(house[sign][-1]) * ARCSEC_PER_RAD for sign in (1, -1)]
+    el_theta, el_tau, el_fric, el_pins, el_house = [], [], [], [], []
     for sign in (-1, 1):
         rows = sides[sign]
-        theta = np.array([sol.te_rad[0] for _, sol in rows])
+        theta = np.array([sol.te_rad[0] for _, sol in rows]) + sign * house[sign]
         tf = _friction_torque(s, g, rows, theta, mu_p, mu_b)
         order = np.argsort(theta) if sign > 0 else np.argsort(theta)
         for i in order:
@@ -195,12 +202,14 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
             el_tau.append(rows[i][0] * 1e3)
             el_fric.append(tf[i])
             el_pins.append(int(rows[i][1].n_pin_contacts[0]))
+            el_house.append(sign * house[sign][i])
     el_theta = np.array(el_theta)
     el_tau = np.array(el_tau)
     el_fric = np.array(el_fric)
     el_pins = np.array(el_pins)
+    el_house = np.array(el_house)
     o = np.lexsort((el_tau, el_theta))
-    el_theta, el_tau, el_fric, el_pins = el_theta[o], el_tau[o], el_fric[o], el_pins[o]
+    el_theta, el_tau, el_fric, el_pins, el_house = el_theta[o], el_tau[o], el_fric[o], el_pins[o], el_house[o]
     U = np.maximum.accumulate(el_tau + el_fric)                                  # loading branch tau(theta)
     D = np.maximum.accumulate(el_tau - el_fric)                                  # unloading branch
     R = rated * 1e3
@@ -222,7 +231,8 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     # the unloading branch from +rated is the first branch's return; sample the load branch of the
     # complete cycle (-rated -> +rated after an unloading from +rated) for the width
     elastic = pd.DataFrame({"torque_Nm": el_tau / 1e3, "torsion_arcmin": el_theta * ARCSEC_PER_RAD / 60.0,
-                            "friction_torque_Nm": el_fric / 1e3, "pins_in_contact": el_pins})
+                            "friction_torque_Nm": el_fric / 1e3, "pins_in_contact": el_pins,
+                            "housing_arcmin": el_house * ARCSEC_PER_RAD / 60.0})
     lm_plus, _ = _mid_width(curve, LOST_MOTION_FRACTION * rated)
     lm_minus, _ = _mid_width(curve, -LOST_MOTION_FRACTION * rated)
     _, width0 = _mid_width(curve, 0.0)
@@ -269,6 +279,29 @@ def _zero_torque(s: QuasiStaticSolver, th: np.ndarray, direction: int):
         if s.law.rigid:
             raise
         return s.solve(th, direction=direction, load_Nm=ContactLaw.RIGID_LOAD_NMM / 1e3), True
+
+
+def _housing_windup(s: QuasiStaticSolver, g: ReducerGeometry, rows) -> np.ndarray:
+    """Output wind-up (rad, >= 0) of the housing ring at each level of one side (rows ordered by |torque|), the
+    incremental unit-load sum of rvdyn.housing over the pin forces of the equilibrium; zeros without elastic
+    supports (the impact law and rigid supports keep a rigid housing)."""
+    n = len(rows)
+    if s.supports is None:
+        return np.zeros(n)
+    d = g.design
+    hc = np.mean(g.pin_centers, axis=0)                                         # the housing's centre
+    rel = g.pin_centers - hc
+    C = housing.housing_compliance(d, np.arctan2(rel[:, 1], rel[:, 0]))
+    loads, torques = [], []
+    for torque, sol in rows:
+        if sol.pin_force_N is None:                                             # the rigid limit: no force
+            loads.append(np.zeros(2 * d.z_pins))
+        else:
+            cen, _ = g.disc_poses(sol.theta_out, sol.psi)
+            F = housing.pin_force_vectors(g.pin_centers, hc, cen[0], sol.pin_force_N[0], d.z_pins, d.z_disc)
+            loads.append(housing.polar_components(g.pin_centers, hc, F))
+        torques.append(abs(torque) * 1e3)
+    return housing.incremental_windup(C, loads, np.array(torques))
 
 
 def _friction_torque(s: QuasiStaticSolver, g: ReducerGeometry, rows, theta: np.ndarray, mu_p: float,

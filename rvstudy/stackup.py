@@ -150,7 +150,9 @@ def play_at_positions(plus3: dict | None, minus3: dict | None) -> np.ndarray | N
 
 def rigidity_at_positions(r: dict[str, dict | None], rated_Nm: float) -> np.ndarray | None:
     """b/a at each position, N m/arcmin: b = 0.97 T_rated, a = the torsion between 3 % and 100 % of rated
-    torque on each side, mean of both sides (``rvdyn.stiffness`` reads the curve so)."""
+    torque on each side, mean of both sides (``rvdyn.stiffness`` reads the curve so). The equilibrium alone:
+    ``rvdyn.stiffness`` adds the housing ring in series (rvdyn.housing; 0.045 arcsec of 117 at rated torque on
+    the default design), which these readings leave out."""
     t = {k: torsion_arcmin(v) for k, v in r.items()}
     if any(v is None for v in t.values()):
         return None

@@ -33,12 +33,15 @@ SHARED_SESSION_FIXTURES = ("small_study", "doe_reference")
 SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
 #: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
 #: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a long
-#: unit late in the queue would leave the other worker idle at the end. The rest follow in collection order
+#: unit late in the queue would leave the other worker idle at the end. The order holds only without xdist's
+#: reordering of the units by their number of tests (switched off in :func:`pytest_configure`). Measured with
+#: it (2026-11-23, whole suite, load ~5 from other jobs): workers at 269 and 255 CPU-s (this process and its
+#: reaped children), finishing 17 s apart; without it 251 and 258, the loop's single-pin scenario last. The rest follow in collection order
 #: (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per test, with a CPU-time
 #: plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load 3-4 (2026-11-23; shared
 #: fixtures counted once): study ~70 (small_study 36, the executor comparison ~15, the stack-up tests 16),
 #: rvcad export 33 (group build123d, with rvcad build: one import of build123d, ~6.5 CPU-s), fcl against
-#: analytic 20 (26 tests), stack-up Monte Carlo 17, rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up
+#: analytic 20 (26 tests), stack-up Monte Carlo 17 (~11 with 12 closed-form draws), rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up
 #: on other reducers 8, stiffness 7, fcl contacts 7. The loop's scenarios (measured before, ``-n 0`` one module
 #: at a time): the single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions,
 #: ~18), calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
@@ -62,6 +65,12 @@ HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "build123d",
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "xdist_group(name): tests run on one pytest-xdist worker (--dist loadgroup)")
+    # pytest-xdist (3.x) hands out the --dist loadgroup units sorted by their number of tests unless told not to
+    # (--no-loadscope-reorder): the many quick parametrised checks went first and the long single-test units of
+    # the loop last, both workers then screening the same run conditions at the same time. Keep the order of
+    # pytest_collection_modifyitems (HEAVY_FIRST) unless the command line asks for the reordering.
+    if hasattr(config.option, "loadscopereorder") and "--loadscope-reorder" not in config.invocation_params.args:
+        config.option.loadscopereorder = False
 
 
 def _unit(it: pytest.Item, study_modules: set[str]) -> tuple[str, str]:

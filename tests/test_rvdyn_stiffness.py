@@ -34,7 +34,7 @@ def test_figures_and_budget_are_the_curve(sweeps) -> None:
     f = sweeps["default"].figures
     assert KEYS <= set(f) and f["rated_torque_Nm"] == DEFAULT_RATED_NM
     assert {"pins", "pin_seats", "gears", "cam_bearings", "journal_bearings", "crank_bending", "crank_torsion",
-            "carrier", "cam_bearing_seats", "journal_bearing_seats"} == set(f["budget"])
+            "carrier", "cam_bearing_seats", "journal_bearing_seats", "housing"} == set(f["budget"])
     el = sweeps["default"].elastic
     at_rated = el.loc[np.isclose(el["torque_Nm"], DEFAULT_RATED_NM), "torsion_arcmin"].to_numpy()[0] * 60
     # the parts add up to the wind-up (virtual work on the linearised gaps: to 1e-4)

@@ -39,7 +39,7 @@ def _lever_max(design: Design, steps: int) -> np.ndarray:
 def common_pin_radius(tmp_path_factory):
     """Only a common pin-radius change, normal(-10 um, 2 um): a uniform clearance at every pin."""
     cfg = StudyConfig(out=tmp_path_factory.mktemp("cf"), solver="analytic", steps=STEPS, workers=1, stages=("mc",),
-                      progress=False, figures=False, use_cache=False, load_Nm=0.0, mc_draws=30, mc_sobol=0,
+                      progress=False, figures=False, use_cache=False, load_Nm=0.0, mc_draws=12, mc_sobol=0,
                       mc_check=0, tolerances={"pin_radius": parse_tolerance("pin_radius[common]=normal:2:-10")},
                       mc_contact="impact")  # the rigid limit of the closed form (load 0); ~1/3 the physical law's cost
     return run_study(cfg)
@@ -61,7 +61,8 @@ def test_common_pin_radius_closed_form(common_pin_radius):
     c = mc["responses"]["te_mean_abs_arcmin"]
     assert c["mean"] == pytest.approx(np.mean(-dr) * inv.mean() * to_arcmin, rel=2e-3)
     assert c["std"] == pytest.approx(np.std(dr, ddof=1) * inv.mean() * to_arcmin, rel=2e-3)
-    # and the draws are the stated normal: mean -10 um, sigma 2 um (40 draws: 4-sigma bounds)
+    # and the draws are the stated normal: mean -10 um, sigma 2 um (4-sigma bound on the mean of the draws; the
+    # sample sigma within 50 %: a wrong scale such as the variance, 4 um, or a uniform of the same bounds fails)
     assert abs(dr.mean() + 10) < 4 * 2 / math.sqrt(len(dr))
     assert 0.5 < dr.std(ddof=1) / 2 < 1.5
     # the lever of the closed form: about (i Z1/Z2) e = 52.4 mm
@@ -201,7 +202,9 @@ def test_play_and_rigidity_equal_rvdyn_stiffness_at_a_locked_input():
     play = play_at_positions(res["dp_3"], res["dm_3"])
     rig = rigidity_at_positions(res, rated)
     h = hysteresis(case, rated_Nm=rated, theta_in_deg=0.0)
-    el = h.elastic.set_index("torque_Nm")["torsion_arcmin"]
+    # the Monte Carlo's solves are the equilibrium alone: rvdyn.stiffness adds the housing ring in series
+    el = h.elastic.set_index("torque_Nm")
+    el = el["torsion_arcmin"] - el["housing_arcmin"]
     th = {f: el[min(el.index, key=lambda t: abs(t - f * rated))] for f in (-1.0, -0.03, 0.03, 1.0)}
     assert play[0] == pytest.approx(th[0.03] - th[-0.03], rel=1e-9)  # the same elastic curve
     b = 0.97 * rated
