@@ -4,7 +4,9 @@ Runs the 5-run benchmark dataset of ``bench_calibrate.py`` (default) or one real
 (``--realistic-seed S``) with the data and the model on one contact law (``--law impact|physical``),
 wraps the forward model's batch call (:func:`rvcalib.forward.te_at_many`) to attribute every batch to
 the loop stage that asked for it (the innermost method of the loop's classes on the call stack), and
-prints per stage: batches, cases asked, unique solves (cache misses), solver seconds. With
+prints per stage: batches, cases asked, unique solves (cache misses), solver seconds, and the solver's work
+in states linearised and taken through the inner solve (outer iterations x states: a measure that does not
+depend on the machine's load, unlike the seconds). With
 ``--cprofile FILE`` the run is profiled as well and the 25 largest cumulative entries are printed.
 
 Run: ``python benchmarks/profile_calibrate.py [--law impact] [--realistic-seed S --max-terms 12
