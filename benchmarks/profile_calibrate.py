@@ -4,7 +4,9 @@ Runs the 5-run benchmark dataset of ``bench_calibrate.py`` (default) or one real
 (``--realistic-seed S``) with the data and the model on one contact law (``--law impact|physical``),
 wraps the forward model's batch call (:func:`rvcalib.forward.te_at_many`) to attribute every batch to
 the loop stage that asked for it (the innermost method of the loop's classes on the call stack), and
-prints per stage: batches, cases asked, unique solves (cache misses), solver seconds. With
+prints per stage: batches, cases asked, unique solves (cache misses), solver seconds, and the solver's work
+in states linearised and taken through the inner solve (outer iterations x states: a measure that does not
+depend on the machine's load, unlike the seconds). With
 ``--cprofile FILE`` the run is profiled as well and the 25 largest cumulative entries are printed.
 
 Run: ``python benchmarks/profile_calibrate.py [--law impact] [--realistic-seed S --max-terms 12
@@ -77,6 +79,25 @@ def instrument() -> dict:
     return stats
 
 
+def count_rows() -> dict:
+    """Wrap the solver's linearisation and inner solve to count the states they take (a work measure that
+    does not depend on the machine's load): ``linearised`` rows of the outer iterations, ``inner`` rows."""
+    from rvdyn.solver import QuasiStaticSolver
+    n = {"linearised": 0, "inner": 0}
+    lin, inner = QuasiStaticSolver._linearise, QuasiStaticSolver._inner
+
+    def _linearise(self, th_in, x, direction):
+        n["linearised"] += int(np.shape(x)[0])
+        return lin(self, th_in, x, direction)
+
+    def _inner(self, th_in, x0, *a, **k):
+        n["inner"] += int(np.shape(x0)[0])
+        return inner(self, th_in, x0, *a, **k)
+
+    QuasiStaticSolver._linearise, QuasiStaticSolver._inner = _linearise, _inner
+    return n
+
+
 def five_run_dataset(root: Path) -> Path:
     """The dataset of ``bench_calibrate.py``'s default mode (same runs, truth, noise and seed)."""
     runs = [{"run": f"r{i + 1}", "load_Nm": L, "direction": d, "declared": {"cam_eccentricity": 5.0, "pin_radius": -2.0}}
@@ -130,6 +151,7 @@ def main() -> int:
     r = forward.forward_runner()
     sim_solves = r.computed
     stats = instrument()
+    rows = count_rows()
     prof = cProfile.Profile() if args.cprofile else None
     t0, c0 = time.perf_counter(), time.process_time()
     if prof:
@@ -142,6 +164,8 @@ def main() -> int:
     print(f"law {args.law}; dataset {folder}; calibration {wall:.1f} s wall, {cpu:.1f} s CPU; "
           f"rvdyn solves {r.computed - sim_solves}, solver s {sum(r.solve_seconds):.1f} (incl. simulation)")
     print(f"RMS {res.rms_before:.5g} -> {res.rms_after:.5g}; stopped by: {res.stopped_by}")
+    print(f"solver work: {rows['linearised']} states linearised, {rows['inner']} states through the inner solve "
+          f"(outer iterations x states, the loop only)")
     for e in res.effects:
         print(f"  {e.name} = {e.value:.7g} {e.unit} [{e.ci_low:.6g}, {e.ci_high:.6g}]")
     print(f"  unexplained: {[u.label for u in res.unexplained]}")

@@ -43,11 +43,13 @@ class Solution:
         the equilibrium, rvdyn.support_eq), ``pin_seats`` (the pins in their housing grooves, in series with
         the pin-disc contacts inside the equilibrium) and ``carrier`` (the end plate turning against the
         output flange through the pillars, inside the equilibrium); empty in the rigid limit and
-        with the spring model of floating discs (impact law or rigid supports with a cam-bearing clearance).
+        with the spring model of floating discs (impact law or rigid supports with a cam-bearing clearance),
+        and when the solver's ``want_parts`` is False (:func:`rvdyn.te.run_te`: the TE alone).
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
     warnings : list of str
     pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
-    cam_force_N : (N, n_discs, n_cranks, 2) N or None, forces of the cams on the discs (fixed frame)
+    cam_force_N : (N, n_discs, n_cranks, 2) N or None, forces of the cams on the discs (fixed frame; None when
+        the solver's ``want_parts`` is False)
     n_pin_contacts : (N,) int, pin-disc contacts (both discs) that touch (penetration > 0)
     """
 
@@ -126,11 +128,12 @@ class ResultsMixin:
         parts: dict[str, np.ndarray] = {}
         warnings: list[str] = []
         cam_F = None
-        if not law.rigid and self.chain is None and not self.float_discs:
+        want = getattr(self, "want_parts", True)        # the wind-up parts and cam forces (not the TE's)
+        if want and not law.rigid and self.chain is None and not self.float_discs:
             cam_F = self.disc_cam_forces(th, x, F, nrm)
         if not law.rigid:
             te = te - direction * T * self.compliance_rad_per_Nmm
-            if not self.float_discs or self.chain is not None:
+            if want and (not self.float_discs or self.chain is not None):
                 f, dx = self._unit_load_forces(law, delta, direction, th, x)   # dF/dT, N per N mm
                 work = f * np.maximum(delta, 0.0)
                 parts = {"pins": work[:, :n1].sum(axis=1), "gears": work[:, n1:].sum(axis=1)}

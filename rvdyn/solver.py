@@ -59,6 +59,18 @@ PILOT_MU = 1e-3
 #: solve's converged states) starts with: as the pilot start's, its rows are near their equilibrium.
 WARM_MU = PILOT_MU
 
+#: Stopping on the contraction of the outer iteration (:meth:`QuasiStaticSolver._outer`): the outer loop minimises
+#: the potential with the gaps linearised, so its Hessian lacks the contact forces times the gaps' curvature
+#: (the geometric stiffness, relative size delta / rho: contact deflection over the profile's radius of curvature,
+#: about 1e-2) and it converges linearly: each step about q = |dx_k| / |dx_(k-1)| of the one before (measured
+#: 0.4-1 % on the loop's conditions). A state whose step dx_k is uncut and exact (below ``LOOSE_MIN_STEP``
+#: tolerances, where the inner solve is not stopped early), with q <= CONTRACTION_MAX, is then within
+#: ``q / (1 - q) |dx_k|`` (the geometric series of the remaining steps) of its equilibrium, and stops once that is
+#: below the tolerance, without the further iteration whose own step would be below it. Only warm states (solves
+#: given ``x_init``, e.g. the runner's warm starts of a closed loop) stop so; a cold solve keeps the plain step
+#: test, so its results (and the references of the tests) are unchanged bit for bit.
+CONTRACTION_MAX = 0.2
+
 #: Largest trust radius (mm) a batch (:meth:`QuasiStaticSolver.solve_many`) grows to: the largest penetration
 #: an elastic solution may have, so one outer step never crosses more than the elastic range.
 MAX_TRUST_MM = 0.1
@@ -81,6 +93,10 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
     law : ContactLaw
     tol : Tolerances
     """
+
+    #: Compute the wind-up parts (:attr:`Solution.parts_rad`, unit-load method) and the cam forces at each
+    #: solution; False (:func:`rvdyn.te.run_te`, which reports neither) leaves them out, the TE is the same bit for bit.
+    want_parts: bool = True
 
     def __init__(self, geom: ReducerGeometry, contacts, law: ContactLaw | None = None,
                  tol: Tolerances = TOL) -> None:
@@ -290,7 +306,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             xs = x[sl]
             if x_init is None and prev is not None:
                 xs[:] = prev
-            used = self._outer(th[sl], xs, dirs[sl], B[sl], law, [(0, sl.stop - s0)], out, s0, [load_Nm], mu0=mu0)
+            used = self._outer(th[sl], xs, dirs[sl], B[sl], law, [(0, sl.stop - s0)], out, s0, [load_Nm], mu0=mu0,
+                               contraction=x_init is not None)
             iters = max(iters, used[0])
             prev = xs[-1].copy()
         return self._finish_rows(th, x, direction, load_Nm, law, iters, out, slice(0, N))
@@ -394,6 +411,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         law = self._law(loads_Nm[0])
         x = np.zeros((N, self.ndof))
         mu0 = np.ones(N)
+        given = np.zeros(N, dtype=bool)              # the states of solves with start states (warm)
         if x_init is not None:
             if len(x_init) != len(bounds):
                 raise ValueError(f"x_init has {len(x_init)} entries for {len(bounds)} solves")
@@ -402,9 +420,10 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                     continue
                 x[a:b] = self._check_start(xi, b - a, f"x_init[{i}]")
                 mu0[a:b] = WARM_MU
+                given[a:b] = True
         out = self._outputs(N)
         used = self._outer(th, x, dirs, B, law, bounds, out, 0, list(loads_Nm), expand=expand_trust,
-                           collect=errors == "return", mu0=mu0, warm=bool(np.any(mu0 < 1.0)))
+                           collect=errors == "return", mu0=mu0, warm=bool(np.any(mu0 < 1.0)), contraction=given)
         res: list = []
         for (a, b), d, L, it in zip(bounds, directions, loads_Nm, used):
             if isinstance(it, Exception):
@@ -426,13 +445,14 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
 
     def _outer(self, th, x, dirs, B, law, bounds: list[tuple[int, int]], out: dict, offset: int,
                loads: list[float], expand: bool = False, collect: bool = False,
-               mu0: float | np.ndarray = 1.0, warm: bool = False) -> list:
+               mu0: float | np.ndarray = 1.0, warm: bool = False, contraction: bool | np.ndarray = False) -> list:
         """Outer iterations of the solves whose rows are ``bounds`` (row ranges of th and x, solved together,
         each to its own convergence test; ``loads`` N m, for the messages); x is updated in place, the converged
         linearisation is written to ``out`` at row ``offset + row``. ``expand``: grow the trust radius of states
         whose cut step the linearisation predicted well (see :meth:`solve_many`). Returns the outer iterations
         each solve used; a solve that does not converge raises its error (:meth:`_unconverged`), or with
-        ``collect`` has the error in its place."""
+        ``collect`` has the error in its place. ``contraction`` (bool or (N,) bool): the states that may stop on
+        the outer loop's contraction (``CONTRACTION_MAX``; the warm ones)."""
         N = th.size
         tol_mm = self.tol.solver_angle_rad * self.Rp
         trust = np.full(N, OUTER_TRUST_MM)
@@ -445,6 +465,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         active = list(range(len(bounds)))
         prev_rows = None
         dx = np.zeros((0, self.ndof))
+        prev_ch = np.full(N, np.inf)                 # the last uncut step's size per state (inf: none)
+        may_settle = np.broadcast_to(np.asarray(contraction, dtype=bool), (N,))   # warm states: the contraction stop
         # one solve with the supports inside: each state leaves the outer loop at its own convergence (the
         # damping floor of the inner loop fixed at the first linearisation's), so a few slow states do not keep
         # the others iterating, and no state's result depends on the others'
@@ -520,6 +542,11 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                     trust[rows] = np.where(good, np.minimum(4.0 * trust[rows], MAX_TRUST_MM), trust[rows])
             big = np.abs(dx).max(axis=1)
             dx = dx * np.minimum(1.0, trust[rows] / np.maximum(big, 1e-300))[:, None]
+            # the contraction test (CONTRACTION_MAX): an uncut, exact step whose predecessor was uncut too
+            q = np.maximum(big / np.maximum(prev_ch[rows], 1e-300), CONTRACTION_MAX)
+            settled = (may_settle[rows] & (big <= trust[rows]) & (big < LOOSE_MIN_STEP * tol_mm)
+                       & (q <= CONTRACTION_MAX) & (CONTRACTION_MAX / (1.0 - CONTRACTION_MAX) * big < tol_mm))
+            prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
             if expand:
                 arms = self._hole_arms(th[rows], xs, step_law)
                 cut[rows] = big > trust[rows]
@@ -531,7 +558,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             still = []
             if per_row:
                 ch = np.abs(dx).max(axis=1)
-                conv = (ch < tol_mm) | ((it >= self.tol.solver_max_iter // 3) & (ch < 10 * tol_mm))
+                conv = (ch < tol_mm) | settled | ((it >= self.tol.solver_max_iter // 3) & (ch < 10 * tol_mm))
                 if len(bounds) == 1:
                     used[0] = it + 1
                 if conv.any():
@@ -569,7 +596,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             for g, lc in zip(active, locs):
                 used[g] = it + 1
                 change = np.abs(dx[lc]).max()
-                if change < tol_mm or (it >= self.tol.solver_max_iter // 3 and change < 10 * tol_mm):
+                ok = bool(np.all((np.abs(dx[lc]).max(axis=1) < tol_mm) | settled[lc]))
+                if ok or (it >= self.tol.solver_max_iter // 3 and change < 10 * tol_mm):
                     # the step is below the tolerance: the linearised gaps at the new state are exact
                     # to O(dx^2 / rho), far below 1e-12 mm
                     o = slice(offset + bounds[g][0], offset + bounds[g][1])

@@ -144,6 +144,7 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     th, steps, revolutions = _angles(g, steps, revolutions, d, theta_in_deg)
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, make_contacts(g, solver), law)
+    s.want_parts = False                                 # the TE table needs neither the wind-up parts nor cam forces
     sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else FCL_CHUNK,
                   x_init=_usable_start(x_init, th.size, s.ndof))
     return _te_result(case, solver, s, sol, steps, revolutions, d, load, time.perf_counter() - t0)
@@ -287,6 +288,7 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
         return out
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, AnalyticContacts(g, per_point=True), law)
+    s.want_parts = False
     xs = [_usable_start(xi, th.size, s.ndof) for xi, th in zip(starts, ths)]
     sols = s.solve_many(ths, [d for _, d in pairs], [L for L, _ in pairs], errors=errors,
                         x_init=None if all(xi is None for xi in xs) else xs)
