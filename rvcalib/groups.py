@@ -212,19 +212,7 @@ class Groups(ReplacementRefit):
                                    "identified, the instance is not; the interval covers every member's size"})
         # 1b. a set of instances of one error type in the model (planet eccentricity of crank 0 and of crank
         #     1) that another error type takes the place of together (a cam phase): the same rule for the set
-        sets: dict[str, list[int]] = {}
-        for i, a in enumerate(self.active):
-            if a.effect.family == "table4" and a.effect.name in by_name and a.effect.name not in unsplit:
-                sets.setdefault(a.effect.key, []).append(i)
-        for key, idx in sorted(sets.items()):
-            if len(idx) < 2:
-                continue
-            t = r_fin.copy()
-            for i in idx:
-                m, a = members[i], self.active[i]
-                t += m.cols @ coef[col0[i]:col0[i + 1]] + (m.contribution if m.contribution is not None
-                                                           else m.cols @ np.asarray(a.p, dtype=float))
-            rest = [blocks[j] for j in range(len(blocks)) if j not in idx]
+        for key, idx, t, rest in self._set_targets(members, blocks, coef, col0, r_fin, by_name, unsplit):
             others = np.column_stack(rest) if rest else None
             r0 = self._group(self.m, t, others)[2]
             if (r0 - rss_grid) * w / s2 < CHI2_95:
@@ -350,6 +338,24 @@ class Groups(ReplacementRefit):
             return None
         return params, float(rss)
 
+    def _set_targets(self, members, blocks, coef, col0, r_fin, by_name, unsplit):
+        """The sets of two or more instances of one Table 4 error type in the model (named, not in an unsplit
+        group), each as (key, member indices, the final coarse residual with the set's parts added back, the
+        other members' and empirical terms' column blocks)."""
+        sets: dict[str, list[int]] = {}
+        for i, a in enumerate(self.active):
+            if a.effect.family == "table4" and a.effect.name in by_name and a.effect.name not in unsplit:
+                sets.setdefault(a.effect.key, []).append(i)
+        for key, idx in sorted(sets.items()):
+            if len(idx) < 2:
+                continue
+            t = r_fin.copy()
+            for i in idx:
+                m, a = members[i], self.active[i]
+                t += m.cols @ coef[col0[i]:col0[i + 1]] + (m.contribution if m.contribution is not None
+                                                           else m.cols @ np.asarray(a.p, dtype=float))
+            yield key, idx, t, [blocks[j] for j in range(len(blocks)) if j not in idx]
+
     def _instance_sets(self, members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq, by_name, unsplit
                        ) -> tuple[set[str], list[tuple[dict, FittedEffect]]]:
         """Effects in the model that are instances of one Table 4 error type (carrier hole eccentricity
@@ -360,22 +366,9 @@ class Groups(ReplacementRefit):
         once, at the equivalent size of that instance (the combined effect), and the set is reported
         as a group of kind ``instances`` with every member's own size. Returns (names of the merged
         members, [(group, the named combined effect)])."""
-        sets: dict[str, list[int]] = {}
-        for i, a in enumerate(self.active):
-            f = by_name.get(a.effect.name)
-            if f is not None and a.effect.family == "table4" and f.name not in unsplit:
-                sets.setdefault(a.effect.key, []).append(i)
         merged: set[str] = set()
         out: list[tuple[dict, FittedEffect]] = []
-        for key, idx in sorted(sets.items()):
-            if len(idx) < 2:
-                continue
-            t = r_fin.copy()
-            for i in idx:
-                m, a = members[i], self.active[i]
-                t += m.cols @ coef[col0[i]:col0[i + 1]] + (m.contribution if m.contribution is not None
-                                                           else m.cols @ np.asarray(a.p, dtype=float))
-            rest = [blocks[j] for j in range(len(blocks)) if j not in idx]
+        for key, idx, t, rest in self._set_targets(members, blocks, coef, col0, r_fin, by_name, unsplit):
             k_set = sum(blocks[i].shape[1] for i in idx)
             best = None
             for i in idx:
