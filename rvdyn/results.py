@@ -128,7 +128,7 @@ class ResultsMixin:
         parts: dict[str, np.ndarray] = {}
         warnings: list[str] = []
         cam_F = None
-        want = getattr(self, "want_parts", True)        # the wind-up parts and cam forces (not the TE's)
+        want = self.want_parts                          # the wind-up parts and cam forces (not the TE's)
         if want and not law.rigid and self.chain is None and not self.float_discs:
             cam_F = self.disc_cam_forces(th, x, F, nrm)
         if not law.rigid:
