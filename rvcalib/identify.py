@@ -102,6 +102,7 @@ class Calibrator(Groups):
         swap_only = False       # at the term limit: a joint step may only swap members
         swaps_left = MAX_SWAP_STEPS
         self._replaced_at: set = set()   # model states at which the replacement refit was tried
+        self._instances_at: set = set()  # model states at which the instance check was made
         eliminated = False      # the backward elimination ran on the present model (nothing changed since)
         while True:
             swap_only = False
@@ -238,11 +239,25 @@ class Calibrator(Groups):
                 if got is not None:
                     log["decision"] = got[1]
                     self.rescreen_due += 1
+            elif self.joint and dec == "stop" and self.active and not self.over_budget():
+                # before stopping: the added-variable test (members refitted) may find what the plain
+                # screening (members held at their sizes) understates; the joint step decides and
+                # confirms through the full model as for any other addition
+                av, av_log = self.added_variable_ranking(rc_cat, Ec)
+                log["added_variable"] = av_log
+                if av:
+                    self.log(f"added-variable test before the stop: {av_log['best']} explains "
+                             f"{av_log['explained_fraction']:.3f} with the members refitted (p {av_log['p']:.3g})")
+                    got = self.joint_step(av, None, None, rc, rc_cat, Ec, r_full, it, log, harms)
+                    if got is not None:
+                        log["decision"] = "added-variable test before the stop: " + got[1]
+                        self.rescreen_due += 1
+                        dec = "physical"
             if got is not None and got[0]:
                 eliminated = False
             sw = self._replacement_before_stop(it) if got is None and swap_only else None
             if sw:
-                log["decision"] = f"replacement refit at the term limit: {sw[1]} in place of {sw[0]}"
+                log["decision"] = f"instance or replacement refit at the term limit: {sw[1]} in place of {sw[0]}"
                 eliminated, swaps_left = False, MAX_SWAP_STEPS
             elif got is None and swap_only:
                 self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search (no swap "
@@ -269,7 +284,14 @@ class Calibrator(Groups):
                 if not ok:
                     dec = "stop"
             elif got is None:
-                log["decision"] = "stop: no candidate passes the F test and the BIC"
+                sw_i = self._instances_before_stop(it) if self.joint else []
+                if sw_i:
+                    log["decision"] = "instance refit before the stop: " + ", ".join(
+                        f"{n} in place of {o}" for o, n in sw_i)
+                    eliminated = False
+                    dec = "physical"
+                else:
+                    log["decision"] = "stop: no candidate passes the F test and the BIC"
             r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
             self.rss_full = float(r_full @ r_full)
             entered = {a.effect.name for a in self.active} - names_before
@@ -299,9 +321,32 @@ class Calibrator(Groups):
         self._drop_empirical(iterations)
         return self._finish(r0, before, iterations, t_start)
 
+    def _instances_before_stop(self, it: int, iterations: list[dict] | None = None) -> list[tuple[str, str]]:
+        """The instance check (:meth:`rvcalib.joint.JointSelection.instance_refit`) once per model state
+        before the loop stops; the swaps made (old, new)."""
+        if not self.joint or self.over_budget():
+            return []
+        key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
+        if key in self._instances_at:
+            return []
+        self._instances_at.add(key)
+        sw = self.instance_refit()
+        if sw:
+            r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+            self.rss_full = float(r_full @ r_full)
+            msg = ", ".join(f"{n} in place of {o}" for o, n in sw)
+            self.log(f"instance refit before the stop: {msg} (RMS {math.sqrt(self.rss_full / self.n):.4g} arcsec)")
+            if iterations is not None:
+                iterations.append({"iteration": it, "decision": f"instance refit before the stop: {msg}"})
+        return sw
+
     def _replacement_before_stop(self, it: int, iterations: list[dict] | None = None) -> tuple[str, str] | None:
-        """The replacement refit (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`) once per model
-        state before the loop stops at the term limit; the swap made (old, new) or None."""
+        """The instance check (:meth:`_instances_before_stop`), then the replacement refit
+        (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`), each once per model state before the
+        loop stops at the term limit; the (last) swap made (old, new) or None."""
+        sw_i = self._instances_before_stop(it, iterations)
+        if sw_i:
+            return sw_i[-1]
         if not self.joint or self.over_budget():
             return None
         key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
