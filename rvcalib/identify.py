@@ -103,12 +103,26 @@ class Calibrator(Groups):
         swaps_left = MAX_SWAP_STEPS
         self._replaced_at: set = set()   # model states at which the replacement refit was tried
         self._instances_at: set = set()  # model states at which the instance check was made
+        self._lookalike_at: set = set()  # model states at which the look-alike refit was made
         eliminated = False      # the backward elimination ran on the present model (nothing changed since)
         while True:
             swap_only = False
             if len(self.active) + len(self.empirical) >= self.max_terms:
                 # at the term limit, first free the terms the joint fit no longer needs (stand-ins that
-                # later effects made redundant), then allow swaps; stop only when neither helps
+                # later effects made redundant), then allow swaps; stop only when neither helps. An
+                # empirical term that the effects found since made insignificant goes first (the test the
+                # loop applies at its end; seed 2: a direction-signed order-40 harmonic at p 0.52 held the
+                # slot the sun eccentricity needed)
+                if self.empirical and not self.over_budget():
+                    emp_before = [t.label for t in self.empirical]
+                    self._drop_empirical(iterations)
+                    if len(self.empirical) < len(emp_before):
+                        r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+                        self.rss_full = float(r_full @ r_full)
+                        gone_e = [lab for lab in emp_before if lab not in {t.label for t in self.empirical}]
+                        self.log(f"at the term limit: removed {', '.join(gone_e)} (no longer significant; RMS "
+                                 f"{math.sqrt(self.rss_full / self.n):.4g} arcsec)")
+                        continue
                 if self.active and not eliminated and not self.over_budget():
                     r_lim, _ = self.full_residual(self._pairs(), self.empirical)
                     weak = self.removal_candidates()
@@ -242,7 +256,15 @@ class Calibrator(Groups):
             elif self.joint and dec == "stop" and self.active and not self.over_budget():
                 # before stopping: the added-variable test (members refitted) may find what the plain
                 # screening (members held at their sizes) understates; the joint step decides and
-                # confirms through the full model as for any other addition
+                # confirms through the full model as for any other addition. The candidates' columns are
+                # their signatures re-solved at this state (the test's derivatives belong to the model
+                # they would join; at the declared model the all-pins pin circle diameter's signature is
+                # -2 times the pin radius's, at a realistic state they differ, seed 2)
+                t_rs = time.perf_counter()
+                n_rs = self.solve_signatures([e for e in self.lib.templates() if not e.expensive], self._pairs())
+                self.rescreen_due = 0
+                self.log(f"screening signatures re-solved at the state before the stop ({n_rs} solves) in "
+                         f"{time.perf_counter() - t_rs:.1f} s")
                 av, av_log = self.added_variable_ranking(rc_cat, Ec)
                 log["added_variable"] = av_log
                 if av:
@@ -285,9 +307,20 @@ class Calibrator(Groups):
                     dec = "stop"
             elif got is None:
                 sw_i = self._instances_before_stop(it) if self.joint else []
+                la = None
+                if not sw_i and self.joint and len(self.active) + len(self.empirical) < self.max_terms:
+                    key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
+                    if key not in self._lookalike_at:
+                        self._lookalike_at.add(key)
+                        la = self.lookalike_refit(it)
                 if sw_i:
                     log["decision"] = "instance refit before the stop: " + ", ".join(
                         f"{n} in place of {o}" for o, n in sw_i)
+                    eliminated = False
+                    dec = "physical"
+                elif la:
+                    log["decision"] = f"look-alike refit before the stop: added {la[1]} beside {la[0]}"
+                    self.log(log["decision"] + f" (RMS {math.sqrt(self.rss_full / self.n):.4g} arcsec)")
                     eliminated = False
                     dec = "physical"
                 else:

@@ -122,3 +122,80 @@ def test_no_sibling_of_a_family_already_in_the_model():
     # a twin-only family (carrier hole of crank 0 / crank 1) has none either
     sel, lib = _sibling_case(["carrier_hole_eccentricity[crank=1]"], "carrier_hole_eccentricity[crank=1]")
     assert sel.siblings(sel.active[0], np.zeros(4), n=4, sigma2=1.0, other_families=True) == []
+
+
+# ---------------------------------------------------------------------- look-alike refit before the stop
+
+def _lookalike_case(c_size: float):
+    """Truth: A at 3, D at 2 and C at ``c_size`` with C's column 0.95 A + 0.31 w (C looks like the member A).
+    The model holds A and D; the full model is linear here (the refit is least squares), so the stub checks
+    the mechanism: which candidate is refitted beside which member, and the acceptance (F test and BIC on
+    all samples)."""
+    from rvcalib.replace import ReplacementRefit
+    rng = np.random.default_rng(11)
+    a, w, d, f = rng.normal(size=(4, NC))
+    c = 0.95 * a + 0.31 * w
+    y = 3.0 * a + 2.0 * d + c_size * c + 0.1 * rng.normal(size=NC)
+    cols = {"A": a, "D": d, "C": c, "F": f}
+    eff = {k: Effect(f"{k}_test", f"{k}_test", "table4", "um", k) for k in cols}
+    col_of = {eff[k].name: v for k, v in cols.items()}
+    sel = ReplacementRefit.__new__(ReplacementRefit)
+    X = np.column_stack([a, d])
+    p, *_ = np.linalg.lstsq(X, y, rcond=None)
+    sel.active = [Active(eff["A"], np.array([p[0]]), 1), Active(eff["D"], np.array([p[1]]), 1)]
+    sel.empirical = []
+    sel.thr, sel.n = THR, NC
+    sel.log = lambda msg: None
+    sel.over_budget = lambda: False
+    sel._p_cur = lambda: len(sel.active)
+    sel._pairs = lambda active=None: [(x.effect, x.p) for x in sel.active]
+
+    def residual(pairs):
+        return y - sum((col_of[e.name] * float(q[0]) for e, q in pairs), np.zeros(NC))
+
+    sel.full_residual = lambda pairs, terms: (residual(pairs), np.zeros(0))
+    r0 = residual(sel._pairs())
+    sel.rss_full = float(r0 @ r0)
+    sel.active_members = lambda Pc=None: [
+        PoolMember(x.effect, col_of[x.effect.name][:, None], col_of[x.effect.name] * float(x.p[0]),
+                   lambda q, p0=x.p: p0 + np.asarray(q), x) for x in sel.active]
+    fits = []
+
+    def fit_full(effects, p0, terms):
+        fits.append([e.name for e in effects])
+        A = np.column_stack([col_of[e.name] for e in effects])
+        q, *_ = np.linalg.lstsq(A, y, rcond=None)
+        r = y - A @ q
+        return [np.array([v]) for v in q], float(r @ r), q, None, A
+
+    sel.fit_full = fit_full
+
+    def rank(t, others, r_full):
+        out = []
+        for k in ("C", "F"):
+            col = cols[k]
+            beta = float(col @ t) / float(col @ col)
+            res = t - beta * col
+            out.append(Candidate(eff[k], 1.0 - float(res @ res) / float(t @ t), np.array([beta]), col[:, None],
+                                 beta * col))
+        return sorted(out, key=lambda x: -x.explained)
+
+    sel.rank = rank
+    return sel, fits
+
+
+def test_lookalike_refit_adds_the_members_look_alike_when_the_data_need_it():
+    sel, fits = _lookalike_case(1.0)
+    got = sel.lookalike_refit(7)
+    assert got == ("A_test", "C_test")
+    # each member's look-alike refitted once, beside every member
+    assert ["A_test", "D_test", "C_test"] in fits
+    c = next(x for x in sel.active if x.effect.name == "C_test")
+    assert abs(float(c.p[0]) - 1.0) < 0.05
+    assert c.info["selection"]["method"] == "look-alike refit before the stop"
+
+
+def test_lookalike_refit_adds_nothing_at_the_truth():
+    sel, fits = _lookalike_case(0.0)
+    assert sel.lookalike_refit(7) is None
+    assert [x.effect.name for x in sel.active] == ["A_test", "D_test"]
