@@ -102,12 +102,27 @@ class Calibrator(Groups):
         swap_only = False       # at the term limit: a joint step may only swap members
         swaps_left = MAX_SWAP_STEPS
         self._replaced_at: set = set()   # model states at which the replacement refit was tried
+        self._instances_at: set = set()  # model states at which the instance check was made
+        self._lookalike_at: set = set()  # model states at which the look-alike refit was made
         eliminated = False      # the backward elimination ran on the present model (nothing changed since)
         while True:
             swap_only = False
             if len(self.active) + len(self.empirical) >= self.max_terms:
                 # at the term limit, first free the terms the joint fit no longer needs (stand-ins that
-                # later effects made redundant), then allow swaps; stop only when neither helps
+                # later effects made redundant), then allow swaps; stop only when neither helps. An
+                # empirical term that the effects found since made insignificant goes first (the test the
+                # loop applies at its end; seed 2: a direction-signed order-40 harmonic at p 0.52 held the
+                # slot the sun eccentricity needed)
+                if self.empirical and not self.over_budget():
+                    emp_before = [t.label for t in self.empirical]
+                    self._drop_empirical(iterations)
+                    if len(self.empirical) < len(emp_before):
+                        r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+                        self.rss_full = float(r_full @ r_full)
+                        gone_e = [lab for lab in emp_before if lab not in {t.label for t in self.empirical}]
+                        self.log(f"at the term limit: removed {', '.join(gone_e)} (no longer significant; RMS "
+                                 f"{math.sqrt(self.rss_full / self.n):.4g} arcsec)")
+                        continue
                 if self.active and not eliminated and not self.over_budget():
                     r_lim, _ = self.full_residual(self._pairs(), self.empirical)
                     weak = self.removal_candidates()
@@ -238,11 +253,33 @@ class Calibrator(Groups):
                 if got is not None:
                     log["decision"] = got[1]
                     self.rescreen_due += 1
+            elif self.joint and dec == "stop" and self.active and not self.over_budget():
+                # before stopping: the added-variable test (members refitted) may find what the plain
+                # screening (members held at their sizes) understates; the joint step decides and
+                # confirms through the full model as for any other addition. The candidates' columns are
+                # their signatures re-solved at this state (the test's derivatives belong to the model
+                # they would join; at the declared model the all-pins pin circle diameter's signature is
+                # -2 times the pin radius's, at a realistic state they differ, seed 2)
+                t_rs = time.perf_counter()
+                n_rs = self.solve_signatures([e for e in self.lib.templates() if not e.expensive], self._pairs())
+                self.rescreen_due = 0
+                self.log(f"screening signatures re-solved at the state before the stop ({n_rs} solves) in "
+                         f"{time.perf_counter() - t_rs:.1f} s")
+                av, av_log = self.added_variable_ranking(rc_cat, Ec)
+                log["added_variable"] = av_log
+                if av:
+                    self.log(f"added-variable test before the stop: {av_log['best']} explains "
+                             f"{av_log['explained_fraction']:.3f} with the members refitted (p {av_log['p']:.3g})")
+                    got = self.joint_step(av, None, None, rc, rc_cat, Ec, r_full, it, log, harms)
+                    if got is not None:
+                        log["decision"] = "added-variable test before the stop: " + got[1]
+                        self.rescreen_due += 1
+                        dec = "physical"
             if got is not None and got[0]:
                 eliminated = False
             sw = self._replacement_before_stop(it) if got is None and swap_only else None
             if sw:
-                log["decision"] = f"replacement refit at the term limit: {sw[1]} in place of {sw[0]}"
+                log["decision"] = f"instance or replacement refit at the term limit: {sw[1]} in place of {sw[0]}"
                 eliminated, swaps_left = False, MAX_SWAP_STEPS
             elif got is None and swap_only:
                 self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search (no swap "
@@ -269,7 +306,25 @@ class Calibrator(Groups):
                 if not ok:
                     dec = "stop"
             elif got is None:
-                log["decision"] = "stop: no candidate passes the F test and the BIC"
+                sw_i = self._instances_before_stop(it) if self.joint else []
+                la = None
+                if not sw_i and self.joint and len(self.active) + len(self.empirical) < self.max_terms:
+                    key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
+                    if key not in self._lookalike_at:
+                        self._lookalike_at.add(key)
+                        la = self.lookalike_refit(it)
+                if sw_i:
+                    log["decision"] = "instance refit before the stop: " + ", ".join(
+                        f"{n} in place of {o}" for o, n in sw_i)
+                    eliminated = False
+                    dec = "physical"
+                elif la:
+                    log["decision"] = f"look-alike refit before the stop: added {la[1]} beside {la[0]}"
+                    self.log(log["decision"] + f" (RMS {math.sqrt(self.rss_full / self.n):.4g} arcsec)")
+                    eliminated = False
+                    dec = "physical"
+                else:
+                    log["decision"] = "stop: no candidate passes the F test and the BIC"
             r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
             self.rss_full = float(r_full @ r_full)
             entered = {a.effect.name for a in self.active} - names_before
@@ -299,9 +354,32 @@ class Calibrator(Groups):
         self._drop_empirical(iterations)
         return self._finish(r0, before, iterations, t_start)
 
+    def _instances_before_stop(self, it: int, iterations: list[dict] | None = None) -> list[tuple[str, str]]:
+        """The instance check (:meth:`rvcalib.joint.JointSelection.instance_refit`) once per model state
+        before the loop stops; the swaps made (old, new)."""
+        if not self.joint or self.over_budget():
+            return []
+        key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
+        if key in self._instances_at:
+            return []
+        self._instances_at.add(key)
+        sw = self.instance_refit()
+        if sw:
+            r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+            self.rss_full = float(r_full @ r_full)
+            msg = ", ".join(f"{n} in place of {o}" for o, n in sw)
+            self.log(f"instance refit before the stop: {msg} (RMS {math.sqrt(self.rss_full / self.n):.4g} arcsec)")
+            if iterations is not None:
+                iterations.append({"iteration": it, "decision": f"instance refit before the stop: {msg}"})
+        return sw
+
     def _replacement_before_stop(self, it: int, iterations: list[dict] | None = None) -> tuple[str, str] | None:
-        """The replacement refit (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`) once per model
-        state before the loop stops at the term limit; the swap made (old, new) or None."""
+        """The instance check (:meth:`_instances_before_stop`), then the replacement refit
+        (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`), each once per model state before the
+        loop stops at the term limit; the (last) swap made (old, new) or None."""
+        sw_i = self._instances_before_stop(it, iterations)
+        if sw_i:
+            return sw_i[-1]
         if not self.joint or self.over_budget():
             return None
         key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
