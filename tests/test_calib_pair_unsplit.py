@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 
 from rvcalib.effects import Effect, Library
-from rvcalib.groups import Groups, collinear_partners, split_test
+from rvcalib.groups import Groups
+from rvcalib.pairs import collinear_partners, split_test
 from rvcalib.results import Active, FittedEffect
 
 
