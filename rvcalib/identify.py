@@ -355,7 +355,7 @@ class Calibrator(Groups):
         return self._finish(r0, before, iterations, t_start)
 
     def _instances_before_stop(self, it: int, iterations: list[dict] | None = None) -> list[tuple[str, str]]:
-        """The instance check (:meth:`rvcalib.joint.JointSelection.instance_refit`) once per model state
+        """The instance check (:meth:`rvcalib.replace.ReplacementRefit.instance_refit`) once per model state
         before the loop stops; the swaps made (old, new)."""
         if not self.joint or self.over_budget():
             return []

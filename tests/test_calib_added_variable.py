@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from rvcalib.effects import Effect
-from rvcalib.joint import JointSelection
+from rvcalib.replace import ReplacementRefit
 from rvcalib.lsq import ftest, projector
 from rvcalib.results import Active, Candidate, PoolMember
 
@@ -26,7 +26,7 @@ def _case(c_size: float):
     p, *_ = np.linalg.lstsq(X, y, rcond=None)
     r = y - X @ p
     eff = {k: Effect(f"{k}_test", f"{k}_test", "table4", "um", k) for k in "ACDF"}
-    sel = JointSelection.__new__(JointSelection)
+    sel = ReplacementRefit.__new__(ReplacementRefit)
     sel.active = [Active(eff["A"], np.array([p[0]]), 1), Active(eff["D"], np.array([p[1]]), 1)]
     sel.empirical = []
     sel.thr = THR
@@ -83,12 +83,12 @@ def test_added_variable_ranking_empty_at_the_truth():
 # ---------------------------------------------------------------------- siblings of crank/disc/hole instances
 
 def _sibling_case(model_names: list[str], own_name: str):
-    """A JointSelection on the paper's library (no dataset, no rvdyn): the model holds ``model_names``;
+    """A ReplacementRefit on the paper's library (no dataset, no rvdyn): the model holds ``model_names``;
     the screening is stubbed (every candidate explains a fixed fraction, its start its library index)."""
     from rvcad.params import Design
     from rvcalib.effects import build_library
     lib = build_library(design=Design())
-    sel = JointSelection.__new__(JointSelection)
+    sel = ReplacementRefit.__new__(ReplacementRefit)
     sel.lib = lib
     sel.active = [Active(lib.by_name(n), np.array([-1.5 if n == own_name else 1.0]), 1) for n in model_names]
     sel.runs, sel.m, sel.n, sel.nc = [None], 4, 4, 4
