@@ -5,10 +5,11 @@ solves (well under a second)."""
 from __future__ import annotations
 
 import numpy as np
+from linear_stubs import linear_rank
 
 from rvcalib.effects import Effect
+from rvcalib.lsq import ftest
 from rvcalib.replace import ReplacementRefit
-from rvcalib.lsq import ftest, projector
 from rvcalib.results import Active, Candidate, PoolMember
 
 NC = 300
@@ -36,21 +37,7 @@ def _case(c_size: float):
     sel.active_members = lambda Pc=None: members
     lib = {"C": c, "F": f}
 
-    def rank(t, others, r_full):
-        """Linear stand-in for Screening.rank: each candidate's column fitted to ``t`` with ``others``
-        projected out, sorted by explained fraction."""
-        P = projector(others)
-        tp = P(t)
-        rss0 = float(tp @ tp)
-        out = []
-        for k, col in lib.items():
-            cp = P(col)
-            beta = float(cp @ tp) / float(cp @ cp)
-            res = tp - beta * cp
-            out.append(Candidate(eff[k], 1.0 - float(res @ res) / rss0, np.array([beta]), cp[:, None], beta * cp))
-        return sorted(out, key=lambda x: -x.explained)
-
-    sel.rank = rank
+    sel.rank = linear_rank(lib, eff)
     return sel, r, lib
 
 

@@ -4,11 +4,11 @@ not only those ranked against the residual alone. Linear core, no rvdyn solves (
 from __future__ import annotations
 
 import numpy as np
+from linear_stubs import linear_rank
 
 from rvcalib.effects import Effect
 from rvcalib.joint import JointSelection
-from rvcalib.lsq import projector
-from rvcalib.results import Active, Candidate, PoolMember
+from rvcalib.results import Active, PoolMember
 from rvcalib.selection import REPLACE_MEMBERS
 
 
@@ -37,22 +37,7 @@ def _case():
     lib = {"C": c, "E": b + 0.05 * rng.normal(size=nc), "F": f}
     calls = []
 
-    def rank(t, others, r_full):
-        """Linear stand-in for Screening.rank: each candidate's column fitted to ``t`` with ``others``
-        projected out, sorted by explained fraction."""
-        calls.append(others)
-        P = projector(others)
-        tp = P(t)
-        rss0 = float(tp @ tp)
-        out = []
-        for k, col in lib.items():
-            cp = P(col)
-            beta = float(cp @ tp) / float(cp @ cp)
-            res = tp - beta * cp
-            out.append(Candidate(eff[k], 1.0 - float(res @ res) / rss0, np.array([beta]), cp[:, None], beta * cp))
-        return sorted(out, key=lambda x: -x.explained)
-
-    sel.rank = rank
+    sel.rank = linear_rank(lib, eff, calls)
     return sel, members, r, lib, eff, calls
 
 
