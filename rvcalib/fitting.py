@@ -202,6 +202,27 @@ class Fitting(Screening):
             return dv, float(math.hypot(dv + float(p[0]), float(p[1])))
         return dv, dv + float(p[0])
 
+    def state_jacobian(self, effects: list[Effect], params: list[np.ndarray], only: list[int] | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The residual (every reading, empirical terms projected out) of ``effects`` at ``params`` and its
+        forward-difference Jacobian in the scaled parameters (step 0.01 of each effect's scale); ``only``: just these columns. Returns (scaled parameters, residual, Jacobian)."""
+        sizes = [e.n_params for e in effects]
+        scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
+        lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
+        hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
+        P = projector(self._emp_matrix(self.empirical))
+
+        def fun(xs: np.ndarray) -> np.ndarray:
+            out, i = [], 0
+            for e, k in zip(effects, sizes):
+                out.append((e, xs[i:i + k] * e.scale))
+                i += k
+            return P(np.concatenate([y - p for y, p in zip(self.y, self.predict(out))]))
+
+        x = np.concatenate([np.asarray(p, dtype=float) for p in params]) / scales
+        r = fun(x)
+        return x, r, fd_jac(fun, x, lo, hi, h=0.01, f0=r, only=only)
+
     def intervals(self) -> list[FittedEffect]:
         """The reported effects: each active effect's size with its 95 % confidence interval from the
         Jacobian (forward differences) of the joint fit on all samples and the residual variance,
@@ -211,22 +232,7 @@ class Fitting(Screening):
         fitted: list[FittedEffect] = []
         if effects:
             scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
-            lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
-            hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
-            P = projector(self._emp_matrix(self.empirical))
-            sizes = [e.n_params for e in effects]
-
-            def fun(xs):
-                out, i = [], 0
-                for e, k in zip(effects, sizes):
-                    out.append((e, xs[i:i + k] * e.scale))
-                    i += k
-                pred = self.predict(out)
-                return P(np.concatenate([y - p for y, p in zip(self.y, pred)]))
-
-            x = np.concatenate([a.p for a in self.active]) / scales
-            r = fun(x)
-            J = fd_jac(fun, x, lo, hi, h=0.01, f0=r)
+            x, r, J = self.state_jacobian(effects, [a.p for a in self.active])
             p_tot = x.size + n_emp
             dof = max(1, self.n - p_tot)
             s2 = float(r @ r) / dof

@@ -303,7 +303,7 @@ class Calibrator(Groups):
                 sw_i = self._instances_before_stop(it) if self.joint else []
                 la = None
                 if not sw_i and self.joint and len(self.active) + len(self.empirical) < self.max_terms:
-                    key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
+                    key = self._state_key()
                     if key not in self._lookalike_at:
                         self._lookalike_at.add(key)
                         la = self.lookalike_refit(it)
@@ -348,12 +348,17 @@ class Calibrator(Groups):
         self._drop_empirical(iterations)
         return self._finish(r0, before, iterations, t_start)
 
+    def _state_key(self) -> tuple:
+        """The present model state (its effects and empirical terms) as a key: the checks before the stop run
+        once per state."""
+        return tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical)
+
     def _instances_before_stop(self, it: int, iterations: list[dict] | None = None) -> list[tuple[str, str]]:
         """The instance check (:meth:`rvcalib.replace.ReplacementRefit.instance_refit`) once per model state
         before the loop stops; the swaps made (old, new)."""
         if not self.joint or self.over_budget():
             return []
-        key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
+        key = self._state_key()
         if key in self._instances_at:
             return []
         self._instances_at.add(key)
@@ -376,7 +381,7 @@ class Calibrator(Groups):
             return sw_i[-1]
         if not self.joint or self.over_budget():
             return None
-        key = (tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical))
+        key = self._state_key()
         if key in self._replaced_at:
             return None
         self._replaced_at.add(key)

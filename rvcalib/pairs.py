@@ -17,7 +17,6 @@ from scipy import stats
 
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError
-from rvcalib.lsq import fd_jac, projector
 from rvcalib.replace import ReplacementRefit
 from rvcalib.results import FittedEffect
 
@@ -34,28 +33,6 @@ OVERWHELMING = 100.0
 
 class PairCheck(ReplacementRefit):
     """The final state's pair check and the model's refits with extra effects (methods on the loop)."""
-
-    def _state_jacobian(self, effects: list[Effect], params: list[np.ndarray], only: list[int] | None = None
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The residual (every reading, empirical terms projected out) of ``effects`` at ``params`` and its
-        forward-difference Jacobian in the scaled parameters (step 0.01 of each effect's scale, as
-        :meth:`intervals`); ``only``: just these columns. Returns (scaled parameters, residual, Jacobian)."""
-        sizes = [e.n_params for e in effects]
-        scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
-        lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
-        hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
-        P = projector(self._emp_matrix(self.empirical))
-
-        def fun(xs: np.ndarray) -> np.ndarray:
-            out, i = [], 0
-            for e, k in zip(effects, sizes):
-                out.append((e, xs[i:i + k] * e.scale))
-                i += k
-            return P(np.concatenate([y - p for y, p in zip(self.y, self.predict(out))]))
-
-        x = np.concatenate([np.asarray(p, dtype=float) for p in params]) / scales
-        r = fun(x)
-        return x, r, fd_jac(fun, x, lo, hi, h=0.01, f0=r, only=only)
 
     def _nonlinear_pairs(self, by_name: dict[str, FittedEffect], unsplit: set[str], rms_model: float) -> list[dict]:
         """Named effects that one left-out library error, nearly collinear with them through the full model,
@@ -92,7 +69,7 @@ class PairCheck(ReplacementRefit):
         if not targets:
             return []
         try:
-            _, r0, J = self._state_jacobian(effects, params)
+            _, r0, J = self.state_jacobian(effects, params)
         except ModelEvaluationError:
             return []
         idx = np.cumsum([0] + [e.n_params for e in effects])
@@ -104,7 +81,7 @@ class PairCheck(ReplacementRefit):
             if self.over_budget():
                 break
             try:
-                _, _, Jc = self._state_jacobian(effects + [c], params + [np.zeros(c.n_params)],
+                _, _, Jc = self.state_jacobian(effects + [c], params + [np.zeros(c.n_params)],
                                                 only=list(range(J.shape[1], J.shape[1] + c.n_params)))
             except ModelEvaluationError:
                 continue
@@ -133,7 +110,7 @@ class PairCheck(ReplacementRefit):
                 if got is not None and got[1] <= float(r0 @ r0) * (1.0 + 1e-9):
                     p_new, rss_new = got
                     try:
-                        _, r1, J1 = self._state_jacobian(effects + [c], p_new)
+                        _, r1, J1 = self.state_jacobian(effects + [c], p_new)
                         refits[ci] = (p_new, float(r1 @ r1), J1)
                     except ModelEvaluationError:
                         pass
