@@ -22,6 +22,12 @@ from rvcalib.results import FittedEffect
 
 #: Joint-fit correlation above which two effects are reported as one group.
 CORRELATION_LIMIT = 0.95
+#: Multiple correlation on the screening grid (the model's linearised columns and a candidate's stored screening
+#: signature) below which a left-out candidate is not differenced through rvdyn for the pair check: a pair the
+#: full model makes collinear beyond :data:`CORRELATION_LIMIT` was collinear beyond 0.98 on the grid in every
+#: case measured (docs/calibration.md, "The pair check's linear prefilter"); 0.8 (a variance inflation of 2.8
+#: against 10.3 at the limit) leaves room for the linearisation's error.
+PREFILTER_LIMIT = 0.8
 #: 95 % point of chi-square with one degree of freedom: a candidate that takes an effect's place and
 #: raises the residual sum of squares by less than this many noise variances fits as well.
 CHI2_95 = 3.841
@@ -34,7 +40,9 @@ OVERWHELMING = 100.0
 class PairCheck(ReplacementRefit):
     """The final state's pair check and the model's refits with extra effects (methods on the loop)."""
 
-    def _nonlinear_pairs(self, by_name: dict[str, FittedEffect], unsplit: set[str], rms_model: float) -> list[dict]:
+    def _nonlinear_pairs(self, by_name: dict[str, FittedEffect], unsplit: set[str], rms_model: float,
+                         linear: tuple[np.ndarray, np.ndarray, dict[str, np.ndarray | None]] | None = None
+                         ) -> list[dict]:
         """Named effects that one left-out library error, nearly collinear with them through the full model,
         could stand beside: groups of kind ``unsplit`` (see docs/calibration.md, "Groups and honest
         intervals", item 7).
@@ -59,7 +67,12 @@ class PairCheck(ReplacementRefit):
         holds zero, the data do not support the effect beside the candidate: the nonlinear form of item 1's
         rule (a candidate that replaces it within the chi-square(1) 95 % limit leaves it insignificant in
         the model holding both). It is then not named; the group gives its size alone and both sizes with
-        their intervals in the joint fit."""
+        their intervals in the joint fit.
+
+        ``linear``: (the members' columns on the screening grid, their column offsets, each candidate's stored
+        screening columns or None) at the final state. A candidate whose screening columns do not inflate any
+        target's variance beyond ``1 / (1 - PREFILTER_LIMIT^2)`` there is not differenced through rvdyn (one
+        solve per condition and column saved; see :data:`PREFILTER_LIMIT`); one without columns always is."""
         effects = [a.effect for a in self.active]
         params = [np.asarray(a.p, dtype=float) for a in self.active]
         n_emp = sum(t.n_cols for t in self.empirical)
@@ -76,6 +89,18 @@ class PairCheck(ReplacementRefit):
         fam_in = {e.template or e.name for e in effects}
         cands = [e for e in self.lib.templates() if (e.template or e.name) not in fam_in
                  and e.family in ("table4", "model") and not e.expensive]
+        if linear is not None:
+            X, col0, lin_cols = linear
+            keep = []
+            for c in cands:
+                S = lin_cols.get(c.name)
+                if S is None or collinear_partners(X, [list(range(col0[i], col0[i + 1])) for i in targets], [S],
+                                                   PREFILTER_LIMIT):
+                    keep.append(c)
+            if len(keep) < len(cands):
+                self.log(f"pair check: {len(cands) - len(keep)} of {len(cands)} left-out candidates below the "
+                         f"linear prefilter ({PREFILTER_LIMIT}) not differenced")
+            cands = keep
         cols = []
         for c in cands:
             if self.over_budget():

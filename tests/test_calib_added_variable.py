@@ -118,16 +118,20 @@ def _lookalike_case(c_size: float):
     The model holds A and D; the full model is linear here (the refit is least squares), so the stub checks
     the mechanism: which candidate is refitted beside which member, and the acceptance (F test and BIC on
     all samples)."""
-    from rvcalib.replace import ReplacementRefit
     rng = np.random.default_rng(11)
     a, w, d, f = rng.normal(size=(4, NC))
     c = 0.95 * a + 0.31 * w
     y = 3.0 * a + 2.0 * d + c_size * c + 0.1 * rng.normal(size=NC)
-    cols = {"A": a, "D": d, "C": c, "F": f}
+    return _lookalike_selection({"A": a, "D": d, "C": c, "F": f}, y, ("C", "F"))
+
+
+def _lookalike_selection(cols: dict, y: np.ndarray, cands: tuple):
+    """A :class:`ReplacementRefit` on a linear model: members A and D (least squares at ``y``), the library
+    ``cands`` (each its own error type), the refits least squares; returns it and the list of refits made."""
     eff = {k: Effect(f"{k}_test", f"{k}_test", "table4", "um", k) for k in cols}
     col_of = {eff[k].name: v for k, v in cols.items()}
     sel = ReplacementRefit.__new__(ReplacementRefit)
-    X = np.column_stack([a, d])
+    X = np.column_stack([cols["A"], cols["D"]])
     p, *_ = np.linalg.lstsq(X, y, rcond=None)
     sel.active = [Active(eff["A"], np.array([p[0]]), 1), Active(eff["D"], np.array([p[1]]), 1)]
     sel.empirical = []
@@ -156,18 +160,7 @@ def _lookalike_case(c_size: float):
         return [np.array([v]) for v in q], float(r @ r), q, None, A
 
     sel.fit_full = fit_full
-
-    def rank(t, others, r_full):
-        out = []
-        for k in ("C", "F"):
-            col = cols[k]
-            beta = float(col @ t) / float(col @ col)
-            res = t - beta * col
-            out.append(Candidate(eff[k], 1.0 - float(res @ res) / float(t @ t), np.array([beta]), col[:, None],
-                                 beta * col))
-        return sorted(out, key=lambda x: -x.explained)
-
-    sel.rank = rank
+    sel.rank = linear_rank({k: cols[k] for k in cands}, eff)
     return sel, fits
 
 
@@ -184,5 +177,37 @@ def test_lookalike_refit_adds_the_members_look_alike_when_the_data_need_it():
 
 def test_lookalike_refit_adds_nothing_at_the_truth():
     sel, fits = _lookalike_case(0.0)
+    assert sel.lookalike_refit(7) is None
+    assert [x.effect.name for x in sel.active] == ["A_test", "D_test"]
+
+
+def _lookalike_pair_case(s_size: float):
+    """Truth: A at 3, D at 2 and ``s_size (B - E)``, where B = 0.95 A + 0.3 w + 0.1 z and E = 0.95 A + 0.3 w -
+    0.1 z are two error types that look alike (correlation 0.98) and like the member A: the truth is along
+    their difference (0.2 z), which B alone reaches only in part (10 % of it, with w it must carry)."""
+    rng = np.random.default_rng(5)
+    a, w, z, d, f = rng.normal(size=(5, NC))
+    b = 0.95 * a + 0.3 * w + 0.1 * z
+    e = 0.95 * a + 0.3 * w - 0.1 * z
+    y = 3.0 * a + 2.0 * d + s_size * (b - e) + 0.1 * rng.normal(size=NC)
+    return _lookalike_selection({"A": a, "D": d, "B": b, "E": e, "F": f}, y, ("B", "E", "F"))
+
+
+def test_lookalike_refit_adds_a_pair_that_only_together_passes():
+    sel, fits = _lookalike_pair_case(0.4)
+    got = sel.lookalike_refit(7)
+    # neither alone passes the loop's F test at its Bonferroni level (else a single name would come back)
+    assert got == ("A_test", "B_test and E_test") or got == ("A_test", "E_test and B_test")
+    singles = [f for f in fits if len(f) == 3]
+    assert singles, "the single look-alike is tried first"
+    assert ["A_test", "D_test", "B_test", "E_test"] in fits or ["A_test", "D_test", "E_test", "B_test"] in fits
+    sizes = {x.effect.name: float(x.p[0]) for x in sel.active}
+    assert abs(sizes["B_test"] - 0.4) < 0.1 and abs(sizes["E_test"] + 0.4) < 0.1
+    assert abs(sizes["A_test"] - 3.0) < 0.1
+    assert sel.active[-1].info["selection"]["together_with"]
+
+
+def test_lookalike_pair_not_added_without_its_difference():
+    sel, fits = _lookalike_pair_case(0.0)
     assert sel.lookalike_refit(7) is None
     assert [x.effect.name for x in sel.active] == ["A_test", "D_test"]

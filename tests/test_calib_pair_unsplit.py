@@ -146,3 +146,31 @@ def test_collinear_partners_and_split_test():
     assert corr == pytest.approx(cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1]))
     assert (vf, vc) == (1.0, 2.0)
     assert sf == pytest.approx(math.sqrt(cov[0, 0])) and sc == pytest.approx(math.sqrt(cov[1, 1]))
+
+
+def test_the_linear_prefilter_differences_only_the_collinear_candidates():
+    # the same unsplit pair with the screening grid's linear columns given (here the basis itself: the model is
+    # linear): z (collinear with x) is differenced and found; w (unrelated to x and u) is not differenced
+    loop = _case(0.005)
+    differenced: list[str] = []
+    sj = loop.state_jacobian
+
+    def counting(effects, params, only=None):
+        if only is not None:
+            differenced.append(effects[-1].name)
+        return sj(effects, params, only=only)
+
+    loop.state_jacobian = counting
+    X = np.column_stack([loop.basis["x"], loop.basis["u"]])
+    lin = {"z": loop.basis["z"][:, None], "w": loop.basis["w"][:, None]}
+    groups = loop._nonlinear_pairs(loop.fitted(), set(), math.sqrt(loop.rss_full / loop.n), (X, [0, 1, 2], lin))
+    assert [g["found"] for g in groups] == ["x"]
+    assert differenced == ["z"]
+    assert any("1 of 2 left-out candidates below the linear prefilter" in m for m in loop.logged), loop.logged
+    # without grid columns a candidate is always differenced
+    loop = _case(0.005)
+    differenced.clear()
+    sj = loop.state_jacobian
+    loop.state_jacobian = counting
+    loop._nonlinear_pairs(loop.fitted(), set(), math.sqrt(loop.rss_full / loop.n), (X, [0, 1, 2], {"z": None}))
+    assert sorted(differenced) == ["w", "z"]
