@@ -19,12 +19,6 @@ from rvcalib.results import Active, Candidate
 #: at the term limit (see :meth:`ReplacementRefit.replacement_refit`): the members whose best replacement
 #: (screened with the others refitted) explains most of their part.
 REPLACE_REFITS = 4
-#: A member's closest look-alike is refitted beside it only when it reproduces at least this fraction of the member's
-#: part (a correlation of 0.71): the refit is for the near-collinear candidates that every linear test at the state
-#: misjudges; a less similar one is judged by the added-variable test that runs before it (seed 1: look-alikes
-#: reproducing 0.01-0.36 of their member's part cost 4 of its 8 refits, none kept; seed 2's kept pin circle diameter
-#: correlates 0.92 with the pin radius, 0.85 of its part).
-LOOKALIKE_MIN_REPRODUCED = 0.5
 #: Two look-alikes of a member whose fitted screening signatures correlate beyond this are refitted beside it as
 #: a pair when neither alone is kept (:meth:`ReplacementRefit.lookalike_refit`): a variance inflation above 5
 #: each, so what they add together lies mostly along their difference, which no linear test at the state sees.
@@ -187,8 +181,6 @@ class ReplacementRefit(JointSelection):
         ranked by how much of the member's part they reproduce, the first four did not hold seed 2's pin
         circle diameter).
 
-        A look-alike that reproduces less than :data:`LOOKALIKE_MIN_REPRODUCED` of its member's part is not
-        refitted (it is not near-collinear with it; the added-variable test before this judges it).
         When no single look-alike is kept, for each member the two of its :data:`LOOKALIKE_PAIR_POOL` closest
         look-alikes (of distinct other error types) whose fitted signatures correlate most, when beyond
         :data:`LOOKALIKE_PAIR_CORRELATION`, are refitted beside it together
@@ -216,7 +208,7 @@ class ReplacementRefit(JointSelection):
             if not ok:
                 continue
             best = ok[0]
-            if best.explained >= LOOKALIKE_MIN_REPRODUCED and best.explained > trials.get(best.effect.name, (0.0,))[0]:
+            if best.explained > trials.get(best.effect.name, (0.0,))[0]:
                 trials[best.effect.name] = (best.explained, best.effect, m.effect.name)
             # its closest look-alikes of three error types: the pair of them that nearly coincide (the pair's trial)
             top: list = []

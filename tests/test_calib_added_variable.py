@@ -179,9 +179,6 @@ def test_lookalike_refit_adds_nothing_at_the_truth():
     sel, fits = _lookalike_case(0.0)
     assert sel.lookalike_refit(7) is None
     assert [x.effect.name for x in sel.active] == ["A_test", "D_test"]
-    # C (0.9 of A's part) is refitted beside A; nothing beside D, whose closest (F, unrelated) reproduces
-    # less than half of its part (LOOKALIKE_MIN_REPRODUCED)
-    assert fits == [["A_test", "D_test", "C_test"]]
 
 
 def _lookalike_pair_case(s_size: float):
