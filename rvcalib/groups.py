@@ -249,7 +249,8 @@ class Groups(PairCheck):
                     lin_cols[e.name] = None if d is None else d.cols
             for g in self._nonlinear_pairs(by_name, unsplit, rms_model, (X, col0, lin_cols)):
                 groups.append(g)
-                unsplit.add(g["found"])
+                if g["kind"] == "unsplit":
+                    unsplit.add(g["found"])
                 alt_names.setdefault(g["found"], set()).update(m["name"] for m in g["members"][1:])
         # 2. honest intervals: each named effect's interval in the model plus any one candidate left out
         #    (profiled over the size the data give that candidate), the union over candidates

@@ -67,7 +67,8 @@ class PairCheck(ReplacementRefit):
         holds zero, the data do not support the effect beside the candidate: the nonlinear form of item 1's
         rule (a candidate that replaces it within the chi-square(1) 95 % limit leaves it insignificant in
         the model holding both). It is then not named; the group gives its size alone and both sizes with
-        their intervals in the joint fit.
+        their intervals in the joint fit. A candidate that the data support beside the model (item 6's level)
+        while the effect stays named is a group of kind ``left_out`` with both sizes.
 
         ``linear``: (the members' columns on the screening grid, their column offsets, each candidate's stored
         screening columns or None) at the final state. A candidate whose screening columns do not inflate any
@@ -168,6 +169,19 @@ class PairCheck(ReplacementRefit):
                                                          "how": "refitted through rvdyn (pair check)"}
                     self.log(f"pair check: {c.name} is supported beside the model ({drop:.1f} noise variances): "
                              f"{f.name}'s interval covers {v_f:.4g} {f.unit}")
+                # reported as a group with both sizes (the model lacks the candidate; the term limit or the
+                # stop left it out), replaced by the unsplit group below when the effect is not named
+                me = {"name": f.name, "key": f.key, "value": f.value, "unit": f.unit, "rms_after_arcsec": rms_model,
+                      "found": True, "value_with_left_out": v_f}
+                ce = {"name": c.name, "key": c.key, "value": v_c, "unit": c.unit,
+                      "rms_after_arcsec": float(math.sqrt(rss_new / self.n)), "found": False}
+                if c.polar:
+                    ce["angle_deg"] = float(c.magnitude_angle(p_new[-1])[1])
+                out.append({"kind": "left_out", "found": f.name, "members": [me, ce],
+                            "note": f"the data support {c.name} beside the model ({drop:.1f} noise variances; "
+                                    f"refitted through rvdyn, RMS {math.sqrt(rss_new / self.n):.4g} arcsec): with it "
+                                    f"at the size listed {f.name} would be {v_f:.4g} {f.unit}; its interval covers "
+                                    "both"})
             if se_f <= 0 or (v_f / se_f) ** 2 >= OVERWHELMING * CHI2_95:
                 continue  # overwhelmingly significant beside it (the backward elimination's rule): no refit
             # the likelihood-ratio test of the effect beside the candidate: the candidate in its place, refitted
@@ -193,6 +207,7 @@ class PairCheck(ReplacementRefit):
                   "value_together": v_c, "se_together": se_c}
             if c.polar:
                 ce["angle_deg"] = float(c.magnitude_angle(p_r[i])[1])
+            out[:] = [g for g in out if not (g["kind"] == "left_out" and g["found"] == f.name)]
             out.append({"kind": "unsplit", "found": f.name, "members": [me, ce], "correlation_together": corr,
                         "rms_together_arcsec": rms_new,
                         "note": f"the data fix a combination of these two, not either: {c.name} in place of {f.name}"

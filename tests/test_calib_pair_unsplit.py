@@ -121,8 +121,16 @@ def test_a_pair_the_data_split_keeps_the_effect_named():
     for d_size in (0.05, 0.3):
         loop = _case(d_size)
         by_name = loop.fitted()
-        assert loop._nonlinear_pairs(by_name, set(), math.sqrt(loop.rss_full / loop.n)) == []
+        groups = loop._nonlinear_pairs(by_name, set(), math.sqrt(loop.rss_full / loop.n))
+        assert not [g for g in groups if g["kind"] == "unsplit"]
         assert any("x beside z" in m for m in loop.logged), loop.logged
+        # z (truth 1) is supported beside the model: reported as a left-out group with both sizes near the truth
+        (g,) = groups
+        assert g["kind"] == "left_out" and g["found"] == "x"
+        me, ce = g["members"]
+        assert ce["name"] == "z" and ce["value"] == pytest.approx(1.0, abs=0.15)
+        assert me["value_with_left_out"] == pytest.approx(1.0, abs=0.15)
+        assert by_name["x"].ci_low <= me["value_with_left_out"] <= by_name["x"].ci_high
     assert any("in place of x" in m for m in _logged_after(0.05)), "the refit in x's place is tried"
 
 
