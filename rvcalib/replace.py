@@ -220,7 +220,10 @@ class ReplacementRefit(JointSelection):
             near = [(abs(_correlation(x.fit, y.fit)), x, y) for i, x in enumerate(top) for y in top[i + 1:]]
             if near:
                 rho, x, y = max(near, key=lambda t: t[0])
-                key = tuple(sorted((x.effect.name, y.effect.name)))
+                # one trial per pair of error types, the first member's (in the model's order) instances: the
+                # instance is the instance and sibling refits' choice (seed 1: the pin circle diameter and pin
+                # radius of pins 0, 19 and 35 beside three more members, each pair correlating 1.000, none kept)
+                key = tuple(sorted((x.effect.key, y.effect.key)))
                 if rho >= LOOKALIKE_PAIR_CORRELATION and key not in pair_trials:
                     pair_trials[key] = (rho, (x.effect, y.effect), m.effect.name)
         order = sorted(trials.values(), key=lambda t: -t[0])
