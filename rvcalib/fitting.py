@@ -114,7 +114,7 @@ class Fitting(Screening):
             return [], float(r @ r), np.zeros(0), fun, np.zeros((r.size, 0))
         x0 = np.clip(np.concatenate([np.asarray(p, dtype=float) for p in p0]) / scales, lo, hi)
         J0, known = self._cached_jacobian(effects, p0, terms, P)
-        got = chord_fit(fun, x0, lo, hi, deadline=self._deadline(), J0=J0, known=known)
+        got = chord_fit(fun, x0, lo, hi, deadline=self._deadline(), J0=J0, known=known, bic_n=self.n)
         if got is not None:
             x, r, J, nfev = got
             self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord", "nfev": nfev,
