@@ -122,6 +122,20 @@ def physical_first(rss_model: float, rss_phys: float, dbic_phys: float, rss_emp:
     return gain_p >= PHYSICAL_SHARE * gain_e or dbic_emp >= dbic_phys - EMPIRICAL_BIC_MARGIN
 
 
+def physical_goes_first(rss_model: float, rss_phys: float, dbic_phys: float, rss_emp: float, dbic_emp: float,
+                        n: int, noise2: float, harmonic: bool) -> bool:
+    """The joint step's choice between a physical subset and one with a new empirical term (both confirmed):
+    :func:`physical_first` while the empirical subset leaves an RMS above :data:`EMPIRICAL_LEAVES_NOISE` times
+    the noise (``noise2``, arcsec^2 per sample, over ``n`` samples) and always when the new term is a harmonic
+    (the greedy step's rule too: physical signatures span several orders, so only a constant, e.g. an encoder
+    zero offset beside a compliance, may win on the BIC margin alone; seed 1 serial: an order-79 harmonic at
+    1.15x the noise took the slot of a physical subset that removed 95 % of its part); otherwise the empirical
+    subset must be better by more than :data:`EMPIRICAL_BIC_MARGIN`."""
+    if harmonic or rss_emp / n > EMPIRICAL_LEAVES_NOISE ** 2 * noise2:
+        return physical_first(rss_model, rss_phys, dbic_phys, rss_emp, dbic_emp)
+    return dbic_emp >= dbic_phys - EMPIRICAL_BIC_MARGIN
+
+
 def model_weights(values: np.ndarray) -> np.ndarray:
     """Akaike / Schwarz model weights ``exp(-(v - min v) / 2)`` normalised to sum 1."""
     v = np.asarray(values, dtype=float)
@@ -621,15 +635,12 @@ class JointSelection(Selection):
             # otherwise the empirical subset must beat it by more than EMPIRICAL_BIC_MARGIN
             # only while the empirical subset itself leaves structure well above the noise (the search
             # goes on either way); a subset that explains the data to the noise (an encoder zero offset
-            # beside a compliance) is judged by the BIC margin alone
-            # A new harmonic is held to the share rule always (the greedy step's rule too: physical signatures span
-            # several orders; only a constant may win on the BIC alone; seed 1 serial: an order-79 harmonic at 1.15x
-            # the noise took a slot that a physical subset removing 95 % of its part should have had)
+            # beside a compliance) is judged by the BIC margin alone, unless its new term is a harmonic
+            # (physical_goes_first)
             harmonic = any(pool[i].term is not None and not pool[i].in_model and pool[i].term.kind == "harmonic"
                            for i in okays[1][0].members)
-            left = harmonic or okays[1][1][1] / self.n > EMPIRICAL_LEAVES_NOISE ** 2 * self._noise2(r_full)
-            if not (physical_first(self.rss_full, okays[0][1][1], okays[0][2], okays[1][1][1], okays[1][2])
-                    if left else okays[1][2] >= okays[0][2] - EMPIRICAL_BIC_MARGIN):
+            if not physical_goes_first(self.rss_full, okays[0][1][1], okays[0][2], okays[1][1][1], okays[1][2],
+                                       self.n, self._noise2(r_full), harmonic):
                 pick = okays[1]
         self.log("joint refits: " + "; ".join(
             f"{'+'.join(pool[i].name for i in t[0].members if not pool[i].in_model)} RMS "

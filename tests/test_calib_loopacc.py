@@ -8,7 +8,8 @@ import pytest
 
 from rvcalib.effects import Effect
 from rvcalib.groups import Groups
-from rvcalib.joint import EMPIRICAL_BIC_MARGIN, PHYSICAL_SHARE, JointSelection, physical_first
+from rvcalib.joint import (EMPIRICAL_BIC_MARGIN, EMPIRICAL_LEAVES_NOISE, PHYSICAL_SHARE, JointSelection,
+                           physical_first, physical_goes_first)
 from rvcalib.results import Active, FittedEffect, PoolMember
 
 
@@ -47,6 +48,25 @@ def test_physical_first_rule(rss_p, dbic_p, rss_e, dbic_e, expect):
     assert physical_first(rss_model, rss_p, dbic_p, rss_e, dbic_e) is expect
     gain_share = (rss_model - rss_p) / (rss_model - rss_e)
     assert (gain_share >= PHYSICAL_SHARE) or not expect or dbic_e >= dbic_p - EMPIRICAL_BIC_MARGIN
+
+
+def test_a_harmonic_near_the_noise_is_held_to_the_share_rule():
+    # seed 1 serial (converged refits), iteration 4: the subset with an order-79 harmonic leaves 1.15x the noise
+    # and is 71 BIC units better; the physical subset removes 95 % of what it removes
+    n, noise2, rss_model = 1332, 0.2 ** 2, 1332 * 0.343 ** 2
+    rss_e = n * (1.15 * 0.2) ** 2
+    rss_p = rss_model - 0.95 * (rss_model - rss_e)
+    dbic_e, dbic_p = -1058.7, -987.8
+    assert rss_e / n < EMPIRICAL_LEAVES_NOISE ** 2 * noise2          # near the noise: the margin rule alone ...
+    assert not physical_goes_first(rss_model, rss_p, dbic_p, rss_e, dbic_e, n, noise2, harmonic=False)
+    assert physical_goes_first(rss_model, rss_p, dbic_p, rss_e, dbic_e, n, noise2, harmonic=True)  # ... not for a harmonic
+    # a harmonic that the physical subset explains only half of still wins on its BIC
+    rss_half = rss_model - 0.5 * (rss_model - rss_e)
+    assert not physical_goes_first(rss_model, rss_half, dbic_p, rss_e, dbic_e, n, noise2, harmonic=True)
+    # far from the noise (2.5x) the share rule holds for any empirical term
+    rss_big, rss_e2 = n * 1.0 ** 2, n * 0.5 ** 2
+    rss_p2 = rss_big - 0.95 * (rss_big - rss_e2)
+    assert physical_goes_first(rss_big, rss_p2, dbic_p, rss_e2, dbic_e, n, noise2, harmonic=False)
 
 
 def _fitted(e: Effect, value: float) -> FittedEffect:
