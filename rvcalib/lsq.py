@@ -15,6 +15,7 @@ from rvcalib.forward import ModelEvaluationError
 #: :func:`chord_fit`, ``bic_n``): below the loop's smallest BIC margin (2), so no decision turns on it.
 BIC_CONVERGED = 1.0
 
+
 def projector(E: np.ndarray | None):
     """Projector onto the orthogonal complement of the columns of E (a function)."""
     if E is None or E.shape[1] == 0:

@@ -23,8 +23,8 @@ REPLACE_REFITS = 4
 #: a pair when neither alone is kept (:meth:`ReplacementRefit.lookalike_refit`): a variance inflation above 5
 #: each, so what they add together lies mostly along their difference, which no linear test at the state sees.
 LOOKALIKE_PAIR_CORRELATION = 0.9
-#: The closest look-alikes of a member (of distinct error types) among which that pair is sought: seed 1's pin circle
-#: diameter and pin radius are the compliance's second and third (a friction torque is its first).
+#: The closest look-alikes of a member (of distinct error types) among which that pair is sought: seed 1's pin radius
+#: and pin circle diameter are the disc phase's second and third (a pin pitch is its first).
 LOOKALIKE_PAIR_POOL = 3
 
 
@@ -186,8 +186,8 @@ class ReplacementRefit(JointSelection):
         :data:`LOOKALIKE_PAIR_CORRELATION`, are refitted beside it together
         (both from zero; the F test with both's parameters): one alone can only move along its own signature,
         where the member already is, while together they move along their difference. Seed 1 (physical law):
-        the all-pins pin circle diameter (truth 1.94 um) and pin radius (0.61) beside the compliance, each
-        alone staying near zero, together BIC -73 and both sizes within tolerance (docs/calibration.md)."""
+        the all-pins pin circle diameter (truth 1.94 um) and pin radius (0.61) beside the disc phase, each
+        alone staying near zero, together BIC -73.6 and both sizes within tolerance (docs/calibration.md)."""
         if not self.active or self.over_budget():
             return None
         members = self.active_members()
@@ -238,7 +238,7 @@ class ReplacementRefit(JointSelection):
                 found = got
         if found is None:
             # neither alone: the near-coincident pairs together (seed 1: the all-pins pin circle diameter and pin
-            # radius, 1.94 and 0.61 um, beside the compliance; each alone stays near zero, together BIC -73)
+            # radius, 1.94 and 0.61 um, beside the disc phase; each alone stays near zero, together BIC -73.6)
             for rho, xs, mname in pair_trials.values():
                 if self.over_budget():
                     break
