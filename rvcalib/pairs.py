@@ -92,12 +92,11 @@ class PairCheck(ReplacementRefit):
                  and e.family in ("table4", "model") and not e.expensive]
         if linear is not None:
             X, col0, lin_cols = linear
-            keep = []
-            for c in cands:
-                S = lin_cols.get(c.name)
-                if S is None or collinear_partners(X, [list(range(col0[i], col0[i + 1])) for i in targets], [S],
-                                                   PREFILTER_LIMIT):
-                    keep.append(c)
+            with_cols = [c for c in cands if lin_cols.get(c.name) is not None]
+            near = {ci for _, ci, _ in collinear_partners(X, [list(range(col0[i], col0[i + 1])) for i in targets],
+                                                          [lin_cols[c.name] for c in with_cols], PREFILTER_LIMIT)}
+            near_names = {with_cols[ci].name for ci in near}
+            keep = [c for c in cands if lin_cols.get(c.name) is None or c.name in near_names]
             if len(keep) < len(cands):
                 self.log(f"pair check: {len(cands) - len(keep)} of {len(cands)} left-out candidates below the "
                          f"linear prefilter ({PREFILTER_LIMIT}) not differenced")

@@ -156,11 +156,8 @@ def test_collinear_partners_and_split_test():
     assert sf == pytest.approx(math.sqrt(cov[0, 0])) and sc == pytest.approx(math.sqrt(cov[1, 1]))
 
 
-def test_the_linear_prefilter_differences_only_the_collinear_candidates():
-    # the same unsplit pair with the screening grid's linear columns given (here the basis itself: the model is
-    # linear): z (collinear with x) is differenced and found; w (unrelated to x and u) is not differenced
-    loop = _case(0.005)
-    differenced: list[str] = []
+def _counting(loop, differenced: list[str]) -> None:
+    """Record the candidate of each one-column differencing (``state_jacobian(..., only=...)``) of ``loop``."""
     sj = loop.state_jacobian
 
     def counting(effects, params, only=None):
@@ -169,6 +166,14 @@ def test_the_linear_prefilter_differences_only_the_collinear_candidates():
         return sj(effects, params, only=only)
 
     loop.state_jacobian = counting
+
+
+def test_the_linear_prefilter_differences_only_the_collinear_candidates():
+    # the same unsplit pair with the screening grid's linear columns given (here the basis itself: the model is
+    # linear): z (collinear with x) is differenced and found; w (unrelated to x and u) is not differenced
+    loop = _case(0.005)
+    differenced: list[str] = []
+    _counting(loop, differenced)
     X = np.column_stack([loop.basis["x"], loop.basis["u"]])
     lin = {"z": loop.basis["z"][:, None], "w": loop.basis["w"][:, None]}
     groups = loop._nonlinear_pairs(loop.fitted(), set(), math.sqrt(loop.rss_full / loop.n), (X, [0, 1, 2], lin))
@@ -178,7 +183,6 @@ def test_the_linear_prefilter_differences_only_the_collinear_candidates():
     # without grid columns a candidate is always differenced
     loop = _case(0.005)
     differenced.clear()
-    sj = loop.state_jacobian
-    loop.state_jacobian = counting
+    _counting(loop, differenced)
     loop._nonlinear_pairs(loop.fitted(), set(), math.sqrt(loop.rss_full / loop.n), (X, [0, 1, 2], {"z": None}))
     assert sorted(differenced) == ["w", "z"]
