@@ -385,8 +385,7 @@ class JointSelection(Selection):
             for b, p in zip(self.active, params):
                 b.p = p
             a.info = dict(a.info or {}, sibling_refit={"replaced": old, "rss_before": self.rss_full, "rss": rss})
-            r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
-            self.rss_full = float(r_full @ r_full)
+            r_full = self.refresh_state()
             swapped.append((old, x.name))
             # the new instance's own siblings next (a descent over the instance index): the first choice
             # can be several pins from the truth (pin 15 for 12 beside a drift stand-in)

@@ -218,6 +218,14 @@ class LoopModel:
         coef, *_ = np.linalg.lstsq(E, r, rcond=None)
         return r - E @ coef, coef
 
+    def refresh_state(self) -> np.ndarray:
+        """The residual of the present model (its effects and empirical terms) on all samples, with
+        ``emp_coef`` and ``rss_full`` set from it (the one place the loop's state figures are refreshed
+        after the model changed)."""
+        r, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
+        self.rss_full = float(r @ r)
+        return r
+
     def split(self, v: np.ndarray) -> list[np.ndarray]:
         """Split a concatenated per-sample vector into runs."""
         out, i = [], 0

@@ -157,8 +157,7 @@ class ReplacementRefit(JointSelection):
         self.active[i] = Active(x, params[i], it, info={
             "explained_fraction": 1.0 - rss / self.rss_full, "delta_bic": found[0] - bic_cur,
             "selection": {"method": "replacement refit at the term limit", "iteration": it, "replaced": old}})
-        r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
-        self.rss_full = float(r_full @ r_full)
+        r_full = self.refresh_state()
         return old, x.name
 
     def lookalike_refit(self, it: int) -> tuple[str, str] | None:
@@ -256,8 +255,7 @@ class ReplacementRefit(JointSelection):
                 "explained_fraction": 1.0 - rss / self.rss_full, "F": F, "p_value": pv, "delta_bic": b_new - bic_cur,
                 "selection": {"method": "look-alike refit before the stop", "iteration": it, "beside": mname,
                               "together_with": [y.name for y in xs if y is not x]}}))
-        r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
-        self.rss_full = float(r_full @ r_full)
+        r_full = self.refresh_state()
         return mname, " and ".join(x.name for x in xs)
 
     def _lookalike_trial(self, xs: list, mname: str, p_cur: int, bic_cur: float, why: str):
