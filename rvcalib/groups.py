@@ -39,7 +39,8 @@ from scipy import stats
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
-from rvcalib.pairs import CHI2_95, CORRELATION_LIMIT, PairCheck
+from rvcalib.basins import BasinCheck
+from rvcalib.pairs import CHI2_95, CORRELATION_LIMIT
 
 #: Smallest log-determinant gain for which a run is said to split a group (a factor 2 in det).
 MIN_LOG_DET_GAIN = math.log(2.0)
@@ -54,7 +55,7 @@ REC_POINTS_PER_PIN = 2
 RESOLVE_FACTOR = 25.0
 
 
-class Groups(PairCheck):
+class Groups(BasinCheck):
     """Identifiability groups and recommended runs (methods on the loop)."""
 
     def identifiability_groups(self, fitted: list[FittedEffect], unexplained: list[Unexplained]) -> list[dict]:
@@ -329,6 +330,10 @@ class Groups(PairCheck):
                                        f"sizes listed it would be {v_aug:.4g} {f.unit}; its interval covers both"})
             self.log(f"left-out candidates at the final state: {', '.join(c['name'] for c in chosen)} (RMS "
                      f"{rms_model:.4g} -> {rms_aug:.4g} arcsec, {how})")
+        # 2c. a second fit of the same effects from another start (rvcalib.basins): intervals cover both
+        if resolve and not self.over_budget():
+            self.restart_refit(0, adopt=False)
+        groups += self.basin_groups(by_name, rms_model)
         # 3. instance sets: several instances of one error type in the model that one instance replaces
         #    within the noise are one identified error (its combined effect), not several
         merged, combined = self._instance_sets(members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq,

@@ -205,7 +205,9 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
     if not result.groups:
         L.append("No group: every effect found is the only candidate that fits as well.")
     for i, g in enumerate(result.groups):
-        mem = "; ".join(f"`{m['name']}` {m['value']:.4g} {m['unit']}"
+        mem = "; ".join(f"`{m['name']}` {m['value']:.4g}"
+                        + (f" or {m['value_other_fit']:.4g}" if m.get("value_other_fit") is not None else "")
+                        + f" {m['unit']}"
                         + (f" (RMS {m['rms_after_arcsec']:.3g})" if m.get("rms_after_arcsec") is not None else "")
                         for m in g["members"])
         L.append(f"- group {i} ({g['kind']}): {mem}. {g.get('note', '')}")
