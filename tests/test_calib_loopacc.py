@@ -119,3 +119,117 @@ def test_twin_instances_are_named_once_at_their_combined_size():
 def test_instances_the_data_split_stay_separate():
     merged, out = _instance_case(twin_noise=1.0)
     assert merged == set() and out == []
+
+
+def _harmonic_gate(av_found: bool, swaps: list, lookalike):
+    """A Calibrator stand-in at one model state whose checks before a harmonic return the given results;
+    records which checks ran."""
+    from rvcalib.identify import Calibrator
+
+    c = Calibrator.__new__(Calibrator)
+    e = Effect("disc_phase[disc=0]", "disc_phase", "table4", "deg", "disc 0")
+    c.joint, c.active, c.empirical, c.max_terms = True, [Active(e, np.array([0.01]), 1)], [], 12
+    c._harmonic_checked_at, c._lookalike_at, c._instances_at = set(), set(), set()
+    c.over_budget = lambda: False
+    ran: list[str] = []
+    cand = [object()] if av_found else []
+
+    def added_variable_ranking(rc_cat, Ec):
+        ran.append("added_variable")
+        return cand, {"best": "pin_radius" if av_found else None}
+
+    def joint_step(av, best, hterm, *args):
+        ran.append("joint_step")
+        assert av is cand and best is None and hterm is None
+        return True, "joint: added pin_radius"
+
+    def instances(it, iterations=None):
+        ran.append("instances")
+        return swaps
+
+    def lookalike_refit(it):
+        ran.append("lookalike")
+        return lookalike
+
+    c.added_variable_ranking, c.joint_step = added_variable_ranking, joint_step
+    def restart_refit(it, adopt=True):
+        ran.append("restart")
+        return None
+
+    c._instances_before_stop, c.lookalike_refit, c.restart_refit = instances, lookalike_refit, restart_refit
+    return c, ran
+
+
+@pytest.mark.parametrize("av_found, instances, lookalike, expect, checks", [
+    (True, [], None, "added-variable test: joint: added pin_radius", ["added_variable", "joint_step"]),
+    (False, [("pin_pitch[pin=0]", "pin_pitch[pin=20]")], None, "instance refit: pin_pitch[pin=20] in place of "
+     "pin_pitch[pin=0]", ["added_variable", "instances"]),
+    (False, [], ("pin_radius", "pin_circle_diameter"), "look-alike refit: added pin_circle_diameter beside "
+     "pin_radius", ["added_variable", "instances", "restart", "lookalike"]),
+    (False, [], None, None, ["added_variable", "instances", "restart", "lookalike"]),
+])
+def test_the_checks_before_the_stop_run_before_a_harmonic_enters(av_found, instances, lookalike, expect, checks):
+    c, ran = _harmonic_gate(av_found, instances, lookalike)
+    log: dict = {}
+    assert c._physical_before_harmonic(7, log, None, None, None, None, []) == expect
+    assert ran == checks and "added_variable_before_harmonic" in log
+    # once per model state: at the same state nothing runs again and the harmonic is judged as before
+    ran.clear()
+    assert c._physical_before_harmonic(8, {}, None, None, None, None, []) is None and ran == []
+    # at the term limit the look-alike refit (which adds a term) is not tried
+    c2, ran2 = _harmonic_gate(False, [], ("pin_radius", "pin_circle_diameter"))
+    c2.max_terms = 1
+    assert c2._physical_before_harmonic(7, {}, None, None, None, None, []) is None
+    assert ran2 == ["added_variable", "instances", "restart"]
+
+
+def _elimination_case(cost: float):
+    """Members A, D (clearly needed) and B, E (orthogonal, each of whose removal costs ``cost`` noise
+    variances), noise variance 1, a linear model (the refits least squares)."""
+    from rvcalib.selection import Selection
+
+    n = 200
+    rng = np.random.default_rng(2)
+    Q, _ = np.linalg.qr(rng.normal(size=(n, 5)))
+    cols = {k: 10.0 * Q[:, i] for i, k in enumerate("ADBE")}
+    noise = Q[:, 4] * 0.0 + rng.normal(size=n)
+    noise -= Q[:, :4] @ (Q[:, :4].T @ noise)
+    noise *= np.sqrt(n - 4) / np.linalg.norm(noise)
+    beta = np.sqrt(cost) / 10.0
+    y = 3.0 * cols["A"] + 2.0 * cols["D"] + beta * (cols["B"] + cols["E"]) + noise
+    eff = {k: Effect(f"{k}_test", f"{k}_test", "table4", "um", k) for k in "ADBE"}
+    sel = Selection.__new__(Selection)
+    sel.n, sel.thr, sel.empirical = n, 1e-3, []
+    sel.active = [Active(eff[k], np.array([v]), 1) for k, v in (("A", 3.0), ("D", 2.0), ("B", beta), ("E", beta))]
+    sel._p_cur = lambda: len(sel.active)
+
+    def residual(pairs):
+        return y - sum((cols[e.name[0]] * float(q[0]) for e, q in pairs), np.zeros(n))
+
+    sel.full_residual = lambda pairs, terms: (residual(pairs), np.zeros(0))
+
+    def fit_full(effects, p0, terms):
+        A = np.column_stack([cols[e.name[0]] for e in effects])
+        q, *_ = np.linalg.lstsq(A, y, rcond=None)
+        r = y - A @ q
+        return [np.array([v]) for v in q], float(r @ r), q, None, A
+
+    sel.fit_full = fit_full
+    r = residual([(a.effect, a.p) for a in sel.active])
+    return sel, float(r @ r)
+
+
+def test_the_elimination_does_not_drop_a_pair_one_member_at_a_time():
+    from scipy import stats
+
+    # each removal alone costs 9.5 noise variances, below F(1) at 1e-3 (10.9); both together 19, above
+    # 2 F(2) (14.2): the first goes, the second stays
+    assert stats.f.isf(1e-3, 1, 196) > 9.5 and 2 * stats.f.isf(1e-3, 2, 196) < 19.0
+    sel, rss = _elimination_case(9.5)
+    gone = sel._backward([a.effect for a in sel.active], np.zeros(0), np.zeros((0, 0)), rss, include_last=True)
+    assert len(gone) == 1 and gone[0] in ("B_test", "E_test")
+    assert [a.effect.name for a in sel.active][:2] == ["A_test", "D_test"] and len(sel.active) == 3
+    # removals that cost little together go, both
+    sel2, rss2 = _elimination_case(3.0)
+    gone2 = sel2._backward([a.effect for a in sel2.active], np.zeros(0), np.zeros((0, 0)), rss2, include_last=True)
+    assert sorted(gone2) == ["B_test", "E_test"]
