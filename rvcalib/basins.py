@@ -5,9 +5,10 @@ along nearly one direction (an offset-like TE: a disc phase, the pin circle diam
 take large sizes of opposite effect, each with a tight linearised interval. Realistic seed 3 on the
 2026-11-27 machine: pin circle diameter -17.3 um [-21.2, -13.5] and pin radius -14.0 um [-16.8, -12.2]
 (truth -0.77 and -1.44) beside a second disc phase, RMS 0.2036 arcsec; the same effects refitted with
-those three started from zero end at 4.09 / 1.41 um and a disc phase of 0.001 deg, RMS 0.2039 arcsec:
-3.2 noise variances apart, so the data do not decide between the two fits. A linearised interval
-describes one basin only.
+those two started from zero (by hand) end at 4.09 / 1.41 um and a disc phase of 0.001 deg, RMS 0.2039
+arcsec: 3.2 noise variances apart, so a linearised interval describes one basin only. In the loop the
+restart acted earlier (at a state 0.2017 arcsec, the second disc phase, the diameter and the radius from
+zero: 14.1 noise variances better) and the pair did not come back (docs/calibration.md, "Stop 25").
 
 The check (:meth:`BasinCheck.restart_refit`, once per model state, before the loop stops and at the
 final state):
@@ -82,7 +83,7 @@ class BasinCheck(PairCheck):
             self._basins: dict = {}
         return self._basins
 
-    def restart_refit(self, it: int, adopt: bool = True) -> str | None:
+    def restart_refit(self, adopt: bool = True) -> str | None:
         """Step 1-3 of the module docstring at the present state (once per state); returns the message when a
         restarted fit replaced the state, else None (an other fit within the noise is kept for the groups).
         ``adopt`` False (the final state, whose intervals are being reported): a better fit is kept as the

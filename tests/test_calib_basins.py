@@ -66,12 +66,12 @@ def _basin_case(delta_noise_var: float):
 
 def test_a_second_fit_within_the_noise_widens_the_intervals_and_makes_a_group():
     sel, starts, refreshed, eff = _basin_case(2.0)
-    assert sel.restart_refit(5) is None
+    assert sel.restart_refit() is None
     # one set {A, B}: B (the smaller part) from zero, A and D from their sizes
     assert starts == [{"A_test": 10.0, "B_test": 0.0, "D_test": 2.0}]
     assert not refreshed and [float(x.p[0]) for x in sel.active] == [10.0, -8.0, 2.0]
     # once per state
-    assert sel.restart_refit(6) is None and len(starts) == 1
+    assert sel.restart_refit() is None and len(starts) == 1
     by_name = {"A_test": _fitted(eff["A"], 10.0, 0.5), "B_test": _fitted(eff["B"], -8.0, 1.0),
                "D_test": _fitted(eff["D"], 2.0, 0.3)}
     groups = sel.basin_groups(by_name, 0.2)
@@ -87,7 +87,7 @@ def test_a_second_fit_within_the_noise_widens_the_intervals_and_makes_a_group():
 
 def test_a_second_fit_beyond_the_noise_is_no_group():
     sel, starts, refreshed, eff = _basin_case(6.0)
-    assert sel.restart_refit(5) is None and len(starts) == 1
+    assert sel.restart_refit() is None and len(starts) == 1
     by_name = {k: _fitted(eff[k[0]], v, 0.5) for k, v in (("A_test", 10.0), ("B_test", -8.0), ("D_test", 2.0))}
     assert sel.basin_groups(by_name, 0.2) == []
     assert by_name["B_test"].ci_high == -7.5
@@ -95,12 +95,12 @@ def test_a_second_fit_beyond_the_noise_is_no_group():
 
 def test_a_better_second_fit_replaces_the_state():
     sel, starts, refreshed, eff = _basin_case(-50.0)
-    msg = sel.restart_refit(5)
+    msg = sel.restart_refit()
     assert msg is not None and msg.startswith("restarted B_test from zero")
     assert refreshed and [float(x.p[0]) for x in sel.active] == [2.5, 0.4, 2.1]
     # at the final state (adopt False) a better fit is reported, not taken
     sel2, _, refreshed2, eff2 = _basin_case(-50.0)
-    assert sel2.restart_refit(5, adopt=False) is None and not refreshed2
+    assert sel2.restart_refit(adopt=False) is None and not refreshed2
     by_name = {k: _fitted(eff2[k[0]], v, 0.5) for k, v in (("A_test", 10.0), ("B_test", -8.0), ("D_test", 2.0))}
     g = sel2.basin_groups(by_name, 0.2)
     assert len(g) == 1 and "the second fits better" in g[0]["note"]

@@ -152,7 +152,7 @@ def _harmonic_gate(av_found: bool, swaps: list, lookalike):
         return lookalike
 
     c.added_variable_ranking, c.joint_step = added_variable_ranking, joint_step
-    def restart_refit(it, adopt=True):
+    def restart_refit(adopt=True):
         ran.append("restart")
         return None
 
