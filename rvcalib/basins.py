@@ -83,17 +83,19 @@ class BasinCheck(PairCheck):
             self._basins: dict = {}
         return self._basins
 
-    def restart_refit(self, adopt: bool = True) -> str | None:
+    def restart_refit(self, adopt: bool = True, members: list | None = None) -> str | None:
         """Step 1-3 of the module docstring at the present state (once per state); returns the message when a
         restarted fit replaced the state, else None (an other fit within the noise is kept for the groups).
         ``adopt`` False (the final state, whose intervals are being reported): a better fit is kept as the
-        other fit too, not taken."""
+        other fit too, not taken. ``members``: :meth:`active_members` at this state if the caller has them
+        (the final state's analysis does)."""
         store = self._basin_store()
         key = self._state_key()
         if key in store or not self.active or self.over_budget():
             return None
         store[key] = []
-        members = [m for m in self.active_members() if m.effect is not None and m.active is not None]
+        members = [m for m in (self.active_members() if members is None else members)
+                   if m.effect is not None and m.active is not None]
         sets = collinear_sets([m.contribution for m in members])
         n = self.n
         k = self._p_cur()

@@ -332,7 +332,7 @@ class Groups(BasinCheck):
                      f"{rms_model:.4g} -> {rms_aug:.4g} arcsec, {how})")
         # 2c. a second fit of the same effects from another start (rvcalib.basins): intervals cover both
         if resolve and not self.over_budget():
-            self.restart_refit(adopt=False)
+            self.restart_refit(adopt=False, members=members)
         groups += self.basin_groups(by_name, rms_model)
         # 3. instance sets: several instances of one error type in the model that one instance replaces
         #    within the noise are one identified error (its combined effect), not several

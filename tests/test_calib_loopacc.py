@@ -190,10 +190,10 @@ def _elimination_case(cost: float):
 
     n = 200
     rng = np.random.default_rng(2)
-    Q, _ = np.linalg.qr(rng.normal(size=(n, 5)))
+    Q, _ = np.linalg.qr(rng.normal(size=(n, 4)))
     cols = {k: 10.0 * Q[:, i] for i, k in enumerate("ADBE")}
-    noise = Q[:, 4] * 0.0 + rng.normal(size=n)
-    noise -= Q[:, :4] @ (Q[:, :4].T @ noise)
+    noise = rng.normal(size=n)
+    noise -= Q @ (Q.T @ noise)
     noise *= np.sqrt(n - 4) / np.linalg.norm(noise)
     beta = np.sqrt(cost) / 10.0
     y = 3.0 * cols["A"] + 2.0 * cols["D"] + beta * (cols["B"] + cols["E"]) + noise
