@@ -202,10 +202,13 @@ class Fitting(Screening):
             return dv, float(math.hypot(dv + float(p[0]), float(p[1])))
         return dv, dv + float(p[0])
 
-    def state_jacobian(self, effects: list[Effect], params: list[np.ndarray], only: list[int] | None = None
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def state_jacobian(self, effects: list[Effect], params: list[np.ndarray], only: list[int] | None = None,
+                       backward: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The residual (every reading, empirical terms projected out) of ``effects`` at ``params`` and its
-        forward-difference Jacobian in the scaled parameters (step 0.01 of each effect's scale); ``only``: just these columns. Returns (scaled parameters, residual, Jacobian)."""
+        forward-difference Jacobian in the scaled parameters (step 0.01 of each effect's scale); ``only``: just
+        these columns; ``backward``: backward differences (the slope on the negative side of each parameter,
+        which differs from the forward one where the TE has a kink, e.g. a one-sided contact at size zero).
+        Returns (scaled parameters, residual, Jacobian)."""
         sizes = [e.n_params for e in effects]
         scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
         lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
@@ -221,7 +224,8 @@ class Fitting(Screening):
 
         x = np.concatenate([np.asarray(p, dtype=float) for p in params]) / scales
         r = fun(x)
-        return x, r, fd_jac(fun, x, lo, hi, h=0.01, f0=r, only=only)
+        # (backward: the upper bound at the point itself, so every forward step leaves it: fd_jac steps back)
+        return x, r, fd_jac(fun, x, lo, np.minimum(hi, x) if backward else hi, h=0.01, f0=r, only=only)
 
     def intervals(self) -> list[FittedEffect]:
         """The reported effects: each active effect's size with its 95 % confidence interval from the

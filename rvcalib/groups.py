@@ -242,13 +242,7 @@ class Groups(BasinCheck):
         #     collinear with a named effect in the model's own Jacobian at the final state, refitted beside it
         #     through rvdyn; the effect is not named when it is no longer significant beside the candidate
         if resolve and not self.over_budget():
-            lin_cols: dict[str, np.ndarray | None] = {}
-            cache_l: dict[int, tuple] = {}
-            for e in self.lib.templates():
-                if e.name not in named_active and not e.expensive:
-                    d = self.screen_effect(e, cache_l, r_fin, None)
-                    lin_cols[e.name] = None if d is None else d.cols
-            for g in self._nonlinear_pairs(by_name, unsplit, rms_model, (X, col0, lin_cols)):
+            for g in self._nonlinear_pairs(by_name, unsplit, rms_model):
                 groups.append(g)
                 if g["kind"] == "unsplit":
                     unsplit.add(g["found"])

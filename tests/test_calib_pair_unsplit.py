@@ -156,33 +156,89 @@ def test_collinear_partners_and_split_test():
     assert sf == pytest.approx(math.sqrt(cov[0, 0])) and sc == pytest.approx(math.sqrt(cov[1, 1]))
 
 
-def _counting(loop, differenced: list[str]) -> None:
-    """Record the candidate of each one-column differencing (``state_jacobian(..., only=...)``) of ``loop``."""
-    sj = loop.state_jacobian
+class KinkLoop(LinearLoop):
+    """:class:`LinearLoop` whose effect ``z`` has a kink at zero: ``basis["z"]`` for positive sizes,
+    ``basis["z_neg"]`` for negative ones (a one-sided contact: a thinner pin opens a play, a thicker one
+    preloads). Its fits take the better of the two sides."""
 
-    def counting(effects, params, only=None):
-        if only is not None:
-            differenced.append(effects[-1].name)
-        return sj(effects, params, only=only)
+    def _cols(self, effects, signs):
+        return np.column_stack([self.basis["z_neg" if (e.name == "z" and s < 0) else e.name]
+                                for e, s in zip(effects, signs)])
 
-    loop.state_jacobian = counting
+    def predict(self, pairs):
+        out = np.zeros(self.n)
+        for e, p in pairs:
+            v = float(p[0])
+            out = out + self.basis["z_neg" if (e.name == "z" and v < 0) else e.name] * v
+        return [out]
+
+    def fit_full(self, effects, p0, terms, max_nfev=20):
+        best = None
+        for sign in (1.0, -1.0):
+            signs = [sign if e.name == "z" else 1.0 for e in effects]
+            A = self._cols(effects, signs)
+            c, *_ = np.linalg.lstsq(A, self.y[0], rcond=None)
+            if any(e.name == "z" and v * sign < 0 for e, v in zip(effects, c)):
+                continue  # the solution is not on this side
+            r = self.y[0] - A @ c
+            if best is None or float(r @ r) < best[1]:
+                best = ([np.array([v]) for v in c], float(r @ r), c, None, None)
+        return best
 
 
-def test_the_linear_prefilter_differences_only_the_collinear_candidates():
-    # the same unsplit pair with the screening grid's linear columns given (here the basis itself: the model is
-    # linear): z (collinear with x) is differenced and found; w (unrelated to x and u) is not differenced
-    loop = _case(0.005)
-    differenced: list[str] = []
-    _counting(loop, differenced)
-    X = np.column_stack([loop.basis["x"], loop.basis["u"]])
-    lin = {"z": loop.basis["z"][:, None], "w": loop.basis["w"][:, None]}
-    groups = loop._nonlinear_pairs(loop.fitted(), set(), math.sqrt(loop.rss_full / loop.n), (X, [0, 1, 2], lin))
-    assert [g["found"] for g in groups] == ["x"]
-    assert differenced == ["z"]
-    assert any("1 of 2 left-out candidates below the linear prefilter" in m for m in loop.logged), loop.logged
-    # without grid columns a candidate is always differenced
-    loop = _case(0.005)
-    differenced.clear()
-    _counting(loop, differenced)
-    loop._nonlinear_pairs(loop.fitted(), set(), math.sqrt(loop.rss_full / loop.n), (X, [0, 1, 2], {"z": None}))
-    assert sorted(differenced) == ["w", "z"]
+def _kink_case():
+    # z's negative side is nearly collinear with x (multiple correlation ~0.999), its positive side unrelated; the
+    # truth is on the negative side
+    rng = np.random.default_rng(5)
+    n = 600
+    x, d, w, u, v = rng.normal(size=(5, n))
+    basis = {"x": x, "z": v, "z_neg": x + 0.05 * d, "w": w, "u": u}
+    y = 1.0 * x - 1.0 * basis["z_neg"] + 0.5 * u + 0.2 * rng.normal(size=n)   # truth: x = 1, z = -1, u = 0.5
+    loop = KinkLoop(basis, y, ["x", "u"])
+    loop.lib = Library([Effect(k, k + "_key", "table4", "um", k) for k in ("x", "z", "w", "u")])
+    loop.active = [Active(loop.lib.by_name(a.effect.name), a.p, 1) for a in loop.active]
+    return loop
+
+
+def test_a_candidate_collinear_only_on_its_negative_side_is_found():
+    # forward differences at size zero see z's positive side (unrelated to x): the pair would be missed and x
+    # named near 0 with a tight interval that misses its truth; the backward column sees the collinear side
+    loop = _kink_case()
+    by_name = loop.fitted()
+    assert by_name["x"].value == pytest.approx(0.0, abs=0.1)       # x holds z's part (x - z_neg ~ 0)
+    assert not by_name["x"].ci_low <= 1.0 <= by_name["x"].ci_high
+    effects = [a.effect for a in loop.active] + [loop.lib.by_name("z")]
+    params = [a.p for a in loop.active] + [np.zeros(1)]
+    _, _, Jf = loop.state_jacobian(effects, params, only=[2])
+    _, _, Jb = loop.state_jacobian(effects, params, only=[2], backward=True)
+    assert np.allclose(Jf[:, 0], -loop.basis["z"]) and np.allclose(Jb[:, 0], -loop.basis["z_neg"])
+    assert not collinear_partners(np.column_stack([loop.basis["x"], loop.basis["u"]]), [[0]], [Jf], 0.95)
+    groups = loop._nonlinear_pairs(by_name, set(), math.sqrt(loop.rss_full / loop.n))
+    assert any("negative side" in m for m in loop.logged), loop.logged
+    # beside x, z is supported (its own part, 0.05 of x's, is above the noise): a left-out group with both sizes
+    assert [(g["kind"], g["found"]) for g in groups] == [("left_out", "x")], loop.logged
+    me, ce = groups[0]["members"]
+    assert ce["name"] == "z" and ce["value"] == pytest.approx(-1.0, abs=0.15)
+    assert me["value_with_left_out"] == pytest.approx(1.0, abs=0.15)
+    assert by_name["x"].ci_low <= 1.0 <= by_name["x"].ci_high      # the interval now covers the truth
+
+
+def test_a_collinear_candidate_the_data_do_not_support_widens_the_interval_in_a_group():
+    # z collinear with x (0.05 apart), truth z = 0.05: beside the model it is not supported, x cannot be replaced
+    # by it (z's own part is split by the data), yet x's interval beside z is wider: it covers that, in a group
+    rng = np.random.default_rng(11)
+    n = 600
+    x, d, w, u = rng.normal(size=(4, n))
+    basis = {"x": x, "z": x + 0.05 * d, "w": w, "u": u}
+    y = 1.0 * x + 0.5 * u + 0.2 * rng.normal(size=n)
+    loop = LinearLoop(basis, y, ["x", "u"])
+    by_name = loop.fitted()
+    width0 = by_name["x"].ci_high - by_name["x"].ci_low
+    groups = loop._nonlinear_pairs(by_name, set(), math.sqrt(loop.rss_full / loop.n))
+    assert [(g["kind"], g["found"]) for g in groups] == [("correlated", "x")], loop.logged
+    f = by_name["x"]
+    assert f.ci_high - f.ci_low > 3 * width0                       # se inflated by 1 / sqrt(1 - rho^2)
+    me, ce = groups[0]["members"]
+    assert f.ci_low <= me["value_together"] <= f.ci_high and f.ci_low <= 1.0 <= f.ci_high
+    assert ce["name"] == "z" and ce["found"] is False
+    assert f.selection["size_with_left_out"]["left_out"] == ["z"]
