@@ -62,14 +62,14 @@ class PairCheck(ReplacementRefit):
         :data:`CORRELATION_LIMIT`, the limit of the ``correlated`` groups) is a pair to check. The model is
         refitted with the candidate through rvdyn (one joint fit per candidate, from its size zero, i.e. the
         final state), and the effect's interval is taken there (Jacobian at the refit, the t quantile of
-        :meth:`intervals`). When the pair's correlation there exceeds the limit and
-        the effect's interval holds zero, the data do not support the effect beside the candidate: the nonlinear
-        form of item 1's rule (a candidate that replaces it within the chi-square(1) 95 % limit leaves it
-        insignificant in the model holding both). It is then not named; the group gives its size alone and both
-        sizes with their intervals in the joint fit. While the effect stays named, its interval covers its size
-        beside the candidate (item 2's rule: the model plus any one left-out candidate), and the pair is a
-        group: of kind ``left_out`` when the data support the candidate beside the model (item 6's level), else
-        of kind ``correlated`` (the runs split them only partly) when the interval had to widen."""
+        :meth:`intervals`). When the pair's correlation there exceeds the limit and the effect's interval holds
+        zero, the data do not support the effect beside the candidate: the nonlinear form of item 1's rule (a
+        candidate that replaces it within the chi-square(1) 95 % limit leaves it insignificant in the model
+        holding both). It is then not named; the group gives its size alone and both sizes with their intervals
+        in the joint fit. While the effect stays named, its interval covers its size beside the candidate (item
+        2's rule: the model plus any one left-out candidate), and the pair is a group: of kind ``left_out`` when
+        the data support the candidate beside the model (item 6's level), else of kind ``correlated`` (the runs
+        split them only partly) when the interval had to widen."""
         effects = [a.effect for a in self.active]
         params = [np.asarray(a.p, dtype=float) for a in self.active]
         n_emp = sum(t.n_cols for t in self.empirical)
@@ -88,19 +88,18 @@ class PairCheck(ReplacementRefit):
                  and e.family in ("table4", "model") and not e.expensive]
         # each candidate's columns on both sides of size zero (SIDES): the slopes differ where the TE has a kink
         cols: list[tuple[Effect, np.ndarray, int]] = []
-        jc_new = list(range(J.shape[1], J.shape[1] + max([c.n_params for c in cands], default=0)))
-        for c in cands:
-            for side in SIDES:
-                if self.over_budget():
-                    break
-                if side < 0 and min(c.lower) >= 0:
-                    continue  # a size that cannot be negative (a compliance, a friction torque): one side only
-                try:
-                    _, _, Jc = self.state_jacobian(effects + [c], params + [np.zeros(c.n_params)],
-                                                    only=jc_new[:c.n_params], backward=side < 0)
-                except ModelEvaluationError:
-                    continue
-                cols.append((c, Jc, side))
+        for c, side in ((c, side) for c in cands for side in SIDES):
+            if self.over_budget():
+                break
+            if side < 0 and min(c.lower) >= 0:
+                continue  # a size that cannot be negative (a compliance, a friction torque): one side only
+            try:
+                _, _, Jc = self.state_jacobian(effects + [c], params + [np.zeros(c.n_params)],
+                                                only=list(range(J.shape[1], J.shape[1] + c.n_params)),
+                                                backward=side < 0)
+            except ModelEvaluationError:
+                continue
+            cols.append((c, Jc, side))
         pairs = collinear_partners(J, [list(range(idx[i], idx[i + 1])) for i in targets],
                                    [Jc for _, Jc, _ in cols], CORRELATION_LIMIT)
         # one refit per candidate; each effect checked with its most collinear candidate (either side) of another type
