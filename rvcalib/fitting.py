@@ -13,22 +13,38 @@ from scipy import optimize, stats
 from rvcad.errors import ERROR_TYPES
 
 from rvcalib.effects import Effect
-from rvcalib.forward import ModelEvaluationError
+from rvcalib.forward import ModelEvaluationError, runner_workers
 from rvcalib.lsq import chord_fit, fd_jac, projector
 from rvcalib.residual import lag1_autocorr
 from rvcalib.results import EmpiricalTerm, FittedEffect
 from rvcalib.screening import Screening
 
 
+#: Joint fits whose end Jacobians are kept for the start of later refits (:meth:`Fitting._cached_jacobian`):
+#: the state's own and the checks made beside it (each 8 bytes x the readings x its columns: about 0.15 MB for
+#: a dozen columns at 1,300 readings, twice that for the final-state pair check's; a few MB in all).
+JAC_KEPT = 8
+
+
+def _same_state(kept: np.ndarray | None, p: np.ndarray) -> bool:
+    """Whether an effect's start ``p`` leaves a kept fit's model where it was: at the kept solution when the
+    effect was in that fit (``kept``), at size zero when it was not."""
+    p = np.asarray(p, dtype=float)
+    if kept is None:
+        return not np.any(p)
+    return kept.shape == p.shape and np.array_equal(kept, p)
+
+
 class Fitting(Screening):
     """The fitting stage of the loop (methods on the loop's model and screening)."""
 
-    #: Start Jacobians of the joint refits taken from the last joint fit: ``"removals"`` (its own state
-    #: only: refits of the same effects with members removed), ``"all"`` (any kept column, stale) or ``"off"``.
+    #: Start Jacobians of the joint refits taken from a kept joint fit: ``"removals"`` (at that fit's own
+    #: state only: refits of the same effects with members removed or new members added at size zero),
+    #: ``"all"`` (any kept column, stale) or ``"off"``.
     jacobian_reuse: str = "removals"
-    #: The last joint fit's Jacobian columns per effect, its empirical terms and its solution
-    #: (:meth:`_keep_jacobian`); None before the first joint fit.
-    _jac_kept: tuple | None = None
+    #: Kept joint fits' Jacobian columns per effect, their empirical terms and their solutions
+    #: (:meth:`_keep_jacobian`), the most recently kept or used first, at most :data:`JAC_KEPT` of them.
+    _jac_kept: tuple = ()
 
     def refine_coarse(self, e: Effect, p0: np.ndarray, rc_raw: list[np.ndarray],
                       Ec: np.ndarray | None, ms: int | None = None) -> tuple[float, np.ndarray]:
@@ -92,23 +108,11 @@ class Fitting(Screening):
         jac : ndarray
             Jacobian of ``fun`` at the solution (scaled parameters).
         """
-        sizes = [e.n_params for e in effects]
         scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects]) if effects else np.zeros(0)
         lo = np.concatenate([np.array(e.lower) for e in effects]) / scales if effects else np.zeros(0)
         hi = np.concatenate([np.array(e.upper) for e in effects]) / scales if effects else np.zeros(0)
         P = projector(self._emp_matrix(terms))
-
-        def unpack(xs: np.ndarray) -> list[tuple[Effect, np.ndarray]]:
-            out, i = [], 0
-            for e, k in zip(effects, sizes):
-                out.append((e, xs[i:i + k] * e.scale))
-                i += k
-            return out
-
-        def fun(xs: np.ndarray) -> np.ndarray:
-            pred = self.predict(unpack(xs))
-            return P(np.concatenate([y - p for y, p in zip(self.y, pred)]))
-
+        fun, unpack = self.residual_function(effects, P)
         if not effects:
             r = fun(np.zeros(0))
             return [], float(r @ r), np.zeros(0), fun, np.zeros((r.size, 0))
@@ -130,45 +134,78 @@ class Fitting(Screening):
         self._keep_jacobian(effects, params, terms, np.asarray(sol.jac, dtype=float))
         return params, float(2.0 * sol.cost), sol.x, fun, sol.jac
 
+    def residual_function(self, effects: list[Effect], P):
+        """The residual of the model with ``effects`` at every reading (empirical terms projected out by
+        ``P``) as a function of the scaled parameter vector, and the vector's unpacking into (effect,
+        parameters). With several forward workers the function carries ``many`` (the residuals of a list
+        of vectors in one batch), so that :func:`rvcalib.lsq.fd_jac` spreads a Jacobian's solves over
+        them; with one, every solve is made as before (the same numbers, the same order)."""
+        sizes = [e.n_params for e in effects]
+
+        def unpack(xs: np.ndarray) -> list[tuple[Effect, np.ndarray]]:
+            out, i = [], 0
+            for e, k in zip(effects, sizes):
+                out.append((e, xs[i:i + k] * e.scale))
+                i += k
+            return out
+
+        def residual(pred: list[np.ndarray]) -> np.ndarray:
+            return P(np.concatenate([y - p for y, p in zip(self.y, pred)]))
+
+        def fun(xs: np.ndarray) -> np.ndarray:
+            return residual(self.predict(unpack(xs)))
+
+        if runner_workers() > 1:
+            def many(points: list[np.ndarray]) -> list:
+                return [p if isinstance(p, ModelEvaluationError) else residual(p)
+                        for p in self.predict_many([unpack(x) for x in points])]
+            fun.many = many  # type: ignore[attr-defined]
+        return fun, unpack
+
     def _cached_jacobian(self, effects: list[Effect], p0: list[np.ndarray], terms: list[EmpiricalTerm],
                          P) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """A start Jacobian for :meth:`fit_full` from the last joint fit's final Jacobian
-        (:meth:`_keep_jacobian`), and the mask of the columns it holds.
+        """A start Jacobian for :meth:`fit_full` from a kept joint fit's final Jacobian
+        (:meth:`_keep_jacobian`, the most recently kept or used that applies), and the mask of the columns it
+        holds.
 
-        Columns are reused only at that fit's own state: every effect of this fit was in it, at the
-        same parameters (``p0`` equal to its solution), and its empirical terms are all among
-        ``terms`` (the projector of ``terms`` applied to a column projected with fewer terms is the
-        column projected with ``terms``). That is a refit of the same effects with members removed
-        (the backward elimination, the term-limit checks): its start Jacobian is the kept one's
-        columns; otherwise (new members, moved sizes) every column is differenced as before. With
-        ``jacobian_reuse = "all"`` any kept column of an effect is reused wherever it was taken (a
-        stale start: faster, but the fits then stop at other points within their tolerance and the
-        loop's discrete choices can change; measured in docs/calibration.md)."""
-        kept = self._jac_kept
+        Columns are reused only at that fit's own state: every effect of this fit that was in it is at
+        the same parameters (``p0`` equal to its solution), every other effect starts at size zero (the
+        model is then that fit's model: an effect of size zero changes no TE), and its empirical terms
+        are all among ``terms`` (the projector of ``terms`` applied to a column projected with fewer terms
+        is the column projected with ``terms``). That is a refit of the same effects with members removed
+        (the backward elimination, the term-limit checks) or with candidates added from zero beside them
+        (the checks before the stop: look-alike and pair refits); the new members' columns are differenced
+        at ``x0``. Otherwise (moved sizes, a new member started away from zero) every column is differenced
+        as before. Several fits are kept, so that the checks made at one state, each of which keeps its own
+        end Jacobian, do not take the state's away from the next check (the entry used moves to the front).
+        With ``jacobian_reuse = "all"`` any kept column of an effect is reused wherever it was taken (a stale
+        start: faster, but the fits then stop at other points within their tolerance and the loop's discrete
+        choices can change; measured in docs/calibration.md)."""
         mode = self.jacobian_reuse
-        if kept is None or mode == "off":
+        if not self._jac_kept or mode == "off":
             return None, None
-        cols, kterms, kparams = kept
         tset = set(terms)
-        if not kterms <= tset:
-            return None, None
-        if mode != "all":
-            for e, p in zip(effects, p0):
-                q = kparams.get(e.name)
-                if q is None or q.shape != np.shape(p) or not np.array_equal(q, np.asarray(p, dtype=float)):
-                    return None, None
-        blocks, mask = [], []
-        for e in effects:
-            got = cols.get(e.name)
-            if got is not None and got.shape == (self.n, e.n_params):
-                blocks.append(P(got) if kterms != tset else got)
-                mask += [True] * e.n_params
-            else:
-                blocks.append(np.zeros((self.n, e.n_params)))
-                mask += [False] * e.n_params
-        if not any(mask):
-            return None, None
-        return np.column_stack(blocks), np.array(mask)
+        for k, (cols, kterms, kparams) in enumerate(self._jac_kept):
+            if not kterms <= tset:
+                continue
+            if mode != "all" and not all(_same_state(kparams.get(e.name), p) for e, p in zip(effects, p0)):
+                continue
+            blocks, mask = [], []
+            for e in effects:
+                got = cols.get(e.name) if e.name in kparams or mode == "all" else None
+                if got is not None and got.shape == (self.n, e.n_params):
+                    blocks.append(P(got) if kterms != tset else got)
+                    mask += [True] * e.n_params
+                else:
+                    blocks.append(np.zeros((self.n, e.n_params)))
+                    mask += [False] * e.n_params
+            if any(mask):
+                # the entry used goes first (the fit about to be kept then comes before it): a state's Jacobian
+                # stays kept through any number of checks made beside it
+                if k:
+                    self._jac_kept = (self._jac_kept[k],) + self._jac_kept[:k] + self._jac_kept[k + 1:]
+                return np.column_stack(blocks), np.array(mask)
+        return None, None
 
     def _keep_jacobian(self, effects: list[Effect], params: list[np.ndarray], terms: list[EmpiricalTerm],
                        J: np.ndarray) -> None:
@@ -177,13 +214,34 @@ class Fitting(Screening):
         if J is None or J.ndim != 2 or J.shape[0] != self.n:
             return
         cols: dict[str, np.ndarray] = {}
-        if self.jacobian_reuse == "all" and self._jac_kept is not None:
-            cols.update(self._jac_kept[0])
+        if self.jacobian_reuse == "all" and self._jac_kept:
+            cols.update(self._jac_kept[0][0])
         i = 0
         for e in effects:
             cols[e.name] = np.array(J[:, i:i + e.n_params])
             i += e.n_params
-        self._jac_kept = (cols, frozenset(terms), {e.name: np.array(p, dtype=float) for e, p in zip(effects, params)})
+        entry = (cols, frozenset(terms), {e.name: np.array(p, dtype=float) for e, p in zip(effects, params)})
+        self._jac_kept = (entry,) + tuple(self._jac_kept)[:JAC_KEPT - 1]
+
+    def keep_state_jacobian(self) -> None:
+        """Difference the present model's Jacobian at its state and keep it (:meth:`_keep_jacobian`), unless a
+        kept fit holds it already: the checks that refit the state with candidates added from zero (the
+        look-alike refits, a dozen at a state) then difference only the candidates' columns. The state may
+        have no fit of its own to take it from (an empirical term dropped at the term limit, a restart that
+        was not kept)."""
+        effects = [a.effect for a in self.active]
+        if not effects or self.jacobian_reuse == "off":
+            return
+        params = [np.asarray(a.p, dtype=float) for a in self.active]
+        _, known = self._cached_jacobian(effects, params, self.empirical,
+                                         projector(self._emp_matrix(self.empirical)))
+        if known is not None and bool(np.all(known)):
+            return
+        try:
+            _, _, J = self.state_jacobian(effects, params)
+        except ModelEvaluationError:
+            return
+        self._keep_jacobian(effects, params, self.empirical, J)
 
     def _declared_total(self, e: Effect, p: np.ndarray) -> tuple[float | None, float | None]:
         """For a correction to a declared error (the runs declare the default instance of ``e.key``,
@@ -209,19 +267,10 @@ class Fitting(Screening):
         these columns; ``backward``: backward differences (the slope on the negative side of each parameter,
         which differs from the forward one where the TE has a kink, e.g. a one-sided contact at size zero).
         Returns (scaled parameters, residual, Jacobian)."""
-        sizes = [e.n_params for e in effects]
         scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
         lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
         hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
-        P = projector(self._emp_matrix(self.empirical))
-
-        def fun(xs: np.ndarray) -> np.ndarray:
-            out, i = [], 0
-            for e, k in zip(effects, sizes):
-                out.append((e, xs[i:i + k] * e.scale))
-                i += k
-            return P(np.concatenate([y - p for y, p in zip(self.y, self.predict(out))]))
-
+        fun, _ = self.residual_function(effects, projector(self._emp_matrix(self.empirical)))
         x = np.concatenate([np.asarray(p, dtype=float) for p in params]) / scales
         r = fun(x)
         # (backward: the upper bound at the point itself, so every forward step leaves it: fd_jac steps back)

@@ -83,6 +83,11 @@ def use_runner(runner: Runner | None) -> Runner | None:
     return prev
 
 
+def runner_workers() -> int:
+    """Worker processes of the forward runner (1: it solves in this process)."""
+    return int(getattr(forward_runner().executor, "workers", 1) or 1)
+
+
 def cache_stats() -> dict[str, float]:
     """Of the forward runner: unique solves (``solves``), results taken from its caches (``hits``),
     solver seconds (``seconds``) and bytes held in memory (``bytes``)."""
@@ -204,7 +209,7 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
     # (serially ~12 % less CPU for the 5 conditions of a state); with several workers only when there are
     # at least as many batches as workers, so that a prediction's conditions still spread over them
     labels = [_group_label(case_dicts[t[0]]) for t in todo]
-    workers = int(getattr(runner.executor, "workers", 1) or 1)
+    workers = runner_workers()
     grouped = len(todo) > 1 and (workers <= 1 or len(set(labels)) >= workers)
     res = runner([t[1] for t in todo], "forward model", theta_in_deg=[t[2] for t in todo],
                  group=labels if grouped else None)

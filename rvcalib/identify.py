@@ -139,7 +139,7 @@ class Calibrator(Groups):
                     swap_only = True
                     swaps_left -= 1
                 else:
-                    sw = self._replacement_before_stop(it + 1, iterations)
+                    sw = self.replacement_before_stop(it + 1, iterations)
                     if sw:
                         r_full, self.emp_coef = self.full_residual(self._pairs(), self.empirical)
                         eliminated, swaps_left = False, MAX_SWAP_STEPS
@@ -269,11 +269,16 @@ class Calibrator(Groups):
                         dec = "physical"
             if got is not None and got[0]:
                 eliminated = False
-            sw = self._replacement_before_stop(it) if got is None and swap_only else None
+            sw = self.replacement_before_stop(it) if got is None and swap_only else None
             if sw:
                 log["decision"] = (f"restart refit at the term limit: {sw[1]}" if sw[0] == "restart" else
                                    f"instance or replacement refit at the term limit: {sw[1]} in place of {sw[0]}")
                 eliminated, swaps_left = False, MAX_SWAP_STEPS
+                # the model changed: the search goes on from it (an iteration whose screening found nothing,
+                # dec "stop", ended the loop here without the checks before the stop at the new state;
+                # realistic seed 2: a restart at the term limit, then the final pair check found the pin
+                # circle diameter worth 115 noise variances that the look-alike refit would have added)
+                dec = "physical"
             elif got is None and swap_only:
                 self.stopped_by = (f"the term limit (max_terms = {self.max_terms}) stopped the search (no swap "
                                    "at the limit improves the model): the residual may hold more that a larger "
@@ -411,7 +416,7 @@ class Calibrator(Groups):
                 iterations.append({"iteration": it, "decision": f"instance refit before the stop: {msg}"})
         return sw
 
-    def _replacement_before_stop(self, it: int, iterations: list[dict] | None = None) -> tuple[str, str] | None:
+    def replacement_before_stop(self, it: int, iterations: list[dict] | None = None) -> tuple[str, str] | None:
         """The instance check (:meth:`_instances_before_stop`), then the replacement refit
         (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`), each once per model state before the
         loop stops at the term limit, with the restart of collinear members (:mod:`rvcalib.basins`) between

@@ -64,10 +64,18 @@ def fd_jac(fun, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, h: float = 0.02,
             f0: np.ndarray | None = None, central: bool = False, only=None) -> np.ndarray:
     """Forward-difference Jacobian of ``fun`` at ``x`` (step ``h * max(1, |x_j|)``, backward where the
     forward step leaves the bounds or cannot be evaluated; ``central`` differences where both fit).
-    ``only``: difference only these column indices (the returned array has just those columns)."""
+    ``only``: difference only these column indices (the returned array has just those columns).
+
+    A ``fun`` with a ``many`` attribute (a function of a list of points giving, for each, its residual
+    or the :class:`ModelEvaluationError` it raised) has its difference points evaluated in one call
+    (one batch of the forward runner, spread over its workers); the columns are the same."""
     f0 = fun(x) if (f0 is None and not central) else f0
+    idx = list(range(x.size) if only is None else only)
+    many = getattr(fun, "many", None)
+    if many is not None and len(idx) > 1:
+        return _fd_jac_batch(fun, many, x, lo, hi, h, f0, central, idx)
     cols = []
-    for j in (range(x.size) if only is None else only):
+    for j in idx:
         step = h * max(1.0, abs(x[j]))
         xp = x.copy()
         xm = x.copy()
@@ -87,6 +95,45 @@ def fd_jac(fun, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, h: float = 0.02,
                 pass
         xm[j] -= step
         cols.append((f0 - fun(xm)) / step)
+    return np.column_stack(cols)
+
+
+def _fd_jac_batch(fun, many, x, lo, hi, h, f0, central, idx) -> np.ndarray:
+    """:func:`fd_jac`'s columns from one batch of difference points (``many``); a forward point that
+    cannot be evaluated is replaced by the backward one, as in the serial differencing."""
+    plan = []  # per column: (step, [(point, sign)]) with sign +1 forward, -1 backward
+    for j in idx:
+        step = h * max(1.0, abs(x[j]))
+        xp, xm = x.copy(), x.copy()
+        xp[j] += step
+        xm[j] -= step
+        if central and x[j] - step >= lo[j] and x[j] + step <= hi[j]:
+            plan.append((step, [(xp, 1), (xm, -1)]))
+        elif x[j] + step <= hi[j]:
+            plan.append((step, [(xp, 1)]))
+        else:
+            plan.append((step, [(xm, -1)]))
+    if f0 is None and any(len(pts) == 1 for _, pts in plan):
+        f0 = fun(x)
+    got = many([p for _, pts in plan for p, _ in pts])
+    cols, k = [], 0
+    for (step, pts), j in zip(plan, idx):
+        vals = got[k:k + len(pts)]
+        k += len(pts)
+        if len(pts) == 2:
+            for v in vals:
+                if isinstance(v, ModelEvaluationError):
+                    raise v
+            cols.append((vals[0] - vals[1]) / (2 * step))
+            continue
+        v, sign = vals[0], pts[0][1]
+        if isinstance(v, ModelEvaluationError):
+            if sign < 0:
+                raise v
+            xm = x.copy()
+            xm[j] -= step
+            v, sign = fun(xm), -1
+        cols.append((v - f0) / step if sign > 0 else (f0 - v) / step)
     return np.column_stack(cols)
 
 

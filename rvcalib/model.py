@@ -170,17 +170,39 @@ class LoopModel:
         run condition over the union of its runs' readings), not interpolated from the model grid:
         the TE has kinks and crank-order content that no practical grid resolves.
         """
-        phys = [(e, p) for e, p in active if e.family != "measurement"]
-        out: list[np.ndarray] = [np.empty(0)] * len(self.runs)
-        xs = [np.concatenate([self.runs[i].input_deg for i in members]) for members in self._cond_runs]
-        tes = _raise_any(te_at_many([self._case(c, phys) for c in range(len(self._cond_runs))], xs))
-        for members, te in zip(self._cond_runs, tes):
-            j = 0
-            for i in members:
-                r = self.runs[i]
-                out[i] = te[j:j + r.input_deg.size] + self._meas(active, r.input_deg, r.output_deg)
-                j += r.input_deg.size
+        out = self.predict_many([active])[0]
+        if isinstance(out, ModelEvaluationError):
+            raise out
         return out
+
+    def predict_many(self, actives: list[list[tuple[Effect, np.ndarray]]]
+                     ) -> list[list[np.ndarray] | ModelEvaluationError]:
+        """:meth:`predict` of several model states in one batch of the forward runner (with several
+        workers the states' solves spread over them); a state rvdyn cannot evaluate gives its
+        :class:`ModelEvaluationError` in its place."""
+        nc = len(self._cond_runs)
+        xs = [np.concatenate([self.runs[i].input_deg for i in members]) for members in self._cond_runs]
+        cases = []
+        for active in actives:
+            phys = [(e, p) for e, p in active if e.family != "measurement"]
+            cases += [self._case(c, phys) for c in range(nc)]
+        tes = te_at_many(cases, xs * len(actives))
+        result: list[list[np.ndarray] | ModelEvaluationError] = []
+        for k, active in enumerate(actives):
+            mine = tes[k * nc:(k + 1) * nc]
+            bad = next((t for t in mine if isinstance(t, ModelEvaluationError)), None)
+            if bad is not None:
+                result.append(bad)
+                continue
+            out: list[np.ndarray] = [np.empty(0)] * len(self.runs)
+            for members, te in zip(self._cond_runs, mine):
+                j = 0
+                for i in members:
+                    r = self.runs[i]
+                    out[i] = te[j:j + r.input_deg.size] + self._meas(active, r.input_deg, r.output_deg)
+                    j += r.input_deg.size
+            result.append(out)
+        return result
 
     def predict_grid(self, active, ms: int | None = None) -> list[np.ndarray]:
         """Model TE at the points of an ``ms``-point grid (default the coarse grid) for every run,

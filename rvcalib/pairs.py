@@ -100,6 +100,11 @@ class PairCheck(ReplacementRefit):
             except ModelEvaluationError:
                 continue
             cols.append((c, Jc, side))
+        # the state's Jacobian and each candidate's forward column at size zero, kept: the refits beside a
+        # candidate start from them (rvcalib.fitting.Fitting._cached_jacobian) instead of differencing again
+        fwd = [(c, Jc) for c, Jc, side in cols if side > 0]
+        self._keep_jacobian(effects + [c for c, _ in fwd], params + [np.zeros(c.n_params) for c, _ in fwd],
+                            self.empirical, np.column_stack([J] + [Jc for _, Jc in fwd]))
         pairs = collinear_partners(J, [list(range(idx[i], idx[i + 1])) for i in targets],
                                    [Jc for _, Jc, _ in cols], CORRELATION_LIMIT)
         # one refit per candidate; each effect checked with its most collinear candidate (either side) of another type

@@ -226,6 +226,8 @@ class ReplacementRefit(JointSelection):
                 if rho >= LOOKALIKE_PAIR_CORRELATION and key not in pair_trials:
                     pair_trials[key] = (rho, (x.effect, y.effect), m.effect.name)
         order = sorted(trials.values(), key=lambda t: -t[0])
+        if order or pair_trials:
+            self.keep_state_jacobian()  # each trial starts at the state: only its candidates' columns differenced
         p_cur = self._p_cur()
         bic_cur = bic(self.rss_full, self.n, p_cur)
         found = None

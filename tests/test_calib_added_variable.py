@@ -160,6 +160,7 @@ def _lookalike_selection(cols: dict, y: np.ndarray, cands: tuple):
         return [np.array([v]) for v in q], float(r @ r), q, None, A
 
     sel.fit_full = fit_full
+    sel.keep_state_jacobian = lambda: None  # the stub's refits are least squares: no start Jacobian to keep
     sel.rank = linear_rank({k: cols[k] for k in cands}, eff)
     return sel, fits
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from rvcalib.lsq import BIC_CONVERGED, chord_fit
 
@@ -51,3 +52,47 @@ def test_converged_fit_is_not_extended() -> None:
     np.testing.assert_allclose(a[0], b[0])
     rss = float(b[1] @ b[1])
     assert N * math.log(rss / float(NOISE @ NOISE)) < BIC_CONVERGED
+
+
+def test_batched_differences_equal_the_serial_ones() -> None:
+    """fd_jac with ``fun.many`` (one batch of difference points, spread over the forward workers) gives the
+    serial columns, with the same backward steps at the upper bound and after a forward point that cannot
+    be evaluated, and central differences where asked."""
+    from rvcalib.forward import ModelEvaluationError
+    from rvcalib.lsq import fd_jac
+
+    t = np.linspace(0.0, 1.0, 50)
+
+    def plain(x):
+        if x[2] > 0.3:  # the model cannot be evaluated beyond 0.3 in x2 (forward step fails)
+            raise ModelEvaluationError("x2 beyond 0.3")
+        return np.sin(3 * t * x[0]) + x[1] ** 2 * t + np.exp(x[2] * t) + x[3] * t ** 2
+
+    batches = []
+
+    def batched(x):
+        return plain(x)
+
+    def many(points):
+        batches.append(len(points))
+        out = []
+        for p in points:
+            try:
+                out.append(plain(p))
+            except ModelEvaluationError as exc:
+                out.append(exc)
+        return out
+    batched.many = many
+    x = np.array([0.7, -1.2, 0.3, 2.0])
+    lo, hi = np.full(4, -5.0), np.array([5.0, 5.0, 5.0, 2.0])  # x3 at its upper bound: backward
+    np.testing.assert_array_equal(fd_jac(batched, x, lo, hi, h=0.01), fd_jac(plain, x, lo, hi, h=0.01))
+    xc = np.array([0.7, -1.2, 0.2, 2.0])
+    np.testing.assert_array_equal(fd_jac(batched, xc, lo, hi, h=0.01, central=True),
+                                  fd_jac(plain, xc, lo, hi, h=0.01, central=True))
+    # one batch each: 4 forward/backward points; 3 central pairs and the backward point at the bound
+    assert batches == [4, 7]
+    for f in (plain, batched):  # a central pair that cannot be evaluated raises, batched or not
+        with pytest.raises(ModelEvaluationError, match="beyond 0.3"):
+            fd_jac(f, x, lo, hi, h=0.01, central=True)
+    Jo = fd_jac(batched, x, lo, hi, h=0.01, only=[1, 3])
+    np.testing.assert_array_equal(Jo, fd_jac(plain, x, lo, hi, h=0.01)[:, [1, 3]])

@@ -138,3 +138,30 @@ def test_time_budget_is_checked_inside_an_iteration(joint_case, monkeypatch):
                                      "validation"), res.stopped_by
     assert res.effects == [] and res.iterations[0]["decision"].startswith("stop: the time budget")
     assert "Stopped early: the time budget" in res.verdict
+
+
+def test_a_swap_at_the_term_limit_goes_on_from_the_new_state(tmp_path, monkeypatch):
+    """A restart or replacement refit at the term limit changes the model: the loop goes on from the new
+    state (its checks before the stop, the term limit's own stop) also when that iteration's screening found
+    nothing to add. Before, such an iteration ended the loop at the swap, reported as "nothing more passes"
+    (realistic seed 2, physical law: a restart at the term limit, then the final-state pair check found the
+    pin circle diameter worth 115 noise variances that the look-alike refit before the stop adds)."""
+    root = tmp_path / "one"
+    simulate_dataset(root, RUNS[:1], {"errors": {"cam_phase": 5.0}}, samples_per_rev=333, start_deg=0.53, seed=4,
+                     noise_arcsec=0.1)
+    ds = read_dataset(root)
+    # one family, all in the model after iteration 1: iteration 2's screening finds nothing (decision "stop")
+    lib = Library([e for e in build_library(ds) if e.key == "cam_phase"])
+    calls: list[int] = []
+
+    def swap_once(self, it, iterations=None):  # the term limit's swap: one restart, then none
+        calls.append(it)
+        return ("restart", "restarted nothing (test)") if len(calls) == 1 else None
+
+    monkeypatch.setattr(Calibrator, "replacement_before_stop", swap_once)
+    res = Calibrator(ds, library=lib, max_terms=1).run()
+    assert [e.name for e in res.effects] == ["cam_phase[crank=0,disc=0]"]
+    assert len(calls) == 2, calls
+    assert "term limit" in res.stopped_by and "no swap" in res.stopped_by, res.stopped_by
+    decisions = [i.get("decision", "") for i in res.iterations]
+    assert any(d.startswith("restart refit at the term limit") for d in decisions), decisions

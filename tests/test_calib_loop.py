@@ -324,3 +324,46 @@ def test_a_drift_over_two_revolutions_is_not_dropped_as_a_transient(tmp_path):
     ds = read_dataset(d)
     assert ds.runs[0].dropped["transient"] == 0 and ds.runs[0].n == 2 * STEPS
     assert any("not a start-up transient" in n for n in ds.notes)
+
+
+def test_states_batched_over_workers_equal_the_serial_solves(tmp_path, calib_forward_cache):
+    """LoopModel.predict_many (several model states in one batch of the forward runner) equals predict of
+    each state within the solver's tolerance, a state rvdyn cannot evaluate gives its error in its slot,
+    and with two workers a fit's Jacobian (its difference points in one batch, spread over the workers)
+    equals the serial one to the solver's tolerance over the step."""
+    from rvcalib import forward
+    from rvcalib.forward import ModelEvaluationError
+    from rvcalib.identify import Calibrator
+    from rvcalib.lsq import fd_jac, projector
+    from rvdyn.runner import Runner
+
+    root = tmp_path / "ds"
+    simulate_dataset(root, [{"run": "fw", "load_Nm": 10.0, "direction": 1}], {"errors": {"pin_pitch": 0.01}},
+                     samples_per_rev=60, start_deg=0.37, noise_arcsec=0.0)
+    cal = Calibrator(read_dataset(root))
+    e1, e2 = cal.lib.by_name("pin_pitch[pin=0]"), cal.lib.by_name("cam_phase[crank=0,disc=0]")
+    states = [[(e1, np.array([0.01]))], [(e1, np.array([0.02])), (e2, np.array([2.0]))],
+              [(e2, np.array([1e6]))]]
+    tol = TOL.solver_angle_rad * ARCSEC_PER_RAD
+    got = cal.predict_many(states)
+    for s, g in zip(states[:2], got[:2]):
+        assert np.abs(g[0] - cal.predict(s)[0]).max() < tol
+    assert isinstance(got[2], ModelEvaluationError)
+    with pytest.raises(ModelEvaluationError):
+        cal.predict(states[2])
+    fun, _ = cal.residual_function([e1, e2], projector(None))
+    assert not hasattr(fun, "many")  # one worker: every solve as before
+    x = np.array([1.0, 0.5])
+    J1 = fd_jac(fun, x, np.full(2, -np.inf), np.full(2, np.inf), h=0.01)
+    pooled = Runner(executor=2, memory_bytes=forward.CACHE_BYTES, law=forward.forward_runner().law)
+    prev = forward.use_runner(pooled)
+    try:
+        fun2, _ = cal.residual_function([e1, e2], projector(None))
+        assert hasattr(fun2, "many")
+        J2 = fd_jac(fun2, x, np.full(2, -np.inf), np.full(2, np.inf), h=0.01)
+    finally:
+        forward.use_runner(prev)
+        pooled.close()
+    # each column is a difference of two solves over a step of 0.01 scaled units
+    assert np.abs(J2 - J1).max() < 2 * tol / 0.01
+    assert np.abs(J1).max() > 100 * tol / 0.01
