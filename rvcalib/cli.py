@@ -11,7 +11,7 @@ on stderr, exit status 2.
 
 The model TE is solved by rvdyn's forward runner (:class:`rvdyn.runner.Runner`, see
 :mod:`rvcalib.forward`): ``--workers`` local processes solve each batch (the screening signatures,
-the run conditions of a prediction), ``--cache`` keeps every solve on disk for later runs (the same
+the run conditions of a prediction, the difference columns of a refit's Jacobian), ``--cache`` keeps every solve on disk for later runs (the same
 cache format as ``rv-stackup --cache``).
 """
 from __future__ import annotations
