@@ -114,3 +114,24 @@ def test_a_state_without_a_kept_fit_gets_its_jacobian_once(model):
     assert model.calls == 4
     model.fit(["e0", "e1", "e2", "e4"], moved + [0.0])
     assert model.fit_stats[-1]["reused_columns"] == 3
+
+
+def test_polish_state_refits_an_unfinished_state_and_keeps_a_finished_one(model):
+    """polish_state: a state short of its minimum (its sizes off the least-squares point, as a fit stopped
+    inside its tolerance on a stale Jacobian) is refitted with a fresh start Jacobian and moves to the minimum;
+    at the minimum it changes nothing."""
+    from rvcalib.results import Active
+
+    best, rss_best, _ = model.fit(["e0", "e1", "e2", "e3"], [0.0, 0.0, 0.0, 0.0])
+    off = [best[0] + 0.3, best[1] - 0.2, best[2], best[3] + 0.1]
+    model.active = [Active(model.effects[k], np.array([v]), 1) for k, v in zip(("e0", "e1", "e2", "e3"), off)]
+    model.empirical = []
+    model.jacobian_reuse = "removals"
+    gain = model.polish_state()
+    assert gain > 0.0 and model.jacobian_reuse == "removals"
+    assert model.fit_stats[-1]["reused_columns"] == 0  # every column differenced at the state
+    np.testing.assert_allclose([float(a.p[0]) for a in model.active], best, atol=1e-3)
+    assert abs(model.rss_full - rss_best) < 0.01 * 0.01 ** 2
+    before = [float(a.p[0]) for a in model.active]
+    assert model.polish_state() < 0.01 * 0.01 ** 2
+    np.testing.assert_allclose([float(a.p[0]) for a in model.active], before, atol=1e-4)
