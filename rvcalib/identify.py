@@ -447,11 +447,12 @@ class Calibrator(Groups):
 
     # ------------------------------------------------------------------ wrap up
     def _finish(self, r0, before: Diagnostics, iterations: list[dict], t_start: float) -> CalibrationResult:
-        rss_was = self.rss_full
         gain = self.polish_state()
         if gain > 0.0:
-            self.log(f"final state refitted from its sizes with a fresh Jacobian: RMS {math.sqrt(rss_was / self.n):.5g}"
-                     f" -> {math.sqrt(self.rss_full / self.n):.5g} arcsec")
+            msg = (f"final state refitted from its sizes with a fresh Jacobian: RMS "
+                   f"{math.sqrt((self.rss_full + gain) / self.n):.5g} -> {math.sqrt(self.rss_full / self.n):.5g} arcsec")
+            self.log(msg)
+            iterations.append({"iteration": len(iterations) + 1, "decision": msg})
         fitted = self.intervals()
         fitted, final_groups = self.final_state_groups(fitted)
         if not self.stopped_by.startswith("nothing"):
