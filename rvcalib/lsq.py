@@ -68,56 +68,27 @@ def fd_jac(fun, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, h: float = 0.02,
 
     A ``fun`` with a ``many`` attribute (a function of a list of points giving, for each, its residual
     or the :class:`ModelEvaluationError` it raised) has its difference points evaluated in one call
-    (one batch of the forward runner, spread over its workers); the columns are the same."""
-    f0 = fun(x) if (f0 is None and not central) else f0
-    idx = list(range(x.size) if only is None else only)
-    many = getattr(fun, "many", None)
-    if many is not None and len(idx) > 1:
-        return _fd_jac_batch(fun, many, x, lo, hi, h, f0, central, idx)
-    cols = []
-    for j in idx:
-        step = h * max(1.0, abs(x[j]))
-        xp = x.copy()
-        xm = x.copy()
-        if central and x[j] - step >= lo[j] and x[j] + step <= hi[j]:
-            xp[j] += step
-            xm[j] -= step
-            cols.append((fun(xp) - fun(xm)) / (2 * step))
-            continue
-        if f0 is None:
-            f0 = fun(x)
-        if x[j] + step <= hi[j]:
-            xp[j] += step
-            try:
-                cols.append((fun(xp) - f0) / step)
-                continue
-            except ModelEvaluationError:
-                pass
-        xm[j] -= step
-        cols.append((f0 - fun(xm)) / step)
-    return np.column_stack(cols)
-
-
-def _fd_jac_batch(fun, many, x, lo, hi, h, f0, central, idx) -> np.ndarray:
-    """:func:`fd_jac`'s columns from one batch of difference points (``many``); a forward point that
-    cannot be evaluated is replaced by the backward one, as in the serial differencing."""
-    plan = []  # per column: (step, [(point, sign)]) with sign +1 forward, -1 backward
-    for j in idx:
+    (one batch of the forward runner, spread over its workers); otherwise they are evaluated one by
+    one in the same order. Either way a forward point that cannot be evaluated is replaced by the
+    backward one, evaluated after the others."""
+    plan = []  # per column: (index, step, [(point, sign)]) with sign +1 forward, -1 backward
+    for j in (range(x.size) if only is None else only):
         step = h * max(1.0, abs(x[j]))
         xp, xm = x.copy(), x.copy()
         xp[j] += step
         xm[j] -= step
         if central and x[j] - step >= lo[j] and x[j] + step <= hi[j]:
-            plan.append((step, [(xp, 1), (xm, -1)]))
+            plan.append((j, step, [(xp, 1), (xm, -1)]))
         elif x[j] + step <= hi[j]:
-            plan.append((step, [(xp, 1)]))
+            plan.append((j, step, [(xp, 1)]))
         else:
-            plan.append((step, [(xm, -1)]))
-    if f0 is None and any(len(pts) == 1 for _, pts in plan):
+            plan.append((j, step, [(xm, -1)]))
+    if f0 is None and any(len(pts) == 1 for _, _, pts in plan):
         f0 = fun(x)
-    got = many([p for _, pts in plan for p, _ in pts])
+    many = getattr(fun, "many", None) or (lambda points: [_evaluated(fun, q) for q in points])
+    got = many([q for _, _, pts in plan for q, _ in pts])
     cols, k = [], 0
-    for (step, pts), j in zip(plan, idx):
+    for j, step, pts in plan:
         vals = got[k:k + len(pts)]
         k += len(pts)
         if len(pts) == 2:
@@ -135,6 +106,14 @@ def _fd_jac_batch(fun, many, x, lo, hi, h, f0, central, idx) -> np.ndarray:
             v, sign = fun(xm), -1
         cols.append((v - f0) / step if sign > 0 else (f0 - v) / step)
     return np.column_stack(cols)
+
+
+def _evaluated(fun, x: np.ndarray):
+    """``fun(x)``, or the :class:`ModelEvaluationError` it raised."""
+    try:
+        return fun(x)
+    except ModelEvaluationError as exc:
+        return exc
 
 
 def broyden_update(J: np.ndarray, s: np.ndarray, dr: np.ndarray) -> np.ndarray:
