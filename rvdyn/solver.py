@@ -144,17 +144,19 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         return self.law
 
     def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200,
-               floor_k: np.ndarray | None = None) -> np.ndarray:
+               floor_k: np.ndarray | None = None, arms: np.ndarray | None | bool = False) -> np.ndarray:
         """Minimise the linearised potential around x0; returns the step (N, ndof).
 
         ``b`` is the load vector (ndof,) or one per state (N, ndof). ``mu`` (N,) is the Levenberg-Marquardt
         damping, updated in place so that the next outer iteration starts from where this one ended.
         ``floor_k`` (N,): the law's typical working stiffness per state (default ``law.floor_stiffness()``;
-        the physical law's depends on the contacts of its own solve).
+        the physical law's depends on the contacts of its own solve). ``arms``: :meth:`_hole_arms` at
+        ``(th_in, x0, law)`` if the caller has them (False: computed here).
         """
         N, M, nj = J.shape                            # nj: the contacts' coordinates, the first of the state
         D = self.ndof
-        arms = self._hole_arms(th_in, x0, law)
+        if arms is False:
+            arms = self._hole_arms(th_in, x0, law)
         B = np.broadcast_to(b, (N, D))
         step = np.zeros((N, D))
         # damping floor: about a quarter of the contacts at 1 um of penetration (typical working stiffness)
@@ -523,7 +525,10 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                     floor_k[lc] = self._step_law(law, C[lc]).floor_stiffness()
             mu = mu_all[rows]
             self.newton_load(B[rows], it == 0)
-            dx = self._inner(th[rows], xs, G, J, B[rows], step_law, mu, floor_k=floor_k)
+            # the cam-bearing model at this linearisation point, shared by the inner solve and the trust region's
+            # potentials (a function of the states alone)
+            arms = self._hole_arms(th[rows], xs, step_law)
+            dx = self._inner(th[rows], xs, G, J, B[rows], step_law, mu, floor_k=floor_k, arms=arms)
             mu_all[rows] = np.minimum(mu, 1e-2)
             # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
             # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
@@ -533,10 +538,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
                 trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
                 if expand:
-                    arms = self._hole_arms(th[rows], xs, step_law)
-                    zero = np.zeros_like(xs)
-                    e_now = energy_sub(self, xs, G, J, B[rows], step_law, zero, arms) + np.einsum(
-                        "nd,nd->n", last_dx[rows], B[rows])
+                    e_here = energy_sub(self, xs, G, J, B[rows], step_law, np.zeros_like(xs), arms)
+                    e_now = e_here + np.einsum("nd,nd->n", last_dx[rows], B[rows])
                     pred = e_old[rows] - e_pred[rows]
                     good = cut[rows] & ~flip & (pred > 0) & (e_old[rows] - e_now > 0.75 * pred)
                     trust[rows] = np.where(good, np.minimum(4.0 * trust[rows], MAX_TRUST_MM), trust[rows])
@@ -548,9 +551,9 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                        & (q <= CONTRACTION_MAX) & (CONTRACTION_MAX / (1.0 - CONTRACTION_MAX) * big < tol_mm))
             prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
             if expand:
-                arms = self._hole_arms(th[rows], xs, step_law)
                 cut[rows] = big > trust[rows]
-                e_old[rows] = energy_sub(self, xs, G, J, B[rows], step_law, np.zeros_like(xs), arms)
+                e_old[rows] = e_here if it > 0 else energy_sub(self, xs, G, J, B[rows], step_law, np.zeros_like(xs),
+                                                               arms)
                 e_pred[rows] = energy_sub(self, xs, G, J, B[rows], step_law, dx, arms)
             last_dx[rows] = dx
             xs += dx
