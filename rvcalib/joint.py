@@ -98,6 +98,16 @@ BIC_TIE = 1e-4
 SIBLING_REFITS = 2
 
 
+def _pool_basis(pool: list[PoolMember], n: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """The pool's columns (n rows) side by side as ``Q R`` (reduced QR: Q (n, P) orthonormal, R (P, P)) and
+    each member's column indices in them."""
+    widths = [m.cols.shape[1] for m in pool]
+    starts = np.cumsum([0] + widths)
+    C = np.concatenate([m.cols for m in pool], axis=1) if pool else np.zeros((n, 0))
+    Q, R = np.linalg.qr(C, mode="reduced")
+    return Q, R, [np.arange(a, a + w) for a, w in zip(starts[:-1], widths)]
+
+
 def aic(rss: float, n: int, k: int) -> float:
     """Akaike information criterion of a Gaussian least-squares fit: ``n ln(rss/n) + 2 k``."""
     return n * math.log(max(rss, 1e-300) / n) + 2.0 * k
@@ -402,9 +412,18 @@ class JointSelection(Selection):
         new = [i for i, m in enumerate(pool) if not m.in_model]
         nc = rc.size
         fits: list[SubsetFit] = []
+        # every subset's columns lie in the span of the pool's: with the pool's columns C = Q R (reduced QR, Q
+        # orthonormal), a subset's least squares on the nc rows equals the one on R's few rows, min |Q^T t - R_S c|
+        # plus the part of t outside the span, |t - Q Q^T t|^2 (the same minimiser, singular values and rank; the
+        # rank cut-off of lstsq's default on the nc rows is passed explicitly)
+        Q, R, at = _pool_basis(pool, nc)
+        eps = np.finfo(float).eps
         for nd in range(0, min(MAX_DROP, len(act)) + 1):
             for drop in itertools.combinations(act, nd):
                 t = rc + sum((pool[i].contribution for i in drop), np.zeros_like(rc))
+                qt = Q.T @ t
+                out = t - Q @ qt
+                rss_out = float(out @ out)
                 keep = [i for i in act if i not in drop]
                 for na in range(0, min(MAX_ADD, len(new)) + 1):
                     if len(keep) + na > max_members:
@@ -412,12 +431,13 @@ class JointSelection(Selection):
                     for add in itertools.combinations(new, na):
                         S = tuple(keep) + add
                         if S:
-                            A = np.column_stack([pool[i].cols for i in S])
-                            coef, *_ = np.linalg.lstsq(A, t, rcond=None)
-                            res = t - A @ coef
+                            cols = np.concatenate([at[i] for i in S])
+                            A = R[:, cols]
+                            coef, *_ = np.linalg.lstsq(A, qt, rcond=eps * max(nc, cols.size))
+                            res = qt - A @ coef
+                            rss = float(res @ res) + rss_out
                         else:
-                            coef, res = np.zeros(0), t
-                        rss = float(res @ res)
+                            coef, rss = np.zeros(0), float(t @ t)
                         k = sum(pool[i].n_params for i in S)
                         fits.append(SubsetFit(S, tuple(drop), k, rss, bic(rss, nc, k), aic(rss, nc, k), coef))
         return fits

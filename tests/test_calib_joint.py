@@ -120,6 +120,66 @@ def test_best_subset_swaps_out_a_stand_in():
     assert coef["A"] == pytest.approx(1.0, abs=0.01) and coef["B"] == pytest.approx(1.0, abs=0.01)
 
 
+def _full_row_subsets(pool, rc, max_members):
+    """The subsets of :meth:`JointSelection.best_subsets` fitted by least squares on all rows (the
+    definition the projected fit must equal)."""
+    import itertools
+
+    from rvcalib.joint import MAX_ADD, MAX_DROP
+
+    act = [i for i, m in enumerate(pool) if m.in_model]
+    new = [i for i, m in enumerate(pool) if not m.in_model]
+    out = {}
+    for nd in range(min(MAX_DROP, len(act)) + 1):
+        for drop in itertools.combinations(act, nd):
+            t = rc + sum((pool[i].contribution for i in drop), np.zeros_like(rc))
+            keep = [i for i in act if i not in drop]
+            for na in range(min(MAX_ADD, len(new)) + 1):
+                if len(keep) + na > max_members:
+                    break
+                for add in itertools.combinations(new, na):
+                    S = tuple(keep) + add
+                    if not S:
+                        out[(S, drop)] = (float(t @ t), np.zeros(0))
+                        continue
+                    A = np.column_stack([pool[i].cols for i in S])
+                    coef, *_ = np.linalg.lstsq(A, t, rcond=None)
+                    r = t - A @ coef
+                    out[(S, drop)] = (float(r @ r), coef)
+    return out
+
+
+def test_subsets_fitted_on_the_pool_basis_equal_the_full_row_fits():
+    """best_subsets fits each subset on the R of the pool's QR (a few rows) instead of all rows: the
+    residual sums of squares and coefficients equal the full-row least squares, with twin columns
+    (rank deficient), near-collinear ones, a two-column member and members in the model."""
+    from rvcalib.effects import Effect
+    from rvcalib.joint import JointSelection
+    from rvcalib.results import Active, PoolMember
+
+    rng = np.random.default_rng(11)
+    nc = 400
+    base = rng.normal(size=(6, nc))
+    cols = {"A": base[0][:, None], "A2": base[0][:, None].copy(),            # a twin: identical column
+            "B": base[1][:, None], "Bn": (base[1] + 1e-7 * base[2])[:, None],  # near-collinear with B
+            "H": base[3:5].T, "X": (base[0] + base[1] + 0.2 * base[5])[:, None]}
+    rc = 3.0 * base[0] - 2.0 * base[1] + 0.5 * base[3] + 0.05 * rng.normal(size=nc)
+    eff = {k: Effect(k, k, "model", "u", "test effect") for k in cols}
+    px = np.array([0.7])
+    pool = [PoolMember(eff["X"], cols["X"], cols["X"][:, 0] * px[0], lambda c: px + c, Active(eff["X"], px, 1))]
+    pool += [PoolMember(eff[k], cols[k], None, lambda c: np.asarray(c)) for k in ("A", "A2", "B", "Bn", "H")]
+    sel = JointSelection.__new__(JointSelection)
+    sel.empirical, sel.thr = [], 1e-4
+    fits = sel.best_subsets(pool, rc, max_members=4)
+    ref = _full_row_subsets(pool, rc, 4)
+    assert len(fits) == len(ref)
+    scale = float(rc @ rc)
+    for f in fits:
+        rss, coef = ref[(f.members, f.dropped)]
+        assert f.rss == pytest.approx(rss, rel=1e-9, abs=1e-12 * scale)
+        assert np.allclose(f.coef, coef, rtol=1e-6, atol=1e-6 * np.abs(coef).max(initial=1.0))
+
+
 def test_time_budget_is_checked_inside_an_iteration(joint_case, monkeypatch):
     """The budget runs out during iteration 1 (after its validation): the loop stops there, changes
     nothing and says where in ``stopped_by`` and the verdict (the solves come from the memory cache)."""
