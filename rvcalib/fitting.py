@@ -291,18 +291,21 @@ class Fitting(Screening):
         return dv, dv + float(p[0])
 
     def state_jacobian(self, effects: list[Effect], params: list[np.ndarray], only: list[int] | None = None,
-                       backward: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       backward: bool = False, f0: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The residual (every reading, empirical terms projected out) of ``effects`` at ``params`` and its
         forward-difference Jacobian in the scaled parameters (step 0.01 of each effect's scale); ``only``: just
         these columns; ``backward``: backward differences (the slope on the negative side of each parameter,
-        which differs from the forward one where the TE has a kink, e.g. a one-sided contact at size zero).
+        which differs from the forward one where the TE has a kink, e.g. a one-sided contact at size zero);
+        ``f0``: the residual at ``params`` if the caller has it (e.g. the state's own, for the state with an
+        effect added at size zero, which changes no TE), else it is solved.
         Returns (scaled parameters, residual, Jacobian)."""
         scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
         lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
         hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
         fun, _ = self.residual_function(effects, projector(self._emp_matrix(self.empirical)))
         x = np.concatenate([np.asarray(p, dtype=float) for p in params]) / scales
-        r = fun(x)
+        r = fun(x) if f0 is None else np.asarray(f0, dtype=float)
         # (backward: the upper bound at the point itself, so every forward step leaves it: fd_jac steps back)
         return x, r, fd_jac(fun, x, lo, np.minimum(hi, x) if backward else hi, h=0.01, f0=r, only=only)
 

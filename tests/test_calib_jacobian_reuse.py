@@ -135,3 +135,25 @@ def test_polish_state_refits_an_unfinished_state_and_keeps_a_finished_one(model)
     before = [float(a.p[0]) for a in model.active]
     assert model.polish_state() < 0.01 * 0.01 ** 2
     np.testing.assert_allclose([float(a.p[0]) for a in model.active], before, atol=1e-4)
+
+
+def test_a_candidate_column_at_zero_from_the_state_residual(model):
+    """The pair check's candidate columns (the state plus a candidate at size zero, which changes no TE) take
+    the state's residual as their base point: one evaluation per column instead of two, the same column."""
+    state, _, _ = model.fit(["e0", "e1", "e2"], [0.0, 0.0, 0.0])
+    model.empirical = []
+    effects = [model.effects[k] for k in ("e0", "e1", "e2")]
+    params = [np.array([v]) for v in state]
+    _, r0, _ = model.state_jacobian(effects, params)
+    cand = model.effects["e3"]
+    for side in (False, True):
+        model.calls = 0
+        _, r_solved, col_solved = model.state_jacobian(effects + [cand], params + [np.zeros(1)], only=[3],
+                                                       backward=side)
+        assert model.calls == 2
+        model.calls = 0
+        _, r_given, col_given = model.state_jacobian(effects + [cand], params + [np.zeros(1)], only=[3],
+                                                     backward=side, f0=r0)
+        assert model.calls == 1
+        np.testing.assert_array_equal(r_given, r_solved)
+        np.testing.assert_array_equal(col_given, col_solved)
