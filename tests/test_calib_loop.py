@@ -235,6 +235,40 @@ def test_te_at_equals_the_grid_at_its_nodes_in_any_order_and_revolution(directio
 
 
 
+def test_one_state_is_split_into_one_batch_per_worker(monkeypatch):
+    """With more workers than batches (one model state: its run conditions differ only in load and
+    direction) the conditions go to the runner as one group per worker, round-robin, each solved together;
+    several states keep one group each. The numbers equal the serial batch's within the solver tolerance."""
+    from rvcalib import forward
+
+    cases = [{"errors": {"pin_pitch": {"pin": 3, "value": 0.02}}, "load_Nm": L, "direction": d}
+             for L in (10.0, 30.0) for d in (1, -1)]
+    x = grid_angles_deg(40, PERIOD_DEG) + 0.37
+    serial = forward.te_at_many(cases, [x] * 4)
+    runner = forward.forward_runner()
+    seen = []
+
+    def spy(cases_, desc="cases", **kw):
+        seen.append(kw.get("group"))
+        return type(runner).__call__(runner, cases_, desc, **kw)
+
+    forward.clear_cache()
+    monkeypatch.setattr(forward, "runner_workers", lambda: 2)
+    monkeypatch.setattr(forward, "forward_runner", lambda: type("R", (), {"solver": runner.solver,
+                                                                          "__call__": staticmethod(spy)})())
+    split = forward.te_at_many(cases, [x] * 4)
+    labels = seen[-1]
+    assert [k for _, k in labels] == [0, 1, 0, 1] and len({lab for lab, _ in labels}) == 1
+    tol = TOL.solver_angle_rad * ARCSEC_PER_RAD
+    for a, b in zip(serial, split):
+        assert np.abs(a - b).max() < tol
+    other = [dict(c, errors={"pin_pitch": {"pin": 3, "value": 0.03}}) for c in cases]
+    forward.te_at_many(cases + other, [x] * 8)
+    labels = seen[-1]
+    assert len(set(labels[:4])) == 1 and len(set(labels[4:])) == 1 and labels[0] != labels[4]
+    assert labels[0] == next(iter({lab for lab, _ in seen[-2]}))  # the state's own label, not split
+
+
 def test_forward_model_runs_on_the_rvdyn_runner_it_is_given(tmp_path):
     """rvcalib's forward model is rvdyn's runner: another runner (here with a disk cache) gives the same
     numbers as the default one, a batch gives what one-by-one calls give, and a case rvdyn cannot
