@@ -499,6 +499,10 @@ class Runner:
                             x0 = self.states.get(near[k])
                             if x0 is not None:
                                 q["x_init"] = x0
+                # the wave's converged states go to the warm-start store in task order once the wave is done, not
+                # as the results arrive: with several workers the next solves' starts (hence their rounding) do not
+                # depend on which worker finished first
+                arrived: list[tuple[int, str, np.ndarray]] = []
                 for j, res in self.executor.run(fn, [payloads[i] for i in wave]):
                     i = wave[j]
                     got = res["results"] if "results" in res else [res]
@@ -511,12 +515,14 @@ class Runner:
                             raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
                         state = r.pop("state", None)
                         if state is not None and k in near:
-                            self.states.put(near[k], state)
+                            arrived.append((i, k, state))
                         self.cache.put(k, r)
                         results[k] = {**self._keep(k, r), "cached": False}
                         self.computed += 1
                         self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
                     bar.update(len(got))
+                for _, k, state in sorted(arrived, key=lambda a: a[0]):  # stable: a task's jobs in their order
+                    self.states.put(near[k], state)
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0

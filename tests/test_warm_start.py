@@ -130,3 +130,37 @@ def test_state_store_keeps_the_newest_state_within_its_budget():
     assert st.get("big") is None and st.bytes <= st.max_bytes
     with pytest.raises(ValueError, match="warm_bytes -1 must be an integer >= 0"):
         StateStore(-1)
+
+
+class _LastFirst:
+    """An executor whose results arrive in the reverse order of the tasks (as from workers that finish out of
+    order), each solved in this process."""
+
+    name = "last-first"
+    workers = 2
+
+    def run(self, fn, payloads):
+        got = [fn(p) for p in payloads]
+        for i in reversed(range(len(payloads))):
+            yield i, got[i]
+
+    def close(self):
+        pass
+
+
+def test_warm_store_takes_a_batch_s_states_in_task_order_whatever_the_arrival_order():
+    """Two cases of one neighbourhood (same angles, load and direction; other errors) in one batch: the state
+    kept for the next solves is the last task's, whether its result arrives last (in this process) or first
+    (workers finishing out of order), so a run with workers does not depend on which finished first."""
+    cases = [Case.from_dict(_case(e, "impact", 10.0, 1)) for e in (5.0, 5.5, 6.0)]
+    kept = []
+    for ex in (None, _LastFirst()):
+        r = Runner(executor=ex, steps=STEPS, warm_bytes=2 ** 20)
+        r(cases[:1], "parent")
+        r(cases[1:], "batch")
+        kept.append(r.states.get(r.jobs(cases[2:])[0].neighbour_key()).copy())
+    np.testing.assert_array_equal(kept[0], kept[1])
+    solo = Runner(steps=STEPS, warm_bytes=2 ** 20)
+    solo(cases[:1], "parent")
+    solo(cases[2:], "last")
+    np.testing.assert_array_equal(kept[0], solo.states.get(solo.jobs(cases[2:])[0].neighbour_key()))
