@@ -10,8 +10,9 @@ prints a human summary, or with ``--json`` one JSON object (``reducer``, ``ratio
 on stderr, exit status 2.
 
 The model TE is solved by rvdyn's forward runner (:class:`rvdyn.runner.Runner`, see
-:mod:`rvcalib.forward`): ``--workers`` local processes solve each batch (the screening signatures,
-the run conditions of a prediction, the difference columns of a refit's Jacobian), ``--cache`` keeps every solve on disk for later runs (the same
+:mod:`rvcalib.forward`): ``--workers`` local processes solve each batch of model states (the screening
+signatures, the difference columns of a refit's Jacobian; a state's run conditions together in one process, so
+the numbers are the serial ones bit for bit), ``--cache`` keeps every solve on disk for later runs (the same
 cache format as ``rv-stackup --cache``).
 """
 from __future__ import annotations

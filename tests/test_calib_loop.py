@@ -235,38 +235,33 @@ def test_te_at_equals_the_grid_at_its_nodes_in_any_order_and_revolution(directio
 
 
 
-def test_one_state_is_split_into_one_batch_per_worker(monkeypatch):
-    """With more workers than batches (one model state: its run conditions differ only in load and
-    direction) the conditions go to the runner as one group per worker, round-robin, each solved together;
-    several states keep one group each. The numbers equal the serial batch's within the solver tolerance."""
+def test_two_workers_give_the_serial_numbers_bit_for_bit():
+    """rv-calibrate --workers N must not change the answer: a model state's run conditions are one group that
+    one worker solves as this process does (not split over the workers: two and two they differ within the
+    solver tolerance, and a realistic draw took another path), the states of a batch spread over the workers,
+    and the warm starts the next solves take do not depend on which worker finished first."""
     from rvcalib import forward
+    from rvdyn.runner import Runner
 
-    cases = [{"errors": {"pin_pitch": {"pin": 3, "value": 0.02}}, "load_Nm": L, "direction": d}
-             for L in (10.0, 30.0) for d in (1, -1)]
+    def state(v: float) -> list[dict]:
+        return [{"errors": {"pin_pitch": {"pin": 3, "value": v}}, "load_Nm": L, "direction": d}
+                for L in (10.0, 30.0) for d in (1, -1)]
+
     x = grid_angles_deg(40, PERIOD_DEG) + 0.37
-    serial = forward.te_at_many(cases, [x] * 4)
-    runner = forward.forward_runner()
-    seen = []
-
-    def spy(cases_, desc="cases", **kw):
-        seen.append(kw.get("group"))
-        return type(runner).__call__(runner, cases_, desc, **kw)
-
-    forward.clear_cache()
-    monkeypatch.setattr(forward, "runner_workers", lambda: 2)
-    monkeypatch.setattr(forward, "forward_runner", lambda: type("R", (), {"solver": runner.solver,
-                                                                          "__call__": staticmethod(spy)})())
-    split = forward.te_at_many(cases, [x] * 4)
-    labels = seen[-1]
-    assert [k for _, k in labels] == [0, 1, 0, 1] and len({lab for lab, _ in labels}) == 1
-    tol = TOL.solver_angle_rad * ARCSEC_PER_RAD
-    for a, b in zip(serial, split):
-        assert np.abs(a - b).max() < tol
-    other = [dict(c, errors={"pin_pitch": {"pin": 3, "value": 0.03}}) for c in cases]
-    forward.te_at_many(cases + other, [x] * 8)
-    labels = seen[-1]
-    assert len(set(labels[:4])) == 1 and len(set(labels[4:])) == 1 and labels[0] != labels[4]
-    assert labels[0] == next(iter({lab for lab, _ in seen[-2]}))  # the state's own label, not split
+    got = []
+    for workers in (1, 2):
+        runner = Runner(executor=workers, memory_bytes=forward.CACHE_BYTES, law=forward.forward_runner().law,
+                        warm_bytes=forward.WARM_BYTES)
+        prev = forward.use_runner(runner)
+        try:
+            one = forward.te_at_many(state(0.02), [x] * 4)                         # a state
+            two = forward.te_at_many(state(0.021) + state(0.023), [x] * 8)        # a batch of two, warm
+            after = forward.te_at_many(state(0.022), [x] * 4)                     # warm from the batch's last
+        finally:
+            forward.use_runner(prev)
+            runner.close()
+        got.append(np.concatenate(one + two + after))
+    np.testing.assert_array_equal(got[1], got[0])
 
 
 def test_forward_model_runs_on_the_rvdyn_runner_it_is_given(tmp_path):
