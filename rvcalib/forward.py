@@ -206,10 +206,10 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
         todo.append((i, case, pts, inv, rev))
     # the cases that differ only in load and direction are solved together (rvdyn.te.run_te_many: one
     # linearisation and inner solve per outer iteration for all of them; serially ~12 % less CPU for the 5
-    # conditions of a state), whatever the workers: a group is solved by one worker as it is in this process, so
-    # with N workers the numbers are the serial ones bit for bit (stop 28: one state's conditions split over two
-    # workers, two and two, differed within the solver tolerance, and a realistic draw took another path and
-    # failed); the states of a batch (a Jacobian's columns, the screening signatures) spread over the workers
+    # conditions of a state), whatever the workers: a group is solved by one worker as it is in this process, so a
+    # batch's numbers are the serial ones bit for bit (stop 28: one state's conditions split over two workers, two
+    # and two, differed within the solver tolerance, and a realistic draw took another path and failed); the
+    # states of a batch (a Jacobian's columns, the screening signatures) spread over the workers
     labels = [_group_label(case_dicts[t[0]]) for t in todo]
     grouped = len(todo) > 1
     res = runner([t[1] for t in todo], "forward model", theta_in_deg=[t[2] for t in todo],

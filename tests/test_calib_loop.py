@@ -236,10 +236,10 @@ def test_te_at_equals_the_grid_at_its_nodes_in_any_order_and_revolution(directio
 
 
 def test_two_workers_give_the_serial_numbers_bit_for_bit():
-    """rv-calibrate --workers N must not change the answer: a model state's run conditions are one group that
-    one worker solves as this process does (not split over the workers: two and two they differ within the
-    solver tolerance, and a realistic draw took another path), the states of a batch spread over the workers,
-    and the warm starts the next solves take do not depend on which worker finished first."""
+    """The forward model's batches through N workers give the serial numbers: a model state's run conditions are
+    one group that one worker solves as this process does (not split over the workers: two and two they differ
+    within the solver tolerance, and a realistic draw took another path), the states of a batch spread over the
+    workers, and the warm starts the next solves take do not depend on which worker finished first."""
     from rvcalib import forward
     from rvdyn.runner import Runner
 
