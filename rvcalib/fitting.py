@@ -13,7 +13,7 @@ from scipy import optimize, stats
 from rvcad.errors import ERROR_TYPES
 
 from rvcalib.effects import Effect
-from rvcalib.forward import ModelEvaluationError, runner_workers
+from rvcalib.forward import ModelEvaluationError
 from rvcalib.lsq import chord_fit, fd_jac, projector
 from rvcalib.residual import lag1_autocorr
 from rvcalib.results import EmpiricalTerm, FittedEffect
@@ -137,9 +137,11 @@ class Fitting(Screening):
     def residual_function(self, effects: list[Effect], P):
         """The residual of the model with ``effects`` at every reading (empirical terms projected out by
         ``P``) as a function of the scaled parameter vector, and the vector's unpacking into (effect,
-        parameters). With several forward workers the function carries ``many`` (the residuals of a list
-        of vectors in one batch), so that :func:`rvcalib.lsq.fd_jac` spreads a Jacobian's solves over
-        them; with one, every solve is made as before (the same numbers, the same order)."""
+        parameters). The function carries ``many`` (the residuals of a list of vectors in one batch of the
+        forward runner), so that :func:`rvcalib.lsq.fd_jac` solves a Jacobian's difference points as one
+        batch, each warm-started from the state: with several workers they spread over them, and the
+        numbers are the same whatever the workers (one point at a time, each would start from the one
+        before, and a run with workers would differ from the serial run within the solver tolerance)."""
         sizes = [e.n_params for e in effects]
 
         def unpack(xs: np.ndarray) -> list[tuple[Effect, np.ndarray]]:
@@ -155,11 +157,10 @@ class Fitting(Screening):
         def fun(xs: np.ndarray) -> np.ndarray:
             return residual(self.predict(unpack(xs)))
 
-        if runner_workers() > 1:
-            def many(points: list[np.ndarray]) -> list:
-                return [p if isinstance(p, ModelEvaluationError) else residual(p)
-                        for p in self.predict_many([unpack(x) for x in points])]
-            fun.many = many  # type: ignore[attr-defined]
+        def many(points: list[np.ndarray]) -> list:
+            return [p if isinstance(p, ModelEvaluationError) else residual(p)
+                    for p in self.predict_many([unpack(x) for x in points])]
+        fun.many = many  # type: ignore[attr-defined]
         return fun, unpack
 
     def _cached_jacobian(self, effects: list[Effect], p0: list[np.ndarray], terms: list[EmpiricalTerm],

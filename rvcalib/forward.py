@@ -83,11 +83,6 @@ def use_runner(runner: Runner | None) -> Runner | None:
     return prev
 
 
-def runner_workers() -> int:
-    """Worker processes of the forward runner (1: it solves in this process)."""
-    return int(getattr(forward_runner().executor, "workers", 1) or 1)
-
-
 def cache_stats() -> dict[str, float]:
     """Of the forward runner: unique solves (``solves``), results taken from its caches (``hits``),
     solver seconds (``seconds``) and bytes held in memory (``bytes``)."""
