@@ -12,8 +12,8 @@ on stderr, exit status 2.
 The model TE is solved by rvdyn's forward runner (:class:`rvdyn.runner.Runner`, see
 :mod:`rvcalib.forward`): ``--workers`` local processes solve each batch of model states (the screening
 signatures, the difference columns of a refit's Jacobian; a state's run conditions together in one process, as
-serially; no result depends on which worker finishes first, but the difference columns start from the state
-where serially each starts from the previous one, so it is not the serial run bit for bit), ``--cache`` keeps
+serially; every difference column warm-started from the state, as serially; no result depends on which worker
+finishes first: the result is the serial one bit for bit), ``--cache`` keeps
 every solve on disk for later runs (the same cache format as ``rv-stackup --cache``).
 """
 from __future__ import annotations

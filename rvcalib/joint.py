@@ -178,6 +178,19 @@ class JointSelection(Selection):
     def _grid_cat(self, pairs: list[tuple[Effect, np.ndarray]]) -> np.ndarray:
         return np.concatenate(self.predict_grid(pairs))
 
+    def _part_of(self, a: Active, base: np.ndarray) -> np.ndarray | None:
+        """The present part of member ``a`` on the screening grid: the state's TE (``base``) minus the TE
+        of the state without ``a``; None when rvdyn cannot evaluate the state without it (errors that
+        compensate each other, e.g. thinner pins on a smaller pin circle: without one of them the parts
+        overlap beyond what a contact law holds; realistic seed 5 at stop 29 stopped with a traceback
+        here). The caller then takes the member's local derivative at the state times its size."""
+        try:
+            return base - self._grid_cat([(b.effect, b.p) for b in self.active if b is not a])
+        except ModelEvaluationError:
+            self.log(f"the state without {a.effect.name} cannot be evaluated by rvdyn: its part is taken "
+                     f"as its derivative at the state times its size")
+            return None
+
     def active_members(self, Pc=lambda v: v) -> list[PoolMember]:
         """The effects in the model linearised at the current state (see the module docstring);
         ``Pc`` a projector applied to the columns (default none)."""
@@ -193,7 +206,7 @@ class JointSelection(Selection):
                 out.append(PoolMember(e, J, J @ p, lambda c, p=p: p + np.asarray(c, dtype=float), a))
                 continue
             others = [(b.effect, b.p) for b in self.active if b is not a]
-            contrib = Pc(base - self._grid_cat(others))
+            part = self._part_of(a, base)
             mag = float(np.linalg.norm(p))
 
             def step_col(direction: np.ndarray) -> tuple[np.ndarray, float]:
@@ -206,19 +219,26 @@ class JointSelection(Selection):
                 return Pc(self._grid_cat(others + [(e, q)]) - base) / dq, dq
 
             if e.n_params == 1:
-                if mag >= MIN_SECANT * e.scale:
+                if part is not None and mag >= MIN_SECANT * e.scale:
+                    contrib = Pc(part)
                     J = (contrib / p[0])[:, None]
                 else:
                     J = step_col(np.array([1.0]))[0][:, None]
+                    contrib = Pc(part) if part is not None else J[:, 0] * p[0]
                 out.append(PoolMember(e, J, contrib, lambda c, p=p: p + np.asarray(c, dtype=float), a))
                 continue
-            if mag >= MIN_SECANT * e.scale:
+            if part is not None and mag >= MIN_SECANT * e.scale:
                 u = p / mag
                 v = np.array([-u[1], u[0]])
+                contrib = Pc(part)
                 J = np.column_stack([contrib / mag, step_col(v)[0]])
             else:
-                u, v = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+                if part is None and mag > 0:  # the local derivative along the size's direction and across it
+                    u, v = p / mag, np.array([-p[1], p[0]]) / mag
+                else:
+                    u, v = np.array([1.0, 0.0]), np.array([0.0, 1.0])
                 J = np.column_stack([step_col(u)[0], step_col(v)[0]])
+                contrib = Pc(part) if part is not None else J[:, 0] * mag
             basis = np.column_stack([u, v])
             out.append(PoolMember(e, J, contrib, lambda c, p=p, B=basis: p + B @ np.asarray(c, dtype=float), a))
         return out
@@ -303,7 +323,9 @@ class JointSelection(Selection):
         if not sibs:
             return []
         p = np.asarray(a.p, dtype=float)
-        contrib = self._grid_cat(self._pairs()) - self._grid_cat([(b.effect, b.p) for b in self.active if b is not a])
+        contrib = self._part_of(a, self._grid_cat(self._pairs()))
+        if contrib is None:
+            return []  # no present part to replace (the state without the member cannot be evaluated)
         target = rc + contrib
         tt = float(target @ target)
         if tt <= 0:

@@ -225,3 +225,41 @@ def test_a_swap_at_the_term_limit_goes_on_from_the_new_state(tmp_path, monkeypat
     assert "term limit" in res.stopped_by and "no swap" in res.stopped_by, res.stopped_by
     decisions = [i.get("decision", "") for i in res.iterations]
     assert any(d.startswith("restart refit at the term limit") for d in decisions), decisions
+
+
+def test_a_member_whose_removal_rvdyn_cannot_evaluate_gets_its_local_part(tmp_path):
+    """Two errors that compensate (pin 0 150 um thinner and 150 um further in): the state is evaluable,
+    the state without the pin radius overlaps beyond what a contact law holds. The pool of the joint
+    step takes that member's present part as its derivative at the state times its size (realistic seed
+    5 at stop 29 stopped here with a traceback); the other member keeps its exact part, and the sibling
+    search (pin 1's radius in pin 0's place) has no part to give back for the first."""
+    from rvcalib.forward import ModelEvaluationError
+    from rvcalib.results import Active
+
+    root = tmp_path / "ds"
+    simulate_dataset(root, [{"run": "fw", "load_Nm": 10.0, "direction": 1}], {"errors": {"pin_pitch": 0.01}},
+                     samples_per_rev=60, start_deg=0.37, noise_arcsec=0.0)
+    ds = read_dataset(root)
+    names = ("pin_circle_diameter[pin=0]", "pin_radius[pin=0]", "pin_radius[pin=1]")
+    lib = Library([e for e in build_library(ds) if e.name in names])
+    said: list[str] = []
+    cal = Calibrator(ds, library=lib, log=said.append)
+    dia, rad = lib.by_name(names[0]), lib.by_name(names[1])
+    state = [(dia, np.array([-300.0])), (rad, np.array([-150.0]))]
+    cal.active = [Active(e, p, 1) for e, p in state]
+    base = cal._grid_cat(state)
+    with pytest.raises(ModelEvaluationError, match="interference"):
+        cal._grid_cat(state[:1])
+    members = cal.active_members()
+    assert [m.effect.name for m in members] == list(names[:2])
+    # the diameter: its exact part (the state minus the state without it), the secant column
+    exact = base - cal._grid_cat(state[1:])
+    np.testing.assert_array_equal(members[0].contribution, exact)
+    np.testing.assert_allclose(members[0].cols[:, 0] * -300.0, exact, rtol=1e-12)
+    # the pin radius: the one-sided derivative at the state times its size
+    col = members[1].cols[:, 0]
+    np.testing.assert_allclose(members[1].contribution, col * -150.0, rtol=1e-12)
+    assert np.linalg.norm(col) > 0
+    said.clear()
+    assert cal.siblings(cal.active[1], np.zeros_like(base)) == []
+    assert any("the state without pin_radius[pin=0] cannot be evaluated" in s for s in said)
