@@ -408,6 +408,9 @@ class Calibrator(Groups):
             return []
         self._instances_at.add(key)
         sw = self.instance_refit()
+        if not sw:
+            got = self.offset_instance_refit(it)
+            sw = [got] if got else []
         if sw:
             r_full = self.refresh_state()
             msg = ", ".join(f"{n} in place of {o}" for o, n in sw)

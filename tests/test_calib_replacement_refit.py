@@ -83,3 +83,49 @@ def test_no_replacement_at_the_truth(stand_in):
     cal, _, _ = stand_in
     # from the state it reached, no other swap lowers the BIC: the refit does not wander
     assert cal.replacement_refit(6) is None
+
+
+def _disc_state(root, hidden: dict):
+    """A two-run dataset (10 N m forward, 30 N m backward; 120 readings per output revolution from 0.37 deg,
+    noise 0.1 arcsec) and the loop's state holding the disc phase of disc 1 and a constant offset, fitted
+    jointly through the full model from -0.015 deg."""
+    from rvcalib.results import EmpiricalTerm
+
+    runs = [{"run": "fw10", "load_Nm": 10.0, "direction": 1}, {"run": "bw30", "load_Nm": 30.0, "direction": -1}]
+    simulate_dataset(root, runs, hidden, samples_per_rev=120, start_deg=0.37, noise_arcsec=0.1, seed=3)
+    ds = read_dataset(root)
+    lib = Library([e for e in build_library(ds) if e.name in ("disc_phase[disc=0]", "disc_phase[disc=1]")])
+    said: list[str] = []
+    cal = Calibrator(ds, library=lib, log=said.append)
+    cal.screening_signatures()
+    off = EmpiricalTerm("offset")
+    d1 = lib.by_name("disc_phase[disc=1]")
+    params, *_ = cal.fit_full([d1], [np.array([-0.015])], [off])
+    cal.active = [Active(d1, params[0], 1)]
+    cal.empirical = [off]
+    cal.refresh_state()
+    return cal, said
+
+
+def test_a_disc_phase_with_a_constant_offset_becomes_the_other_disc_s_phase(tmp_path):
+    """Disc 0's phase of +0.02 deg is, to the data, disc 1's at -0.02 deg plus a constant (-69 arcsec): a
+    state holding the latter (the instance check keeps the offset, so the swap only ties there) is
+    refitted with disc 0 in place of disc 1 and the offset dropped (one parameter fewer), as realistic seed
+    5 needed; with a true zero offset of 30 arcsec beside disc 1's phase, dropping the offset costs far more
+    than the parameter saves, and the state stays."""
+    cal, said = _disc_state(tmp_path / "disc0", {"errors": {"disc_phase": {"disc": 0, "value": 0.02}}})
+    assert cal.emp_coef[0] == pytest.approx(-69.5, abs=1.0)
+    got = cal.offset_instance_refit(2)
+    assert got == ("disc_phase[disc=1] and the unexplained constant offset", "disc_phase[disc=0]")
+    assert [a.effect.name for a in cal.active] == ["disc_phase[disc=0]"] and cal.empirical == []
+    assert float(cal.active[0].p[0]) == pytest.approx(0.02, abs=2e-4)
+    assert math.sqrt(cal.rss_full / cal.n) < 0.12
+    assert any(s.startswith("offset refit: disc_phase[disc=0] in place of disc_phase[disc=1]") for s in said)
+
+    cal, said = _disc_state(tmp_path / "disc1", {"errors": {"disc_phase": {"disc": 1, "value": -0.02}},
+                                                  "harmonics": [{"order": 0, "amplitude_arcsec": 30.0}]})
+    rss = cal.rss_full
+    assert cal.offset_instance_refit(2) is None
+    assert [a.effect.name for a in cal.active] == ["disc_phase[disc=1]"] and len(cal.empirical) == 1
+    assert cal.rss_full == rss
+    assert any(s.startswith("offset refit: disc_phase[disc=0]") for s in said)  # tried, not kept
