@@ -10,7 +10,7 @@ prints a human summary, or with ``--json`` one JSON object (``reducer``, ``ratio
 on stderr, exit status 2.
 
 The model TE is solved by rvdyn's forward runner (:class:`rvdyn.runner.Runner`, see
-:mod:`rvcalib.forward`): ``--workers`` local processes solve each batch of model states (the screening
+:mod:`rvcalib.forward`): ``--workers`` local processes (default 2, as ``rv-stackup``) solve each batch of model states (the screening
 signatures, the difference columns of a refit's Jacobian; a state's run conditions together in one process, as
 serially; every difference column warm-started from the state, as serially; no result depends on which worker
 finishes first: the result is the serial one bit for bit), ``--cache`` keeps
@@ -51,8 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "orders that matter (default: the smallest grid that does)")
     p.add_argument("--time-budget", type=float, default=None, metavar="SECONDS",
                    help="stop adding terms after this many seconds (the result says so; default: no budget)")
-    p.add_argument("--workers", type=int, default=1,
-                   help="local worker processes solving the model's batches (default 1 = this process)")
+    p.add_argument("--workers", type=int, default=2,
+                   help="local worker processes solving the model's batches (default 2, as rv-stackup; 1 = this "
+                        "process; the result is the same bit for bit whatever the workers)")
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="case cache folder kept for later runs (default: none; solves are kept in memory for this run)")
     p.add_argument("--verbose", action="store_true", help="progress messages on stderr")

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError
 from rvcalib.joint import JOINT_BIC_MARGIN, JointSelection
 from rvcalib.lsq import bic, ftest, projector
@@ -89,11 +90,11 @@ class ReplacementRefit(JointSelection):
         return self.sibling_refit(names, rc, other_families=True)
 
     def offset_instance_refit(self, it: int) -> tuple[str, str] | None:
-        """Before the loop stops, with a constant offset among the empirical terms: every crank / disc / hole
-        instance in the model refitted through the full model with an instance of each other family of its
-        error type in its place *and the offset dropped*; the fit that lowers the BIC on all samples most (by
-        more than :data:`JOINT_BIC_MARGIN`; one parameter fewer) is kept. Returns (old, new) of the swap, or
-        None.
+        """Before the loop stops, with a constant offset among the empirical terms: the model refitted through
+        the full model without the offset, and with each of the best :data:`REPLACE_REFITS` other instances of
+        a crank / disc / hole member's error type in the member's place and the offset dropped; the fit that
+        lowers the BIC on all samples most (by more than :data:`JOINT_BIC_MARGIN`; one parameter fewer) is
+        kept. Returns (old, new) of the change, or None.
 
         Why: the TE is an output angle, so an error that turns one part of the train against the others is,
         to the data, the same turn of the other part with the opposite sign plus a constant: a phase error of
@@ -102,19 +103,22 @@ class ReplacementRefit(JointSelection):
         stays) and the empirical term keeps the constant. Measured on realistic draw seed 5 (stop 29, physical
         law): the joint step took a constant offset in iteration 1 (no disc phase in the model yet), later
         the disc phase of disc 1 at -0.0636 deg with the offset at -202 arcsec for disc 0's +0.0545 deg, and
-        the loop ended with the offset reported unexplained and two disc-hole eccentricities 5-6 um off."""
+        the loop ended with the offset reported unexplained and two disc-hole eccentricities 5-6 um off. With
+        both discs' phases in the model the offset is redundant outright (equal phases of both discs turn the
+        output as a whole), and the elimination at the term limit removed a disc phase before it."""
         offs = [t for t in self.empirical if t.kind == "offset" and t.factor == "common"]
+        if not offs or not self.active or self.over_budget():
+            return None
         members = [(i, a) for i, a in enumerate(self.active)
                    if a.effect.instance and not any(k == "pin" for k, _ in a.effect.instance)]
-        if not offs or not members or self.over_budget():
-            return None
         rc = np.concatenate(self.coarse_residual())   # data minus the physics: the offset's part is in it
         base = self._grid_cat(self._pairs())
         in_model = {a.effect.name for a in self.active}
         # the candidates: every other instance of the member's error type (its own family's twins too: with
         # the offset dropped they are not twins), ranked by the part of the member's part plus the residual
-        # (the offset's part included) their screening signature explains; the best REPLACE_REFITS refitted
-        trials = []
+        # (the offset's part included) their screening signature explains; the best REPLACE_REFITS refitted,
+        # after the model itself without the offset (both discs' phases in the model make a constant too)
+        trials: list[tuple[float, int | None, Effect | None, np.ndarray | None]] = []
         for i, a in members:
             part = self._part_of(a, base)
             if part is None:
@@ -128,38 +132,45 @@ class ReplacementRefit(JointSelection):
                 if d is not None and d.explained > 0:
                     trials.append((d.explained, i, x, np.asarray(d.p, dtype=float)))
         trials.sort(key=lambda z: -z[0])
+        trials = [(1.0, None, None, None)] + trials[:REPLACE_REFITS]
         p_cur = self._p_cur()
         bic_cur = bic(self.rss_full, self.n, p_cur)
         found = None
         for t in offs:
             rest = [u for u in self.empirical if u is not t]
-            for expl, i, x, q in trials[:REPLACE_REFITS]:
+            for expl, i, x, q in trials:
                 if self.over_budget():
                     break
-                a = self.active[i]
                 effects = [x if k == i else b.effect for k, b in enumerate(self.active)]
                 p0 = [np.clip(q, x.lower, x.upper) if k == i else b.p for k, b in enumerate(self.active)]
                 try:
                     params, rss, *_ = self.fit_full(effects, p0, rest)
                 except ModelEvaluationError:
                     continue
-                b_new = bic(rss, self.n, p_cur - t.n_cols - a.effect.n_params + x.n_params)
-                self.log(f"offset refit: {x.name} in place of {a.effect.name} and the {t.label} (screened "
-                         f"{expl:.3f}): RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
+                if i is None:
+                    b_new = bic(rss, self.n, p_cur - t.n_cols)
+                    what = f"the {t.label} dropped, the members refitted"
+                else:
+                    b_new = bic(rss, self.n, p_cur - t.n_cols - self.active[i].effect.n_params + x.n_params)
+                    what = f"{x.name} in place of {self.active[i].effect.name} and the {t.label} (screened {expl:.3f})"
+                self.log(f"offset refit: {what}: RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
                 if b_new < bic_cur - JOINT_BIC_MARGIN and (found is None or b_new < found[0]):
                     found = (b_new, i, x, params, rest, t)
         if found is None:
             return None
         b_new, i, x, params, rest, t = found
-        old = self.active[i].effect.name
         for a, p in zip(self.active, params):
             a.p = p
+        self.empirical = rest
+        self._emp_info.pop(t, None)
+        if i is None:
+            self.refresh_state()
+            return f"the {t.label}", "the members refitted without it"
+        old = self.active[i].effect.name
         self.active[i] = Active(x, params[i], it, info={
             "delta_bic": b_new - bic_cur,
             "selection": {"method": "offset refit before the stop", "iteration": it, "replaced": old,
                           "dropped": t.label}})
-        self.empirical = rest
-        self._emp_info.pop(t, None)
         self.refresh_state()
         return f"{old} and the {t.label}", x.name
 

@@ -35,7 +35,7 @@ def test_ratio81_dataset_names_the_pin_circle_error(ratio81, capsys):
     assert (root / "ds" / "design.json").is_file() and ans["ratio"] == pytest.approx(81.0)
     ds = read_dataset(root / "ds")
     assert ds.ratio == pytest.approx(81.0) and ds.design_source.startswith("design.json")
-    assert main([str(root / "ds"), "--out", str(root / "out"), "--json"]) == 0
+    assert main([str(root / "ds"), "--out", str(root / "out"), "--json", "--workers", "1"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["ratio"] == pytest.approx(81.0) and d["reducer"]["z_sun"] == 18
     assert [e["name"] for e in d["effects"]] == ["pin_circle_diameter"]

@@ -37,6 +37,10 @@ class CountingModel(Fitting):
             out = out + self.a[e.name] * x + self.b[e.name] * x * x
         return [out]
 
+    def predict_many(self, actives):
+        """The model's batch (a Jacobian's difference points): :meth:`predict` of each state, in order."""
+        return [self.predict(a) for a in actives]
+
     def fit(self, names: list[str], p0: list[float]):
         self.calls = 0
         params, rss, *_ = self.fit_full([self.effects[k] for k in names], [np.array([v]) for v in p0], [])

@@ -112,7 +112,8 @@ def test_a_disc_phase_with_a_constant_offset_becomes_the_other_disc_s_phase(tmp_
     state holding the latter (the instance check keeps the offset, so the swap only ties there) is
     refitted with disc 0 in place of disc 1 and the offset dropped (one parameter fewer), as realistic seed
     5 needed; with a true zero offset of 30 arcsec beside disc 1's phase, dropping the offset costs far more
-    than the parameter saves, and the state stays."""
+    than the parameter saves, and the state stays; with both discs' phases in the model the offset is dropped
+    and the members refitted."""
     cal, said = _disc_state(tmp_path / "disc0", {"errors": {"disc_phase": {"disc": 0, "value": 0.02}}})
     assert cal.emp_coef[0] == pytest.approx(-69.5, abs=1.0)
     got = cal.offset_instance_refit(2)
@@ -129,3 +130,18 @@ def test_a_disc_phase_with_a_constant_offset_becomes_the_other_disc_s_phase(tmp_
     assert [a.effect.name for a in cal.active] == ["disc_phase[disc=1]"] and len(cal.empirical) == 1
     assert cal.rss_full == rss
     assert any(s.startswith("offset refit: disc_phase[disc=0]") for s in said)  # tried, not kept
+    assert any(s.startswith("offset refit: the unexplained constant offset dropped") for s in said)
+
+    # both discs' phases and the offset (equal phases of both discs turn the output as a whole): the model
+    # without the offset fits as well with one parameter fewer
+    cal, said = _disc_state(tmp_path / "both", {"errors": {"disc_phase": [{"disc": 0, "value": 0.02},
+                                                                          {"disc": 1, "value": 0.01}]}})
+    d0 = cal.lib.by_name("disc_phase[disc=0]")
+    params, *_ = cal.fit_full([d0, cal.active[0].effect], [np.array([0.005]), cal.active[0].p], cal.empirical)
+    cal.active = [Active(d0, params[0], 1), Active(cal.active[0].effect, params[1], 1)]
+    cal.refresh_state()
+    got = cal.offset_instance_refit(2)
+    assert got == ("the unexplained constant offset", "the members refitted without it")
+    assert cal.empirical == [] and [a.effect.name for a in cal.active] == ["disc_phase[disc=0]", "disc_phase[disc=1]"]
+    assert [float(a.p[0]) for a in cal.active] == pytest.approx([0.02, 0.01], abs=3e-4)
+    assert math.sqrt(cal.rss_full / cal.n) < 0.12
