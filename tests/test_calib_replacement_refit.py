@@ -143,5 +143,7 @@ def test_a_disc_phase_with_a_constant_offset_becomes_the_other_disc_s_phase(tmp_
     got = cal.offset_instance_refit(2)
     assert got == ("the unexplained constant offset", "the members refitted without it")
     assert cal.empirical == [] and [a.effect.name for a in cal.active] == ["disc_phase[disc=0]", "disc_phase[disc=1]"]
-    assert [float(a.p[0]) for a in cal.active] == pytest.approx([0.02, 0.01], abs=3e-4)
+    # (which disc holds which phase the data cannot tell: +0.01 deg of disc 0 against disc 1 is, to the TE,
+    # -0.01 plus a constant; the fit ends on either twin, from the warm start it is given)
+    assert sorted(float(a.p[0]) for a in cal.active) == pytest.approx([0.01, 0.02], abs=3e-4)
     assert math.sqrt(cal.rss_full / cal.n) < 0.12
