@@ -21,6 +21,10 @@ from rvcalib.results import Active, Candidate
 #: at the term limit (see :meth:`ReplacementRefit.replacement_refit`): the members whose best replacement
 #: (screened with the others refitted) explains most of their part.
 REPLACE_REFITS = 4
+#: A member whose part (the state's TE minus the TE without it, on the screening grid) has at least this share of
+#: its sum of squares in its mean is refitted away together with a constant offset before the stop
+#: (:meth:`ReplacementRefit.offset_instance_refit`): a disc phase's part is mostly a constant.
+OFFSET_LIKE = 0.5
 #: Two look-alikes of a member whose fitted screening signatures correlate beyond this are refitted beside it as
 #: a pair when neither alone is kept (:meth:`ReplacementRefit.lookalike_refit`): a variance inflation above 5
 #: each, so what they add together lies mostly along their difference, which no linear test at the state sees.
@@ -94,7 +98,8 @@ class ReplacementRefit(JointSelection):
         the full model without the offset, and with each of the best :data:`REPLACE_REFITS` other instances of
         a crank / disc / hole member's error type in the member's place and the offset dropped; the fit that
         lowers the BIC on all samples most (by more than :data:`JOINT_BIC_MARGIN`; one parameter fewer) is
-        kept. Returns (old, new) of the change, or None.
+        kept; so is the model without the offset and without one member whose part is mostly a constant
+        (:data:`OFFSET_LIKE`). Returns (old, new) of the change, or None.
 
         Why: the TE is an output angle, so an error that turns one part of the train against the others is,
         to the data, the same turn of the other part with the opposite sign plus a constant: a phase error of
@@ -114,13 +119,14 @@ class ReplacementRefit(JointSelection):
         rc = np.concatenate(self.coarse_residual())   # data minus the physics: the offset's part is in it
         base = self._grid_cat(self._pairs())
         in_model = {a.effect.name for a in self.active}
+        parts = {i: self._part_of(a, base) for i, a in enumerate(self.active) if a.effect.family != "measurement"}
         # the candidates: every other instance of the member's error type (its own family's twins too: with
         # the offset dropped they are not twins), ranked by the part of the member's part plus the residual
         # (the offset's part included) their screening signature explains; the best REPLACE_REFITS refitted,
         # after the model itself without the offset (both discs' phases in the model make a constant too)
         trials: list[tuple[float, int | None, Effect | None, np.ndarray | None]] = []
         for i, a in members:
-            part = self._part_of(a, base)
+            part = parts[i]
             if part is None:
                 continue
             target = rc + part
@@ -132,7 +138,19 @@ class ReplacementRefit(JointSelection):
                 if d is not None and d.explained > 0:
                     trials.append((d.explained, i, x, np.asarray(d.p, dtype=float)))
         trials.sort(key=lambda z: -z[0])
-        trials = [(1.0, None, None, None)] + trials[:REPLACE_REFITS]
+        # and each member whose part is mostly a constant removed with the offset (the share of its part's
+        # sum of squares in its mean over the grid at least OFFSET_LIKE): realistic seed 5 held both discs'
+        # phases and the offset for disc 0's phase alone
+        const = []
+        for i, part in parts.items():
+            if part is None or not np.any(part):
+                continue
+            share = float(part.mean() ** 2 / np.mean(part ** 2))
+            if share >= OFFSET_LIKE:
+                const.append((share, i))
+        const.sort(key=lambda z: -z[0])
+        trials = ([(1.0, None, None, None)] + [(sh, i, None, None) for sh, i in const[:REPLACE_REFITS]]
+                  + trials[:REPLACE_REFITS])
         p_cur = self._p_cur()
         bic_cur = bic(self.rss_full, self.n, p_cur)
         found = None
@@ -141,15 +159,24 @@ class ReplacementRefit(JointSelection):
             for expl, i, x, q in trials:
                 if self.over_budget():
                     break
-                effects = [x if k == i else b.effect for k, b in enumerate(self.active)]
-                p0 = [np.clip(q, x.lower, x.upper) if k == i else b.p for k, b in enumerate(self.active)]
+                if i is not None and x is None:   # the member removed with the offset
+                    effects = [b.effect for k, b in enumerate(self.active) if k != i]
+                    p0 = [b.p for k, b in enumerate(self.active) if k != i]
+                else:
+                    effects = [x if k == i else b.effect for k, b in enumerate(self.active)]
+                    p0 = [np.clip(q, x.lower, x.upper) if k == i else b.p for k, b in enumerate(self.active)]
                 try:
-                    params, rss, *_ = self.fit_full(effects, p0, rest)
+                    params, rss, *_ = self.fit_full(effects, p0, rest) if effects else ([], float(
+                        np.sum(self.full_residual([], rest)[0] ** 2)))
                 except ModelEvaluationError:
                     continue
                 if i is None:
                     b_new = bic(rss, self.n, p_cur - t.n_cols)
                     what = f"the {t.label} dropped, the members refitted"
+                elif x is None:
+                    b_new = bic(rss, self.n, p_cur - t.n_cols - self.active[i].effect.n_params)
+                    what = (f"{self.active[i].effect.name} and the {t.label} removed (a constant makes {expl:.2f} of "
+                            f"its part)")
                 else:
                     b_new = bic(rss, self.n, p_cur - t.n_cols - self.active[i].effect.n_params + x.n_params)
                     what = f"{x.name} in place of {self.active[i].effect.name} and the {t.label} (screened {expl:.3f})"
@@ -159,13 +186,22 @@ class ReplacementRefit(JointSelection):
         if found is None:
             return None
         b_new, i, x, params, rest, t = found
-        for a, p in zip(self.active, params):
-            a.p = p
+        if not (i is not None and x is None):
+            for a, p in zip(self.active, params):
+                a.p = p
         self.empirical = rest
         self._emp_info.pop(t, None)
         if i is None:
             self.refresh_state()
             return f"the {t.label}", "the members refitted without it"
+        if x is None:
+            old = self.active[i].effect.name
+            keep = [a for k, a in enumerate(self.active) if k != i]
+            for a, p in zip(keep, params):
+                a.p = p
+            self.active = keep
+            self.refresh_state()
+            return f"{old} and the {t.label}", "the members refitted without them"
         old = self.active[i].effect.name
         self.active[i] = Active(x, params[i], it, info={
             "delta_bic": b_new - bic_cur,

@@ -147,3 +147,16 @@ def test_a_disc_phase_with_a_constant_offset_becomes_the_other_disc_s_phase(tmp_
     # -0.01 plus a constant; the fit ends on either twin, from the warm start it is given)
     assert sorted(float(a.p[0]) for a in cal.active) == pytest.approx([0.01, 0.02], abs=3e-4)
     assert math.sqrt(cal.rss_full / cal.n) < 0.12
+
+    # disc 0's phase alone in the data, the state holding both discs' phases (0.03 and 0.01 deg: their
+    # difference the truth) and the offset: one disc's phase (its part all but a constant) goes with the
+    # offset. Which one the data cannot tell (disc 1 at -0.02 deg fits as well as disc 0 at +0.02: twins)
+    cal, said = _disc_state(tmp_path / "d0both", {"errors": {"disc_phase": {"disc": 0, "value": 0.02}}})
+    cal.active = [Active(d0, np.array([0.03]), 1), Active(cal.active[0].effect, np.array([0.01]), 1)]
+    cal.refresh_state()
+    got = cal.offset_instance_refit(2)
+    assert got[0].endswith(" and the unexplained constant offset") and got[1] == "the members refitted without them"
+    assert cal.empirical == [] and len(cal.active) == 1 and cal.active[0].effect.key == "disc_phase"
+    assert abs(float(cal.active[0].p[0])) == pytest.approx(0.02, abs=2e-4)
+    assert math.sqrt(cal.rss_full / cal.n) < 0.12
+    assert sum("removed (a constant makes" in s for s in said) == 2
