@@ -124,7 +124,7 @@ class ReplacementRefit(JointSelection):
         # the offset dropped they are not twins), ranked by the part of the member's part plus the residual
         # (the offset's part included) their screening signature explains; the best REPLACE_REFITS refitted,
         # after the model itself without the offset (both discs' phases in the model make a constant too)
-        trials: list[tuple[float, int | None, Effect | None, np.ndarray | None]] = []
+        trials: list[tuple[float, int, Effect, np.ndarray]] = []
         for i, a in members:
             part = parts[i]
             if part is None:
@@ -141,74 +141,59 @@ class ReplacementRefit(JointSelection):
         # and each member whose part is mostly a constant removed with the offset (the share of its part's
         # sum of squares in its mean over the grid at least OFFSET_LIKE): realistic seed 5 held both discs'
         # phases and the offset for disc 0's phase alone
-        const = []
-        for i, part in parts.items():
-            if part is None or not np.any(part):
-                continue
-            share = float(part.mean() ** 2 / np.mean(part ** 2))
-            if share >= OFFSET_LIKE:
-                const.append((share, i))
-        const.sort(key=lambda z: -z[0])
-        trials = ([(1.0, None, None, None)] + [(sh, i, None, None) for sh, i in const[:REPLACE_REFITS]]
-                  + trials[:REPLACE_REFITS])
+        const = sorted(((float(part.mean() ** 2 / np.mean(part ** 2)), i) for i, part in parts.items()
+                        if part is not None and np.any(part)), key=lambda z: -z[0])
+        const = [(sh, i) for sh, i in const if sh >= OFFSET_LIKE]
+        # each trial: the members (Active kept, or a new effect with its start) and what it does
+        plans: list[tuple[list[tuple[Active | Effect, np.ndarray]], str]] = [
+            ([(a, a.p) for a in self.active], "the {t} dropped, the members refitted")]
+        plans += [([(a, a.p) for k, a in enumerate(self.active) if k != i],
+                   f"{self.active[i].effect.name} and the {{t}} removed (a constant makes {sh:.2f} of its part)")
+                  for sh, i in const[:REPLACE_REFITS]]
+        plans += [([((x, np.clip(q, x.lower, x.upper)) if k == i else (a, a.p)) for k, a in enumerate(self.active)],
+                   f"{x.name} in place of {self.active[i].effect.name} and the {{t}} (screened {expl:.3f})")
+                  for expl, i, x, q in trials[:REPLACE_REFITS]]
         p_cur = self._p_cur()
         bic_cur = bic(self.rss_full, self.n, p_cur)
         found = None
         for t in offs:
             rest = [u for u in self.empirical if u is not t]
-            for expl, i, x, q in trials:
+            for members_new, what in plans:
                 if self.over_budget():
                     break
-                if i is not None and x is None:   # the member removed with the offset
-                    effects = [b.effect for k, b in enumerate(self.active) if k != i]
-                    p0 = [b.p for k, b in enumerate(self.active) if k != i]
-                else:
-                    effects = [x if k == i else b.effect for k, b in enumerate(self.active)]
-                    p0 = [np.clip(q, x.lower, x.upper) if k == i else b.p for k, b in enumerate(self.active)]
+                effects = [m.effect if isinstance(m, Active) else m for m, _ in members_new]
                 try:
-                    params, rss, *_ = self.fit_full(effects, p0, rest) if effects else ([], float(
-                        np.sum(self.full_residual([], rest)[0] ** 2)))
+                    if effects:
+                        params, rss, *_ = self.fit_full(effects, [p for _, p in members_new], rest)
+                    else:
+                        params, rss = [], float(np.sum(self.full_residual([], rest)[0] ** 2))
                 except ModelEvaluationError:
                     continue
-                if i is None:
-                    b_new = bic(rss, self.n, p_cur - t.n_cols)
-                    what = f"the {t.label} dropped, the members refitted"
-                elif x is None:
-                    b_new = bic(rss, self.n, p_cur - t.n_cols - self.active[i].effect.n_params)
-                    what = (f"{self.active[i].effect.name} and the {t.label} removed (a constant makes {expl:.2f} of "
-                            f"its part)")
-                else:
-                    b_new = bic(rss, self.n, p_cur - t.n_cols - self.active[i].effect.n_params + x.n_params)
-                    what = f"{x.name} in place of {self.active[i].effect.name} and the {t.label} (screened {expl:.3f})"
+                b_new = bic(rss, self.n, sum(e.n_params for e in effects) + sum(u.n_cols for u in rest))
+                what = what.format(t=t.label)
                 self.log(f"offset refit: {what}: RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
                 if b_new < bic_cur - JOINT_BIC_MARGIN and (found is None or b_new < found[0]):
-                    found = (b_new, i, x, params, rest, t)
+                    found = (b_new, members_new, params, rest, t, what)
         if found is None:
             return None
-        b_new, i, x, params, rest, t = found
-        if not (i is not None and x is None):
-            for a, p in zip(self.active, params):
-                a.p = p
+        b_new, members_new, params, rest, t, what = found
+        new_active = []
+        for (m, _), p in zip(members_new, params):
+            if isinstance(m, Active):
+                m.p = p
+                new_active.append(m)
+            else:
+                new_active.append(Active(m, p, it, info={
+                    "delta_bic": b_new - bic_cur,
+                    "selection": {"method": "offset refit before the stop", "iteration": it, "change": what}}))
+        gone = [a.effect.name for a in self.active if a not in new_active]
+        came = [a.effect.name for a in new_active if a not in self.active]
+        self.active = new_active
         self.empirical = rest
         self._emp_info.pop(t, None)
-        if i is None:
-            self.refresh_state()
-            return f"the {t.label}", "the members refitted without it"
-        if x is None:
-            old = self.active[i].effect.name
-            keep = [a for k, a in enumerate(self.active) if k != i]
-            for a, p in zip(keep, params):
-                a.p = p
-            self.active = keep
-            self.refresh_state()
-            return f"{old} and the {t.label}", "the members refitted without them"
-        old = self.active[i].effect.name
-        self.active[i] = Active(x, params[i], it, info={
-            "delta_bic": b_new - bic_cur,
-            "selection": {"method": "offset refit before the stop", "iteration": it, "replaced": old,
-                          "dropped": t.label}})
         self.refresh_state()
-        return f"{old} and the {t.label}", x.name
+        return (" and ".join(gone + [f"the {t.label}"]),
+                ", ".join(came) if came else "the members refitted without " + ("them" if gone else "it"))
 
     def replacement_refit(self, it: int) -> tuple[str, str] | None:
         """Before the loop stops at the term limit: each member refitted through the full model with the
