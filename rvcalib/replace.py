@@ -101,11 +101,11 @@ class ReplacementRefit(JointSelection):
         kept; so is the model without the offset and without one member whose part is mostly a constant
         (:data:`OFFSET_LIKE`). Returns (old, new) of the change, or None.
 
-        Why: the TE is an output angle, so an error that turns one part of the train against the others is,
-        to the data, the same turn of the other part with the opposite sign plus a constant: a phase error of
-        disc 1 at -a with an offset equals disc 0 at +a. The instance check (:meth:`instance_refit`) keeps
-        the offset in the model, so the swap there only ties (the offset goes to zero, the parameter count
-        stays) and the empirical term keeps the constant. Measured on realistic draw seed 5 (stop 29, physical
+        Why: the TE is an output angle, and some errors trade their sign against a constant: a disc's phase at
+        -a with an offset gives the TE of the same phase at +a (and disc 0's phase at +a, its twin). The
+        instance check (:meth:`instance_refit`) keeps the offset in the model, so a swap there only ties (the
+        offset goes to zero, the parameter count stays) and the empirical term keeps the constant; a refit
+        from the state without the offset may not cross zero, hence the other instances as well. Measured on realistic draw seed 5 (stop 29, physical
         law): the joint step took a constant offset in iteration 1 (no disc phase in the model yet), later
         the disc phase of disc 1 at -0.0636 deg with the offset at -202 arcsec for disc 0's +0.0545 deg, and
         the loop ended with the offset reported unexplained and two disc-hole eccentricities 5-6 um off. With

@@ -108,17 +108,19 @@ def _disc_state(root, hidden: dict):
 
 
 def test_a_disc_phase_with_a_constant_offset_becomes_the_other_disc_s_phase(tmp_path):
-    """Disc 0's phase of +0.02 deg is, to the data, disc 1's at -0.02 deg plus a constant (-69 arcsec): a
-    state holding the latter (the instance check keeps the offset, so the swap only ties there) is
-    refitted with disc 0 in place of disc 1 and the offset dropped (one parameter fewer), as realistic seed
-    5 needed; with a true zero offset of 30 arcsec beside disc 1's phase, dropping the offset costs far more
-    than the parameter saves, and the state stays; with both discs' phases in the model the offset is dropped
-    and the members refitted."""
+    """Disc 0's phase of +0.02 deg is, to the data, a disc phase of -0.02 deg plus a constant (-69 arcsec), and
+    disc 1's phase is its twin (the same TE at the same size): a state holding disc 1 at -0.02 and the offset
+    (the instance check keeps the offset, so a swap only ties there) is refitted without the offset, the disc
+    phase at +0.02 (one parameter fewer), as realistic seed 5 needed; which of the twins ends in the model
+    depends on the fits' warm starts (both trials reach the same RMS: disc 0 in disc 1's place, or disc 1
+    refitted across zero). With a true zero offset of 30 arcsec beside disc 1's phase, dropping the offset
+    costs far more than the parameter saves, and the state stays; with both discs' phases in the model the
+    offset goes, with one of them when its part is all but a constant."""
     cal, said = _disc_state(tmp_path / "disc0", {"errors": {"disc_phase": {"disc": 0, "value": 0.02}}})
     assert cal.emp_coef[0] == pytest.approx(-69.5, abs=1.0)
     got = cal.offset_instance_refit(2)
-    assert got == ("disc_phase[disc=1] and the unexplained constant offset", "disc_phase[disc=0]")
-    assert [a.effect.name for a in cal.active] == ["disc_phase[disc=0]"] and cal.empirical == []
+    assert got is not None and got[0].endswith("the unexplained constant offset")
+    assert len(cal.active) == 1 and cal.active[0].effect.key == "disc_phase" and cal.empirical == []
     assert float(cal.active[0].p[0]) == pytest.approx(0.02, abs=2e-4)
     assert math.sqrt(cal.rss_full / cal.n) < 0.12
     assert any(s.startswith("offset refit: disc_phase[disc=0] in place of disc_phase[disc=1]") for s in said)
@@ -137,8 +139,7 @@ def test_a_disc_phase_with_a_constant_offset_becomes_the_other_disc_s_phase(tmp_
     cal, said = _disc_state(tmp_path / "both", {"errors": {"disc_phase": [{"disc": 0, "value": 0.02},
                                                                           {"disc": 1, "value": 0.01}]}})
     d0 = cal.lib.by_name("disc_phase[disc=0]")
-    params, *_ = cal.fit_full([d0, cal.active[0].effect], [np.array([0.005]), cal.active[0].p], cal.empirical)
-    cal.active = [Active(d0, params[0], 1), Active(cal.active[0].effect, params[1], 1)]
+    cal.active = [Active(d0, np.array([0.025]), 1), Active(cal.active[0].effect, np.array([0.015]), 1)]
     cal.refresh_state()
     got = cal.offset_instance_refit(2)
     assert got == ("the unexplained constant offset", "the members refitted without it")
