@@ -105,8 +105,8 @@ class ReplacementRefit(JointSelection):
         -a with an offset gives the TE of the same phase at +a (and disc 0's phase at +a, its twin). The
         instance check (:meth:`instance_refit`) keeps the offset in the model, so a swap there only ties (the
         offset goes to zero, the parameter count stays) and the empirical term keeps the constant; a refit
-        from the state without the offset may not cross zero, hence the other instances as well. Measured on realistic draw seed 5 (stop 29, physical
-        law): the joint step took a constant offset in iteration 1 (no disc phase in the model yet), later
+        from the state without the offset may not cross zero, hence the other instances as well. Measured on
+        realistic draw seed 5 (stop 29, physical law): the joint step took a constant offset in iteration 1 (no disc phase in the model yet), later
         the disc phase of disc 1 at -0.0636 deg with the offset at -202 arcsec for disc 0's +0.0545 deg, and
         the loop ended with the offset reported unexplained and two disc-hole eccentricities 5-6 um off. With
         both discs' phases in the model the offset is redundant outright (equal phases of both discs turn the
@@ -170,10 +170,10 @@ class ReplacementRefit(JointSelection):
                 except ModelEvaluationError:
                     continue
                 b_new = bic(rss, self.n, sum(e.n_params for e in effects) + sum(u.n_cols for u in rest))
-                what = what.format(t=t.label)
-                self.log(f"offset refit: {what}: RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
+                said = what.format(t=t.label)
+                self.log(f"offset refit: {said}: RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
                 if b_new < bic_cur - JOINT_BIC_MARGIN and (found is None or b_new < found[0]):
-                    found = (b_new, members_new, params, rest, t, what)
+                    found = (b_new, members_new, params, rest, t, said)
         if found is None:
             return None
         b_new, members_new, params, rest, t, what = found
@@ -186,8 +186,9 @@ class ReplacementRefit(JointSelection):
                 new_active.append(Active(m, p, it, info={
                     "delta_bic": b_new - bic_cur,
                     "selection": {"method": "offset refit before the stop", "iteration": it, "change": what}}))
-        gone = [a.effect.name for a in self.active if a not in new_active]
-        came = [a.effect.name for a in new_active if a not in self.active]
+        kept, before = {id(a) for a in new_active}, {id(a) for a in self.active}   # by identity (Active holds arrays)
+        gone = [a.effect.name for a in self.active if id(a) not in kept]
+        came = [a.effect.name for a in new_active if id(a) not in before]
         self.active = new_active
         self.empirical = rest
         self._emp_info.pop(t, None)
