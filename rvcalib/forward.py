@@ -11,8 +11,8 @@ angles over one output revolution (the screening and the coarse fits of :mod:`rv
 :func:`te_at` solves exactly at given angles (every reading of a run: interpolating a grid is not
 exact, see there); :func:`te_at_many` and :func:`grid_te_many` solve a batch at once (in parallel when
 the runner has several workers). The cases of a batch that differ only in load and direction (the run
-conditions of one model state) are one runner group: :func:`rvdyn.te.run_te_many` solves them together,
-each equal to its single solve within the solver tolerance.
+conditions of one model state) are solved :data:`GROUP_CONDITIONS` at a time as one runner group:
+:func:`rvdyn.te.run_te_many` solves them together, each equal to its single solve within the solver tolerance.
 
 Solutions are cached by the runner under the job key (the case's content hash, which holds the
 design, the errors, the load and the direction, and the angles), so identical conditions and
@@ -55,6 +55,12 @@ CACHE_BYTES = 256 * 2 ** 20
 #: state of each run condition and angle set, ~80 kB for 360 angles under the physical law; least recently used
 #: first out).
 WARM_BYTES = 32 * 2 ** 20
+
+#: Run conditions of one model state solved together in one runner group (one worker task), in their order in the
+#: batch: two and two, so that a single state's solve (a chord trial) spreads over two workers. Serially a
+#: realistic state's four conditions at 333 readings take about the same CPU in two groups of two as in one of
+#: four (0.33-0.34 against 0.34-0.38 s, warm; four single solves 0.36-0.38 s; docs/calibration.md, "Loop speed").
+GROUP_CONDITIONS = 2
 
 _RUNNER: Runner | None = None
 
@@ -199,13 +205,19 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
         u_run = u[::-1] if rev else u  # in the order of motion
         pts = u_run if u_run.size >= 2 else np.append(u_run, u_run + period / 2)
         todo.append((i, case, pts, inv, rev))
-    # the cases that differ only in load and direction are solved together (rvdyn.te.run_te_many: one
-    # linearisation and inner solve per outer iteration for all of them; serially ~12 % less CPU for the 5
-    # conditions of a state), whatever the workers: a group is solved by one worker as it is in this process, so a
-    # batch's numbers are the serial ones bit for bit (stop 28: one state's conditions split over two workers, two
-    # and two, differed within the solver tolerance, and a realistic draw took another path and failed); the
-    # states of a batch (a Jacobian's columns, the screening signatures) spread over the workers
-    labels = [_group_label(case_dicts[t[0]]) for t in todo]
+    # the cases that differ only in load and direction are solved together, GROUP_CONDITIONS at a time in their
+    # order in the batch (rvdyn.te.run_te_many: one linearisation and inner solve per outer iteration for all of
+    # them), whatever the workers: a group is solved by one worker as it is in this process, so a batch's numbers
+    # are the serial ones bit for bit (stop 28: a split that depended on the workers changed the rounding, and a
+    # realistic draw took another path); a single state's conditions (a chord trial) and the states of a batch (a
+    # Jacobian's columns, the screening signatures) spread over the workers
+    seen: dict[str, int] = {}
+    labels = []
+    for t in todo:
+        lab = _group_label(case_dicts[t[0]])
+        k = seen.get(lab, 0)
+        seen[lab] = k + 1
+        labels.append(f"{lab}#{k // GROUP_CONDITIONS}")
     grouped = len(todo) > 1
     res = runner([t[1] for t in todo], "forward model", theta_in_deg=[t[2] for t in todo],
                  group=labels if grouped else None)

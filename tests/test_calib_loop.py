@@ -238,9 +238,10 @@ def test_te_at_equals_the_grid_at_its_nodes_in_any_order_and_revolution(directio
 
 def test_two_workers_give_the_serial_numbers_bit_for_bit():
     """The forward model's batches through N workers give the serial numbers: a model state's run conditions are
-    one group that one worker solves as this process does (not split over the workers: two and two they differ
-    within the solver tolerance, and a realistic draw took another path), the states of a batch spread over the
-    workers, and the warm starts the next solves take do not depend on which worker finished first."""
+    groups of two (forward.GROUP_CONDITIONS) whatever the workers, each solved by one worker as this process
+    solves it (a split that depended on the workers changed the rounding, and a realistic draw took another
+    path), the groups of a batch spread over the workers, and the warm starts the next solves take do not
+    depend on which worker finished first."""
     from rvcalib import forward
     from rvdyn.runner import Runner
 
@@ -263,6 +264,38 @@ def test_two_workers_give_the_serial_numbers_bit_for_bit():
             runner.close()
         got.append(np.concatenate(one + two + after))
     np.testing.assert_array_equal(got[1], got[0])
+
+
+def test_a_state_s_run_conditions_are_solved_two_and_two():
+    """A model state's four run conditions go to the runner as two tasks of two conditions (GROUP_CONDITIONS, in
+    their order), so a single state's solve spreads over two workers; a batch of two states as four tasks."""
+    from rvcalib import forward
+    from rvdyn.runner import Runner
+
+    def state(v: float) -> list[dict]:
+        return [{"errors": {"pin_pitch": {"pin": 3, "value": v}}, "load_Nm": L, "direction": d}
+                for L in (10.0, 30.0) for d in (1, -1)]
+
+    runner = Runner(executor=1, memory_bytes=forward.CACHE_BYTES, law=forward.forward_runner().law)
+    tasks: list[list[tuple]] = []
+    run = runner.executor.run
+
+    def spy(fn, payloads):
+        tasks.append([tuple((q["case"]["load_Nm"], q["case"]["direction"]) for q in p.get("jobs", [p]))
+                      for p in payloads])
+        yield from run(fn, payloads)
+
+    runner.executor.run = spy
+    x = grid_angles_deg(24, PERIOD_DEG) + 0.37
+    prev = forward.use_runner(runner)
+    try:
+        forward.te_at_many(state(0.02), [x] * 4)
+        forward.te_at_many(state(0.021) + state(0.023), [x] * 8)
+    finally:
+        forward.use_runner(prev)
+        runner.close()
+    assert tasks[0] == [((10.0, 1), (10.0, -1)), ((30.0, 1), (30.0, -1))]
+    assert [len(t) for t in tasks[1]] == [2, 2, 2, 2]
 
 
 def test_forward_model_runs_on_the_rvdyn_runner_it_is_given(tmp_path):
