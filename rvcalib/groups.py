@@ -327,7 +327,9 @@ class Groups(BasinCheck):
         # 2c. a second fit of the same effects from another start (rvcalib.basins): intervals cover both
         if resolve and not self.over_budget():
             self.restart_refit(adopt=False, members=members)
-        groups += self.basin_groups(by_name, rms_model)
+        for g in self.basin_groups(by_name, rms_model):
+            groups.append(g)
+            unsplit.update(m["name"] for m in g["members"] if not m["named"])
         # 3. instance sets: several instances of one error type in the model that one instance replaces
         #    within the noise are one identified error (its combined effect), not several
         merged, combined = self._instance_sets(members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq,

@@ -79,6 +79,9 @@ def test_a_second_fit_within_the_noise_widens_the_intervals_and_makes_a_group():
     g = groups[0]
     assert [m["name"] for m in g["members"]] == ["A_test", "B_test"]          # D's 2.1 is inside 2 +- 0.3
     assert [m["value_other_fit"] for m in g["members"]] == [2.5, 0.4]
+    # B at 0.4 in the other fit is within its interval's half-width (1.0) of zero: not named; A (2.5 > 0.5) is
+    assert [m["named"] for m in g["members"]] == [True, False]
+    assert "B_test not named as effects" in g["note"]
     assert by_name["A_test"].ci_low == 2.5 and by_name["A_test"].ci_high == 10.5
     assert by_name["B_test"].ci_low == -9.0 and by_name["B_test"].ci_high == 0.4
     assert by_name["D_test"].ci_low == pytest.approx(1.7) and by_name["D_test"].ci_high == pytest.approx(2.3)

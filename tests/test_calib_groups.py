@@ -119,3 +119,24 @@ def test_interval_covers_the_truth_when_an_error_is_left_out(tmp_path):
     assert comp.ci_low <= 0.2 <= comp.ci_high
     assert comp.ci_low <= lo and comp.ci_high >= hi  # widened, never narrowed
     assert comp.selection["interval_widened_by"] == "pin_radius"
+
+
+def test_a_member_the_other_fit_holds_near_zero_is_not_named(one_load, monkeypatch):
+    """A member of a ``two_fits`` group whose size in the other fit is within its interval's half-width of zero
+    (``named`` false, rvcalib.basins) leaves ``effects`` as a member of an ``unsplit`` group does; the other
+    effects stay named."""
+    cal, _, _ = one_load
+    seen = {}
+
+    def basin_groups(by_name, rms_model):
+        seen.update(by_name)
+        return [{"kind": "two_fits", "found": CAM, "rms_other_fit_arcsec": rms_model,
+                 "members": [{"name": CAM, "key": "cam_eccentricity", "value": by_name[CAM].value, "unit": "um",
+                              "rms_after_arcsec": rms_model, "found": True, "value_other_fit": 0.0,
+                              "named": False}], "note": "stub"}]
+
+    monkeypatch.setattr(cal, "basin_groups", basin_groups)
+    kept, groups = cal.final_state_groups(cal.intervals())
+    assert CAM in seen
+    assert CAM not in {f.name for f in kept}
+    assert any(g["kind"] == "two_fits" and g["found"] == CAM for g in groups)
