@@ -11,8 +11,9 @@ on stderr, exit status 2.
 
 The model TE is solved by rvdyn's forward runner (:class:`rvdyn.runner.Runner`, see
 :mod:`rvcalib.forward`): ``--workers`` local processes (default 2, as ``rv-stackup``) solve each batch of model states (the screening
-signatures, the difference columns of a refit's Jacobian; a state's run conditions together in one process, as
-serially; every difference column warm-started from the state, as serially; no result depends on which worker
+signatures, the difference columns of a refit's Jacobian; a state's run conditions two and two, each pair in one
+process as serially, so a single state spreads over two; every difference column warm-started from the state, as
+serially; no result depends on which worker
 finishes first: the result is the serial one bit for bit), ``--cache`` keeps
 every solve on disk for later runs (the same cache format as ``rv-stackup --cache``).
 """
