@@ -57,9 +57,12 @@ CACHE_BYTES = 256 * 2 ** 20
 WARM_BYTES = 32 * 2 ** 20
 
 #: Run conditions of one model state solved together in one runner group (one worker task), in their order in the
-#: batch: two and two, so that a single state's solve (a chord trial) spreads over two workers. Serially a
-#: realistic state's four conditions at 333 readings take about the same CPU in two groups of two as in one of
-#: four (0.33-0.34 against 0.34-0.38 s, warm; four single solves 0.36-0.38 s; docs/calibration.md, "Loop speed").
+#: batch: two and two, an odd last one with the two before it (3 conditions: one group; 5: two and three), so that a
+#: single state's solve (a chord trial) spreads over two workers. Serially a realistic state's four conditions at
+#: 333 readings take about the same CPU in two groups of two as in one of four (0.33-0.34 against 0.34-0.38 s, warm;
+#: four single solves 0.36-0.38 s; docs/calibration.md, "Loop speed"). A group of one goes to rvdyn.te.run_te,
+#: which has no per-state exit: three conditions as two and one made a loop test under the impact law take 51.5
+#: instead of 34.2 s.
 GROUP_CONDITIONS = 2
 
 _RUNNER: Runner | None = None
@@ -211,13 +214,19 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
     # are the serial ones bit for bit (stop 28: a split that depended on the workers changed the rounding, and a
     # realistic draw took another path); a single state's conditions (a chord trial) and the states of a batch (a
     # Jacobian's columns, the screening signatures) spread over the workers
+    states = [_group_label(case_dicts[t[0]]) for t in todo]
+    count: dict[str, int] = {}
+    for lab in states:
+        count[lab] = count.get(lab, 0) + 1
     seen: dict[str, int] = {}
     labels = []
-    for t in todo:
-        lab = _group_label(case_dicts[t[0]])
+    for lab in states:
         k = seen.get(lab, 0)
         seen[lab] = k + 1
-        labels.append(f"{lab}#{k // GROUP_CONDITIONS}")
+        # an odd last condition joins the group before it: a group of one is solved alone (rvdyn.te.run_te), without
+        # the batch's per-state exit, and under the impact law that cost a loop test half as much again
+        last = max(count[lab] // GROUP_CONDITIONS - 1, 0)
+        labels.append(f"{lab}#{min(k // GROUP_CONDITIONS, last)}")
     grouped = len(todo) > 1
     res = runner([t[1] for t in todo], "forward model", theta_in_deg=[t[2] for t in todo],
                  group=labels if grouped else None)

@@ -268,13 +268,15 @@ def test_two_workers_give_the_serial_numbers_bit_for_bit():
 
 def test_a_state_s_run_conditions_are_solved_two_and_two():
     """A model state's four run conditions go to the runner as two tasks of two conditions (GROUP_CONDITIONS, in
-    their order), so a single state's solve spreads over two workers; a batch of two states as four tasks."""
+    their order), so a single state's solve spreads over two workers; a batch of two states as four tasks. An odd
+    last condition joins the pair before it (three: one task; five: two and three): a task of one condition
+    would be solved without the batch's per-state exit."""
     from rvcalib import forward
     from rvdyn.runner import Runner
 
-    def state(v: float) -> list[dict]:
+    def state(v: float, loads=(10.0, 30.0)) -> list[dict]:
         return [{"errors": {"pin_pitch": {"pin": 3, "value": v}}, "load_Nm": L, "direction": d}
-                for L in (10.0, 30.0) for d in (1, -1)]
+                for L in loads for d in (1, -1)]
 
     runner = Runner(executor=1, memory_bytes=forward.CACHE_BYTES, law=forward.forward_runner().law)
     tasks: list[list[tuple]] = []
@@ -291,11 +293,15 @@ def test_a_state_s_run_conditions_are_solved_two_and_two():
     try:
         forward.te_at_many(state(0.02), [x] * 4)
         forward.te_at_many(state(0.021) + state(0.023), [x] * 8)
+        forward.te_at_many(state(0.024)[:3], [x] * 3)
+        forward.te_at_many(state(0.025, (10.0, 20.0, 30.0))[:5], [x] * 5)
     finally:
         forward.use_runner(prev)
         runner.close()
     assert tasks[0] == [((10.0, 1), (10.0, -1)), ((30.0, 1), (30.0, -1))]
     assert [len(t) for t in tasks[1]] == [2, 2, 2, 2]
+    assert [len(t) for t in tasks[2]] == [3]
+    assert tasks[3] == [((10.0, 1), (10.0, -1)), ((20.0, 1), (20.0, -1), (30.0, 1))]
 
 
 def test_forward_model_runs_on_the_rvdyn_runner_it_is_given(tmp_path):
