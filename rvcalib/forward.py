@@ -38,6 +38,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
@@ -215,9 +216,7 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
     # realistic draw took another path); a single state's conditions (a chord trial) and the states of a batch (a
     # Jacobian's columns, the screening signatures) spread over the workers
     states = [_group_label(case_dicts[t[0]]) for t in todo]
-    count: dict[str, int] = {}
-    for lab in states:
-        count[lab] = count.get(lab, 0) + 1
+    count = Counter(states)
     seen: dict[str, int] = {}
     labels = []
     for lab in states:
