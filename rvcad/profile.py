@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+from numba import njit
 from scipy.optimize import brentq
 
 from rvcad.tolerances import TOL, Tolerances
@@ -60,11 +61,12 @@ def _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, px, py, max_step):
     return np.clip(f / fp, -max_step, max_step), sp2
 
 
-def _sin_cos_small(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """sin x and cos x for |x| <= 0.05 by their Taylor series, with as many terms as the largest |x| needs
-    for remainders below 1e-19 (to x^9 and x^8 at 0.05; to x^3 and x^2 below 2e-5)."""
+@njit(cache=True, inline="always")
+def _sin_cos_small_1(x: float) -> tuple[float, float]:
+    """sin x and cos x for |x| <= 0.05 by their Taylor series, with as many terms as |x| needs for remainders
+    below 1e-19 (to x^9 and x^8 at 0.05; to x^3 and x^2 below 2e-5)."""
     x2 = x * x
-    m = float(np.abs(x).max()) if x.size else 0.0
+    m = abs(x)
     if m < 2e-5:
         return x + x * x2 * (-1.0 / 6.0), 1.0 - 0.5 * x2
     if m < 2e-3:
@@ -72,6 +74,91 @@ def _sin_cos_small(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0))))
     return (x + x * x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0)))),
             1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0)))))
+
+
+@njit(cache=True)
+def _foot_points_kernel(t0, P, R, e, Z, ph, max_step, tol_mm, max_iter):
+    """Foot parameters t (K,) of the points P (K, 2) on ``q(t) = R u(t) - e u(Z t + ph)`` from t0 (K,), each
+    point by its own Newton iteration (the step of :func:`_foot_newton_step`, clipped to ``max_step``) until
+    it moves the foot by less than ``tol_mm`` (at most ``max_iter`` steps); returns t and cos t, sin t,
+    cos(Z t + ph), sin(Z t + ph) at the feet (the trig terms carried by :func:`_sin_cos_small_1` after steps
+    of Z |dt| <= 0.05, evaluated directly after larger ones). Each iteration sweeps the points still moving,
+    so independent points overlap in the pipeline."""
+    K = t0.shape[0]
+    T = t0.copy()
+    C1 = np.cos(T)
+    S1 = np.sin(T)
+    C2 = np.cos(Z * T + ph)
+    S2 = np.sin(Z * T + ph)
+    moving = np.ones(K, dtype=np.bool_)
+    eZ = e * Z
+    eZ2 = e * Z * Z
+    for _ in range(max_iter):
+        left = False
+        for i in range(K):
+            if not moving[i]:
+                continue
+            c1 = C1[i]
+            s1 = S1[i]
+            c2 = C2[i]
+            s2 = S2[i]
+            dx = R * c1 - e * c2 - P[i, 0]
+            dy = R * s1 - e * s2 - P[i, 1]
+            d1x = -R * s1 + eZ * s2
+            d1y = R * c1 - eZ * c2
+            d2x = -R * c1 + eZ2 * c2
+            d2y = -R * s1 + eZ2 * s2
+            sp2 = d1x * d1x + d1y * d1y
+            f = dx * d1x + dy * d1y
+            fp = sp2 + dx * d2x + dy * d2y
+            if not fp > 0:
+                fp = sp2
+            step = min(max(f / fp, -max_step), max_step)
+            t = T[i] - step
+            T[i] = t
+            zs = Z * step
+            if abs(zs) > 0.05:
+                C1[i] = math.cos(t)
+                S1[i] = math.sin(t)
+                a2 = Z * t + ph
+                C2[i] = math.cos(a2)
+                S2[i] = math.sin(a2)
+            else:
+                sa, ca = _sin_cos_small_1(step)
+                sb, cb = _sin_cos_small_1(zs)
+                C1[i] = c1 * ca + s1 * sa
+                S1[i] = s1 * ca - c1 * sa
+                C2[i] = c2 * cb + s2 * sb
+                S2[i] = s2 * cb - c2 * sb
+            if abs(step) * math.sqrt(sp2) >= tol_mm:
+                left = True
+            else:
+                moving[i] = False
+        if not left:
+            break
+    return T, C1, S1, C2, S2
+
+
+@njit(cache=True)
+def _curvature_kernel(t, R, e, Z, ph):
+    """Signed curvature (1/mm) of ``q(t) = R u(t) - e u(Z t + ph)`` at each t (flat): ``q' = R u'(t) - e Z
+    u'(Z t + ph)``, ``q'' = -R u(t) + e Z^2 u(Z t + ph)``, ``kappa = (q'_x q''_y - q'_y q''_x) / |q'|^3``."""
+    out = np.empty(t.shape[0])
+    eZ = e * Z
+    eZ2 = e * Z ** 2
+    for i in range(t.shape[0]):
+        c1 = math.cos(t[i])
+        s1 = math.sin(t[i])
+        a2 = Z * t[i] + ph
+        c2 = math.cos(a2)
+        s2 = math.sin(a2)
+        dx = R * -s1 - eZ * -s2
+        dy = R * c1 - eZ * c2
+        ddx = -R * c1 + eZ2 * c2
+        ddy = -R * s1 + eZ2 * s2
+        r = math.sqrt(dx * dx + dy * dy)
+        out[i] = (dx * ddy - dy * ddx) / (r * r * r)
+    return out
 
 
 def sagitta_samples(t0: float, t1: float, speed, radius, sagitta: float, max_chord: float = 1.0,
@@ -180,9 +267,12 @@ class CycloidProfile:
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
     def curvature(self, t: np.ndarray) -> np.ndarray:
-        """Signed curvature of q, 1/mm (positive where the disc is convex)."""
-        d, dd = self.dq(t), self.ddq(t)
-        return (d[..., 0] * dd[..., 1] - d[..., 1] * dd[..., 0]) / np.linalg.norm(d, axis=-1) ** 3
+        """Signed curvature of q, 1/mm (positive where the disc is convex):
+        ``(q'_x q''_y - q'_y q''_x) / |q'|^3`` (:meth:`dq`, :meth:`ddq`; compiled, :func:`_curvature_kernel`)."""
+        t = np.asarray(t, dtype=float)
+        return _curvature_kernel(np.ascontiguousarray(t).reshape(-1), float(self.pin_circle_radius),
+                                 float(self.eccentricity), float(self.z_pins),
+                                 float(self.cam_phase)).reshape(t.shape)
 
     def boundary(self, t: np.ndarray) -> np.ndarray:
         """Equidistant b(t) = q(t) - rp n(t) (the envelope of the pins), mm."""
@@ -357,48 +447,15 @@ class CycloidProfile:
     def _foot_point_per_point(self, p: np.ndarray, t0: np.ndarray, trig: bool = False):
         """:meth:`foot_point` with each point stopping at its own convergence (the same Newton step).
 
-        The trig terms of t and Z t + phi_c are evaluated once; after each Newton step of Z |dt| <= 0.05
-        they follow by the angle-addition formulas with the Taylor series of the small angle (remainders below
-        1e-19), so they agree with direct evaluation to a few rounding errors.
+        Compiled (:func:`_foot_points_kernel`): the trig terms of t and Z t + phi_c are evaluated once; after
+        each Newton step of Z |dt| <= 0.05 they follow by the angle-addition formulas with the Taylor series of
+        the small angle (remainders below 1e-19), so they agree with direct evaluation to a few rounding errors.
         ``trig``: also return cos t, sin t, cos(Z t + phi_c), sin(Z t + phi_c) at the feet."""
-        t = np.array(t0, dtype=float, copy=True).reshape(-1)
-        P = p.reshape(-1, 2)
-        R, e, Z, ph = self.pin_circle_radius, self.eccentricity, self.z_pins, self.cam_phase
-        max_step = 0.25 * math.pi / self.z_lobes
-        eZ, eZ2 = e * Z, e * Z * Z
-        c1, s1 = np.cos(t), np.sin(t)
-        a2 = Z * t + ph
-        c2, s2 = np.cos(a2), np.sin(a2)
-        T = [t, c1, s1, c2, s2]                      # results, written back for the points still iterating
-        act = None                                   # indices still iterating (None: all)
-        px, py = P[:, 0], P[:, 1]
-        for _ in range(self.tol.foot_point_max_iter):
-            step, sp2 = _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, px, py, max_step)
-            t = t - step
-            zs = Z * step
-            sa, ca = _sin_cos_small(step)
-            sb, cb = _sin_cos_small(zs)
-            c1, s1 = c1 * ca + s1 * sa, s1 * ca - c1 * sa
-            c2, s2 = c2 * cb + s2 * sb, s2 * cb - c2 * sb
-            big = np.nonzero(np.abs(zs) > 0.05)[0]
-            if big.size:                             # large steps: the trig terms evaluated directly
-                tb = t[big]
-                c1[big], s1[big] = np.cos(tb), np.sin(tb)
-                a2 = Z * tb + ph
-                c2[big], s2[big] = np.cos(a2), np.sin(a2)
-            more = np.abs(step) * np.sqrt(sp2) >= self.tol.foot_point_mm
-            cur = [t, c1, s1, c2, s2]
-            if act is None:
-                T = cur
-                act = np.nonzero(more)[0]
-            else:
-                for full, v in zip(T, cur):
-                    full[act] = v
-                act = act[more]
-            if act.size == 0:
-                break
-            t, c1, s1, c2, s2 = (v[act] for v in T)
-            px, py = P[act, 0], P[act, 1]
+        t = np.ascontiguousarray(t0, dtype=float).reshape(-1)
+        P = np.ascontiguousarray(p, dtype=float).reshape(-1, 2)
+        T = _foot_points_kernel(t, P, float(self.pin_circle_radius), float(self.eccentricity),
+                                float(self.z_pins), float(self.cam_phase), 0.25 * math.pi / self.z_lobes,
+                                float(self.tol.foot_point_mm), int(self.tol.foot_point_max_iter))
         shape = np.shape(t0)
         if trig:
             return tuple(v.reshape(shape) for v in T)

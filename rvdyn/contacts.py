@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from rvcad.geometry import ReducerGeometry
 from rvdyn.materials import LineContact
@@ -127,7 +128,7 @@ class PhysicalLaw:
     (N/mm along the line of action) on the others. ``rows`` selects steps of the chunk.
 
     The per-step constant ``ln A + C`` of the inversion (:meth:`rvdyn.materials.LineContact._u`) is computed
-    once per linearisation, and the inversion runs on whole arrays (no masked copies); the numbers are the
+    once per linearisation, and the inversion is compiled (:func:`_physical_kernel`); the numbers are the
     same operations in the same order as ``LineContact``'s. :meth:`energy_force_stiffness` gives the energy,
     force and stiffness of one inversion (the solver's line search keeps the force and stiffness of the
     accepted step for its next Newton step)."""
@@ -140,8 +141,9 @@ class PhysicalLaw:
         self.n_pin = n_pin
         self.k_mesh = float(k_mesh)
         C = np.asarray(line.C, dtype=float)
-        self._lnAC = np.log(line.A) + C                 # per step and pin, once per linearisation
-        self._Pmax = np.exp(C - (1.0 + 1e-12))          # the law's largest line load, N/mm (u = 1)
+        # per step and pin, once per linearisation: ln A + C and the law's largest line load, N/mm (u = 1)
+        self._lnAC = np.ascontiguousarray(np.atleast_2d(np.log(line.A) + C), dtype=float)
+        self._Pmax = np.ascontiguousarray(np.atleast_2d(np.exp(C - (1.0 + 1e-12))), dtype=float)
 
     def describe(self) -> str:
         return "the physical contact law (Hertz line contact, ISO 6336 mesh stiffness)"
@@ -152,29 +154,6 @@ class PhysicalLaw:
     def floor_stiffness(self) -> float:
         C = np.median(self.line.C)
         return float(self.line.stiffness(np.array(1e-4), np.array(C)))
-
-    def _u_pos(self, delta: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The pin contacts in touch (delta > 0) as flat indices into ``delta`` (N, M), their u = C - ln P and
-        their line load P = delta / (A u) (N/mm; at most the law's maximum ``e^(C - 1)``).
-
-        ``u - ln u = ln(A e^C / delta)`` by Newton from ``u0 = rhs + ln rhs`` (3 steps), each step written
-        ``u <- u (ln u + rhs - 1) / (u - 1)`` (the same Newton step, two operations fewer). ``P = delta / (A u)``
-        is Johnson's relation itself (``delta = A P (C - ln P)``), without the exponential of ``e^(C - u)``."""
-        N, M = delta.shape
-        p = self.n_pin
-        lnAC = self._lnAC if rows is None else self._lnAC[rows]
-        Pmax = self._Pmax if rows is None else self._Pmax[rows]
-        ix = np.flatnonzero(delta[:, :p] > 0)                                  # in the (N, p) pin block
-        d = np.take(delta[:, :p], ix) if M != p else np.take(delta, ix)
-        rhs = np.take(lnAC, ix) - np.log(d)
-        rhs = np.maximum(rhs, 1.0 + 1e-12)             # delta beyond the law's maximum: clamp at u = 1
-        u = rhs + np.log(rhs)
-        r1 = rhs - 1.0
-        for _ in range(3):
-            u = u * (np.log(u) + r1) / (u - 1.0)
-        u = np.maximum(u, 1.0 + 1e-12)
-        P = np.minimum(d / (self.line.A * u), np.take(Pmax, ix))
-        return ix + (ix // p) * (M - p), u, P
 
     def force_stiffness(self, delta: np.ndarray, rows=None) -> tuple[np.ndarray, np.ndarray]:
         _, F, K = self.energy_force_stiffness(delta, rows, energy=False)
@@ -191,24 +170,53 @@ class PhysicalLaw:
 
     def energy_force_stiffness(self, delta: np.ndarray, rows=None, fk: bool = True, energy: bool = True):
         """Energy (N mm), force (N) and stiffness (N/mm) of every contact (None: the energy without ``energy``,
-        the force and stiffness without ``fk``), computed on the contacts in touch only."""
-        p = self.n_pin
-        ix, u, P = self._u_pos(delta, rows)
-        L, A = self.line.L, self.line.A
-        dm = delta[:, p:]
-        E = F = K = None
-        if energy:
-            E = np.zeros_like(delta)
-            np.put(E, ix, 0.5 * L * A * P * P * (u - 0.5))
-            E[:, p:] = 0.5 * self.k_mesh * np.maximum(dm, 0.0) ** 2
-        if fk:
-            F = np.zeros_like(delta)
-            K = np.zeros_like(delta)
-            np.put(F, ix, L * P)
-            np.put(K, ix, L / (A * (u - 1.0)))
-            F[:, p:] = self.k_mesh * np.maximum(dm, 0.0)
-            K[:, p:] = np.where(dm > 0, self.k_mesh, 0.0)
-        return E, F, K
+        the force and stiffness without ``fk``); compiled (:func:`_physical_kernel`), the pin contacts'
+        inversion on the contacts in touch only."""
+        N, n_steps = delta.shape[0], self._lnAC.shape[0]
+        r = np.arange(n_steps)[slice(None) if rows is None else rows]
+        if r.shape[0] != N:
+            raise ValueError(f"delta has {N} steps where the law's rows select {r.shape[0]}")
+        E, F, K = _physical_kernel(np.ascontiguousarray(delta, dtype=float), self._lnAC, self._Pmax, r,
+                                   self.n_pin, float(self.line.L), float(self.line.A), self.k_mesh)
+        return (E if energy else None), (F if fk else None), (K if fk else None)
+
+
+@njit(cache=True)
+def _physical_kernel(delta, lnAC, Pmax, rows, p, L, A, k_mesh):
+    """Energy, force and stiffness (N, M) of :class:`PhysicalLaw` at the approaches ``delta`` (N, M) mm; step n
+    uses row ``rows[n]`` of the per-step constants ``lnAC = ln A + C`` and ``Pmax`` (., p).
+
+    Pin contacts in touch (delta > 0): ``u = C - ln P`` solves ``u - ln u = ln(A e^C / delta)`` by Newton from
+    ``u0 = rhs + ln rhs`` (3 steps, each written ``u <- u (ln u + rhs - 1) / (u - 1)``), clamped at u = 1 (delta
+    beyond the law's maximum); the line load ``P = delta / (A u)`` is Johnson's relation itself (``delta = A P (C -
+    ln P)``), at most ``Pmax``; energy ``L A P^2 (u - 1/2) / 2``, force ``L P``, stiffness ``L / (A (u - 1))``. The
+    mesh columns (j >= p): a linear spring ``k_mesh`` in compression."""
+    N, M = delta.shape
+    E = np.zeros((N, M))
+    F = np.zeros((N, M))
+    K = np.zeros((N, M))
+    for n in range(N):
+        r = rows[n]
+        for j in range(p):
+            d = delta[n, j]
+            if d > 0:
+                rhs = max(lnAC[r, j] - math.log(d), 1.0 + 1e-12)
+                u = rhs + math.log(rhs)
+                r1 = rhs - 1.0
+                for _ in range(3):
+                    u = u * (math.log(u) + r1) / (u - 1.0)
+                u = max(u, 1.0 + 1e-12)
+                P = min(d / (A * u), Pmax[r, j])
+                E[n, j] = 0.5 * L * A * P * P * (u - 0.5)
+                F[n, j] = L * P
+                K[n, j] = L / (A * (u - 1.0))
+        for j in range(p, M):
+            dm = delta[n, j]
+            if dm > 0:
+                E[n, j] = 0.5 * k_mesh * (dm * dm)
+                F[n, j] = k_mesh * dm
+                K[n, j] = k_mesh
+    return E, F, K
 
 
 class AnalyticContacts:
