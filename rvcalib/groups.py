@@ -246,6 +246,7 @@ class Groups(BasinCheck):
                 groups.append(g)
                 if g["kind"] == "unsplit":
                     unsplit.add(g["found"])
+                unsplit.update(m["name"] for m in g["members"] if m.get("named") is False)
                 alt_names.setdefault(g["found"], set()).update(m["name"] for m in g["members"][1:])
         # 2. honest intervals: each named effect's interval in the model plus any one candidate left out
         #    (profiled over the size the data give that candidate), the union over candidates
