@@ -44,10 +44,12 @@ def _up(a: np.ndarray) -> np.ndarray:
     return np.stack([-np.sin(a), np.cos(a)], axis=-1)
 
 
+@njit(cache=True, inline="always")
 def _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, px, py, max_step):
-    """One Newton step (clipped to ``max_step``) of the foot-point condition (b(t) - p) . b'(t) = 0 of the
-    boundary b(t) = R (cos t, sin t) - e (cos(Z t + phi), sin(Z t + phi)), from the trig terms at t;
-    returns the step and |b'(t)|^2 (a concave point, f' <= 0, steps along the gradient instead)."""
+    """One Newton step (clipped to ``max_step``) of the foot-point condition (q(t) - p) . q'(t) = 0 of the
+    pin-centre curve q(t) = R (cos t, sin t) - e (cos(Z t + phi), sin(Z t + phi)), from the trig terms at t
+    (``eZ = e Z``, ``eZ2 = e Z^2``); returns the step and |q'(t)|^2 (a concave point, f' <= 0, steps along the
+    gradient instead). One point (compiled, inlined in the kernels)."""
     dx = R * c1 - e * c2 - px
     dy = R * s1 - e * s2 - py
     d1x = -R * s1 + eZ * s2
@@ -57,8 +59,33 @@ def _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, px, py, max_step):
     sp2 = d1x * d1x + d1y * d1y
     f = dx * d1x + dy * d1y
     fp = sp2 + dx * d2x + dy * d2y
-    fp = np.where(fp > 0, fp, sp2)
-    return np.clip(f / fp, -max_step, max_step), sp2
+    if not fp > 0:
+        fp = sp2
+    return min(max(f / fp, -max_step), max_step), sp2
+
+
+@njit(cache=True)
+def _foot_points_all_kernel(t0, px, py, R, e, Z, ph, max_step, tol_mm, max_iter):
+    """Foot parameters t (K,) of the points (px, py) (K,) from t0 (K,): every point takes the Newton step of
+    :func:`_foot_newton_step` (the trig terms evaluated directly) until all have moved their feet by less than
+    ``tol_mm`` in one step (at most ``max_iter`` steps), so the feet do not depend on the order of the points
+    but on the set (the reproducible default of :meth:`CycloidProfile.foot_point`)."""
+    K = t0.shape[0]
+    T = t0.copy()
+    eZ = e * Z
+    eZ2 = e * Z * Z
+    for _ in range(max_iter):
+        done = True
+        for i in range(K):
+            a2 = Z * T[i] + ph
+            step, sp2 = _foot_newton_step(R, e, eZ, eZ2, math.cos(T[i]), math.sin(T[i]), math.cos(a2),
+                                          math.sin(a2), px[i], py[i], max_step)
+            T[i] = T[i] - step
+            if not abs(step) * math.sqrt(sp2) < tol_mm:
+                done = False
+        if done:
+            break
+    return T
 
 
 @njit(cache=True, inline="always")
@@ -102,18 +129,7 @@ def _foot_points_kernel(t0, P, R, e, Z, ph, max_step, tol_mm, max_iter):
             s1 = S1[i]
             c2 = C2[i]
             s2 = S2[i]
-            dx = R * c1 - e * c2 - P[i, 0]
-            dy = R * s1 - e * s2 - P[i, 1]
-            d1x = -R * s1 + eZ * s2
-            d1y = R * c1 - eZ * c2
-            d2x = -R * c1 + eZ2 * c2
-            d2y = -R * s1 + eZ2 * s2
-            sp2 = d1x * d1x + d1y * d1y
-            f = dx * d1x + dy * d1y
-            fp = sp2 + dx * d2x + dy * d2y
-            if not fp > 0:
-                fp = sp2
-            step = min(max(f / fp, -max_step), max_step)
+            step, sp2 = _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, P[i, 0], P[i, 1], max_step)
             t = T[i] - step
             T[i] = t
             zs = Z * step
@@ -429,20 +445,12 @@ class CycloidProfile:
         p = np.asarray(p, dtype=float)
         if per_point:
             return self._foot_point_per_point(p, t0)
-        px, py = p[..., 0], p[..., 1]
-        t = np.array(t0, dtype=float, copy=True)
-        R, e, Z, ph = self.pin_circle_radius, self.eccentricity, self.z_pins, self.cam_phase
-        max_step = 0.25 * math.pi / self.z_lobes
-        eZ, eZ2 = e * Z, e * Z * Z
-        for _ in range(self.tol.foot_point_max_iter):
-            c1, s1 = np.cos(t), np.sin(t)
-            a2 = Z * t + ph
-            c2, s2 = np.cos(a2), np.sin(a2)
-            step, sp2 = _foot_newton_step(R, e, eZ, eZ2, c1, s1, c2, s2, px, py, max_step)
-            t -= step
-            if np.all(np.abs(step) * np.sqrt(sp2) < self.tol.foot_point_mm):
-                break
-        return t
+        px, py, t = np.broadcast_arrays(p[..., 0], p[..., 1], np.asarray(t0, dtype=float))
+        flat = [np.ascontiguousarray(v, dtype=float).reshape(-1) for v in (t, px, py)]
+        out = _foot_points_all_kernel(*flat, float(self.pin_circle_radius), float(self.eccentricity),
+                                      float(self.z_pins), float(self.cam_phase), 0.25 * math.pi / self.z_lobes,
+                                      float(self.tol.foot_point_mm), int(self.tol.foot_point_max_iter))
+        return out.reshape(t.shape)
 
     def _foot_point_per_point(self, p: np.ndarray, t0: np.ndarray, trig: bool = False):
         """:meth:`foot_point` with each point stopping at its own convergence (the same Newton step).
