@@ -284,7 +284,7 @@ class PairCheck(ReplacementRefit):
             _, (v, se), (v_c, _) = test
             lo, hi = v - tq * se, v + tq * se
             moved = not f.ci_low <= v <= f.ci_high
-            stands_in = lo <= 0.0 and not f.ci_low <= 0.0 <= f.ci_high
+            stands_in = lo <= 0.0 <= hi and not f.ci_low <= 0.0 <= f.ci_high
             f.ci_low, f.ci_high = float(min(f.ci_low, lo)), float(max(f.ci_high, hi))
             if not (moved or stands_in):
                 continue                             # the size stays inside the interval (widened to cover it)

@@ -314,11 +314,15 @@ def test_an_effect_that_stands_for_a_supported_left_out_candidate_is_not_named()
     assert "u" not in kinds and "size_with_left_out" not in by_name["u"].selection  # u: no group
 
 
-def test_a_genuine_effect_beside_a_supported_candidate_stays_named():
-    loop = _stand_in_case(0.5)
+@pytest.mark.parametrize("v_truth", [0.5, -0.5])
+def test_a_genuine_effect_beside_a_supported_candidate_stays_named(v_truth):
+    loop = _stand_in_case(v_truth)
     by_name = loop.fitted()
     groups = loop._nonlinear_pairs(by_name, set(), math.sqrt(loop.rss_full / loop.n))
     for g in groups:
         assert all(m.get("named", True) for m in g["members"]), g
     f = by_name["v"]
-    assert f.ci_low > 0.0 and f.ci_low <= 0.5 <= f.ci_high
+    assert 0.0 not in (f.ci_low, f.ci_high) and f.ci_low * f.ci_high > 0.0   # its interval stays on one side
+    assert f.ci_low <= v_truth <= f.ci_high
+    # its interval beside z holds no zero: no refit without it (the rule's test is on both ends of the interval)
+    assert not any("without v" in m for m in loop.logged), loop.logged
