@@ -171,6 +171,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             E0, F_all, K_all = energy_sub(self, x0, G, J, B, law, step, arms, fk=True)
         else:
             E0 = energy_sub(self, x0, G, J, B, law, step, arms)
+        # the linearised potential at x0 itself, for the outer loop's trust region (the same evaluation it needs)
+        self._e_start = E0.copy()
         Jnorm = _row_norm(J)
         bnorm = np.linalg.norm(B, axis=1)
         tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
@@ -538,7 +540,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
                 trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
                 if expand:
-                    e_here = energy_sub(self, xs, G, J, B[rows], step_law, np.zeros_like(xs), arms)
+                    e_here = self._e_start                # the potential at xs, from the inner solve
                     e_now = e_here + np.einsum("nd,nd->n", last_dx[rows], B[rows])
                     pred = e_old[rows] - e_pred[rows]
                     good = cut[rows] & ~flip & (pred > 0) & (e_old[rows] - e_now > 0.75 * pred)
@@ -552,8 +554,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
             if expand:
                 cut[rows] = big > trust[rows]
-                e_old[rows] = e_here if it > 0 else energy_sub(self, xs, G, J, B[rows], step_law, np.zeros_like(xs),
-                                                               arms)
+                e_old[rows] = e_here if it > 0 else self._e_start
                 e_pred[rows] = energy_sub(self, xs, G, J, B[rows], step_law, dx, arms)
             last_dx[rows] = dx
             xs += dx
