@@ -330,7 +330,7 @@ class Groups(BasinCheck):
             self.restart_refit(adopt=False, members=members)
         for g in self.basin_groups(by_name, rms_model):
             groups.append(g)
-            unsplit.update(m["name"] for m in g["members"] if not m["named"])
+            unsplit.update(m["name"] for m in g["members"] if m.get("named") is False)
         # 3. instance sets: several instances of one error type in the model that one instance replaces
         #    within the noise are one identified error (its combined effect), not several
         merged, combined = self._instance_sets(members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq,

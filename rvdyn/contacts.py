@@ -177,14 +177,15 @@ class PhysicalLaw:
         if r.shape[0] != N:
             raise ValueError(f"delta has {N} steps where the law's rows select {r.shape[0]}")
         E, F, K = _physical_kernel(np.ascontiguousarray(delta, dtype=float), self._lnAC, self._Pmax, r,
-                                   self.n_pin, float(self.line.L), float(self.line.A), self.k_mesh)
+                                   self.n_pin, float(self.line.L), float(self.line.A), self.k_mesh, energy, fk)
         return (E if energy else None), (F if fk else None), (K if fk else None)
 
 
 @njit(cache=True)
-def _physical_kernel(delta, lnAC, Pmax, rows, p, L, A, k_mesh):
+def _physical_kernel(delta, lnAC, Pmax, rows, p, L, A, k_mesh, want_e, want_fk):
     """Energy, force and stiffness (N, M) of :class:`PhysicalLaw` at the approaches ``delta`` (N, M) mm; step n
-    uses row ``rows[n]`` of the per-step constants ``lnAC = ln A + C`` and ``Pmax`` (., p).
+    uses row ``rows[n]`` of the per-step constants ``lnAC = ln A + C`` and ``Pmax`` (., p). Only the outputs asked
+    for (``want_e``: the energy; ``want_fk``: force and stiffness) are filled; the others are empty (0, 0).
 
     Pin contacts in touch (delta > 0): ``u = C - ln P`` solves ``u - ln u = ln(A e^C / delta)`` by Newton from
     ``u0 = rhs + ln rhs`` (3 steps, each written ``u <- u (ln u + rhs - 1) / (u - 1)``), clamped at u = 1 (delta
@@ -192,9 +193,9 @@ def _physical_kernel(delta, lnAC, Pmax, rows, p, L, A, k_mesh):
     ln P)``), at most ``Pmax``; energy ``L A P^2 (u - 1/2) / 2``, force ``L P``, stiffness ``L / (A (u - 1))``. The
     mesh columns (j >= p): a linear spring ``k_mesh`` in compression."""
     N, M = delta.shape
-    E = np.zeros((N, M))
-    F = np.zeros((N, M))
-    K = np.zeros((N, M))
+    E = np.zeros((N, M) if want_e else (0, 0))
+    F = np.zeros((N, M) if want_fk else (0, 0))
+    K = np.zeros((N, M) if want_fk else (0, 0))
     for n in range(N):
         r = rows[n]
         for j in range(p):
@@ -207,15 +208,19 @@ def _physical_kernel(delta, lnAC, Pmax, rows, p, L, A, k_mesh):
                     u = u * (math.log(u) + r1) / (u - 1.0)
                 u = max(u, 1.0 + 1e-12)
                 P = min(d / (A * u), Pmax[r, j])
-                E[n, j] = 0.5 * L * A * P * P * (u - 0.5)
-                F[n, j] = L * P
-                K[n, j] = L / (A * (u - 1.0))
+                if want_e:
+                    E[n, j] = 0.5 * L * A * P * P * (u - 0.5)
+                if want_fk:
+                    F[n, j] = L * P
+                    K[n, j] = L / (A * (u - 1.0))
         for j in range(p, M):
             dm = delta[n, j]
             if dm > 0:
-                E[n, j] = 0.5 * k_mesh * (dm * dm)
-                F[n, j] = k_mesh * dm
-                K[n, j] = k_mesh
+                if want_e:
+                    E[n, j] = 0.5 * k_mesh * (dm * dm)
+                if want_fk:
+                    F[n, j] = k_mesh * dm
+                    K[n, j] = k_mesh
     return E, F, K
 
 

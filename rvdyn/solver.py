@@ -144,8 +144,10 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         return self.law
 
     def _inner(self, th_in, x0, G, J, b, law: ContactLaw, mu: np.ndarray, max_iter: int = 200,
-               floor_k: np.ndarray | None = None, arms: np.ndarray | None | bool = False) -> np.ndarray:
-        """Minimise the linearised potential around x0; returns the step (N, ndof).
+               floor_k: np.ndarray | None = None, arms: np.ndarray | None | bool = False
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Minimise the linearised potential around x0; returns the step (N, ndof) and the linearised potential
+        at x0 itself (N,) N mm, which the solve evaluates first and the outer loop's trust region needs too.
 
         ``b`` is the load vector (ndof,) or one per state (N, ndof). ``mu`` (N,) is the Levenberg-Marquardt
         damping, updated in place so that the next outer iteration starts from where this one ended.
@@ -171,8 +173,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             E0, F_all, K_all = energy_sub(self, x0, G, J, B, law, step, arms, fk=True)
         else:
             E0 = energy_sub(self, x0, G, J, B, law, step, arms)
-        # the linearised potential at x0 itself, for the outer loop's trust region (the same evaluation it needs)
-        self._e_start = E0.copy()
+        E_start = E0.copy()                           # the linearised potential at x0 itself (returned)
         Jnorm = _row_norm(J)
         bnorm = np.linalg.norm(B, axis=1)
         tol_mm = self.tol.solver_angle_rad * self.Rp * 1e-2
@@ -258,7 +259,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 done |= (tot > LOOSE_MIN_STEP * 100.0 * tol_mm) & (moved < INNER_LOOSE * tot)
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False
-        return step
+        return step, E_start
 
     def _check_solve_args(self, theta_in, direction, load_Nm) -> np.ndarray:
         if direction not in (1, -1):
@@ -344,7 +345,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         G, J = self._linearise(th, xp, direction)
         step_law = self._step_law(law, self._line_last()[0] if law.physical else None)
         self.newton_load(B, True)
-        dx = self._inner(th, xp, G, J, B, step_law, np.ones(1))
+        dx, _ = self._inner(th, xp, G, J, B, step_law, np.ones(1))
         if not np.all(np.isfinite(dx)):                  # no usable pilot: the rows start as without one
             return np.zeros((th_in.size, self.ndof)), 1.0
         xp += dx * min(1.0, OUTER_TRUST_MM / max(float(np.abs(dx).max()), 1e-300))
@@ -530,7 +531,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             # the cam-bearing model at this linearisation point, shared by the inner solve and the trust region's
             # potentials (a function of the states alone)
             arms = self._hole_arms(th[rows], xs, step_law)
-            dx = self._inner(th[rows], xs, G, J, B[rows], step_law, mu, floor_k=floor_k, arms=arms)
+            dx, e_start = self._inner(th[rows], xs, G, J, B[rows], step_law, mu, floor_k=floor_k, arms=arms)
             mu_all[rows] = np.minimum(mu, 1e-2)
             # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
             # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
@@ -540,7 +541,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
                 trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
                 if expand:
-                    e_here = self._e_start                # the potential at xs, from the inner solve
+                    e_here = e_start                      # the potential at xs, from the inner solve
                     e_now = e_here + np.einsum("nd,nd->n", last_dx[rows], B[rows])
                     pred = e_old[rows] - e_pred[rows]
                     good = cut[rows] & ~flip & (pred > 0) & (e_old[rows] - e_now > 0.75 * pred)
@@ -554,7 +555,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
             if expand:
                 cut[rows] = big > trust[rows]
-                e_old[rows] = e_here if it > 0 else self._e_start
+                e_old[rows] = e_here if it > 0 else e_start
                 e_pred[rows] = energy_sub(self, xs, G, J, B[rows], step_law, dx, arms)
             last_dx[rows] = dx
             xs += dx

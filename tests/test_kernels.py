@@ -73,6 +73,10 @@ def test_physical_law_equals_line_contact_and_the_mesh_spring():
     assert np.array_equal(F[:, 6:], 2.5e5 * np.maximum(dm, 0.0))
     assert np.array_equal(K[:, 6:], np.where(dm > 0, 2.5e5, 0.0))
     np.testing.assert_allclose(E[:, 6:], 0.5 * 2.5e5 * np.maximum(dm, 0.0) ** 2, rtol=1e-15)
+    # the energy alone and the force and stiffness alone: the same numbers as all three together
+    assert np.array_equal(law.energy(delta), E)
+    F1, K1 = law.force_stiffness(delta)
+    assert np.array_equal(F1, F) and np.array_equal(K1, K)
     # rows: the per-step constants of the rows chosen, the same numbers as the whole
     rows = np.array([7, 2, 4])
     E2, F2, K2 = law.energy_force_stiffness(delta[rows], rows)
