@@ -61,11 +61,11 @@ def instrument() -> dict:
     stats: dict = defaultdict(lambda: [0, 0, 0, 0.0])
     orig = forward.te_at_many
 
-    def wrapped(case_dicts, input_deg, solver="analytic"):
+    def wrapped(case_dicts, input_deg, solver="analytic", **kw):
         r = forward.forward_runner()
         c0 = r.computed
         t0 = time.process_time()
-        out = orig(case_dicts, input_deg, solver)
+        out = orig(case_dicts, input_deg, solver, **kw)
         st = stats[stage_of_stack()]
         st[0] += 1
         st[1] += len(case_dicts)

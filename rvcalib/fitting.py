@@ -159,7 +159,7 @@ class Fitting(Screening):
 
         def many(points: list[np.ndarray]) -> list:
             return [p if isinstance(p, ModelEvaluationError) else residual(p)
-                    for p in self.predict_many([unpack(x) for x in points])]
+                    for p in self.predict_many([unpack(x) for x in points], sensitivity=True)]
         fun.many = many  # type: ignore[attr-defined]
         return fun, unpack
 

@@ -106,6 +106,7 @@ def clear_cache() -> None:
     r = forward_runner()
     r.memory.clear()
     r.states.clear()
+    r.job_states.clear()
 
 
 def grid_angles_deg(steps: int, period: float) -> np.ndarray:
@@ -148,9 +149,10 @@ def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> 
 
 
 def grid_te_many(case_dicts: Sequence[dict[str, Any]], steps: int | Sequence[int],
-                 solver: str = "analytic") -> list[np.ndarray | ModelEvaluationError]:
+                 solver: str = "analytic", sensitivity: bool = False) -> list[np.ndarray | ModelEvaluationError]:
     """:func:`grid_te` of many cases in one batch of the runner (one ``steps`` or one per case); a case
-    rvdyn cannot evaluate gives its :class:`ModelEvaluationError` in its place instead of raising."""
+    rvdyn cannot evaluate gives its :class:`ModelEvaluationError` in its place instead of raising.
+    ``sensitivity``: as in :func:`te_at_many`."""
     st = [int(steps)] * len(case_dicts) if isinstance(steps, (int, np.integer)) else [int(s) for s in steps]
     angles: list[np.ndarray | None] = []
     for d, s in zip(case_dicts, st):
@@ -158,7 +160,7 @@ def grid_te_many(case_dicts: Sequence[dict[str, Any]], steps: int | Sequence[int
             angles.append(grid_angles_deg(s, case_period_deg(d)))
         except ModelEvaluationError:
             angles.append(None)
-    return te_at_many(case_dicts, angles, solver)
+    return te_at_many(case_dicts, angles, solver, sensitivity=sensitivity)
 
 
 def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analytic") -> np.ndarray:
@@ -183,9 +185,15 @@ def te_at(case_dict: dict[str, Any], input_deg: np.ndarray, solver: str = "analy
 
 
 def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndarray | None],
-               solver: str = "analytic") -> list[np.ndarray | ModelEvaluationError]:
+               solver: str = "analytic", sensitivity: bool = False) -> list[np.ndarray | ModelEvaluationError]:
     """:func:`te_at` of many cases (each with its angles) in one batch of the forward runner; a case
-    rvdyn cannot evaluate (or whose angles are None) gives a :class:`ModelEvaluationError` in its place."""
+    rvdyn cannot evaluate (or whose angles are None) gives a :class:`ModelEvaluationError` in its place.
+
+    ``sensitivity``: sensitivity solves (:meth:`rvdyn.runner.Runner.__call__`'s ``max_outer=1``): each case with a
+    warm start moves by one linearisation from its run condition's newest converged state. For the
+    differences of nearby states the loop takes as sensitivities (a Jacobian's columns, the screening signatures,
+    the members' parts), whose change from that state they give within about 1e-3 of itself at about 0.55 of the
+    CPU; the residual of a fit, which its decisions compare, is always a converged solve."""
     if len(input_deg) != len(case_dicts):
         raise ValueError(f"input_deg has {len(input_deg)} entries for {len(case_dicts)} cases")
     runner = forward_runner()
@@ -228,7 +236,7 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
         labels.append(f"{lab}#{min(k // GROUP_CONDITIONS, last)}")
     grouped = len(todo) > 1
     res = runner([t[1] for t in todo], "forward model", theta_in_deg=[t[2] for t in todo],
-                 group=labels if grouped else None)
+                 group=labels if grouped else None, max_outer=1 if sensitivity else None)
     for (i, _, _, inv, rev), r in zip(todo, res):
         if r["status"] != "ok":
             out[i] = ModelEvaluationError(f"rvdyn could not evaluate the case: {r['error']}")

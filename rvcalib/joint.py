@@ -175,8 +175,8 @@ class JointSelection(Selection):
                 break
         return out
 
-    def _grid_cat(self, pairs: list[tuple[Effect, np.ndarray]]) -> np.ndarray:
-        return np.concatenate(self.predict_grid(pairs))
+    def _grid_cat(self, pairs: list[tuple[Effect, np.ndarray]], sensitivity: bool = False) -> np.ndarray:
+        return np.concatenate(self.predict_grid(pairs, sensitivity=sensitivity))
 
     def _part_of(self, a: Active, base: np.ndarray) -> np.ndarray | None:
         """The present part of member ``a`` on the screening grid: the state's TE (``base``) minus the TE
@@ -216,7 +216,7 @@ class JointSelection(Selection):
                 if abs(dq) < 1e-12:
                     q, dq = np.clip(p - h * direction, e.lower, e.upper), -h
                     dq = float(np.dot(q - p, direction))
-                return Pc(self._grid_cat(others + [(e, q)]) - base) / dq, dq
+                return Pc(self._grid_cat(others + [(e, q)], sensitivity=True) - base) / dq, dq
 
             if e.n_params == 1:
                 if part is not None and mag >= MIN_SECANT * e.scale:

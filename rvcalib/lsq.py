@@ -221,8 +221,8 @@ def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int
         if not accepted and reused:
             # the reused start Jacobian gave no decrease: difference it here and go on (once)
             reused = False
-            try:
-                J = fd_jac(fun, x, lo, hi, h=h, f0=r)
+            try:  # fun(x) asked for again (the forward runner's cache): its difference points start from x's state
+                J = fd_jac(fun, x, lo, hi, h=h)
             except ModelEvaluationError:
                 return (x, r, J, nfev) if nfev > n_start else None
             nfev += x.size

@@ -151,10 +151,12 @@ class LoopModel:
             model.update(e.model_options(p))
         return merge_case(self.cond_base[i_cond], errs, model)
 
-    def _phys_grid(self, active: list[tuple[Effect, np.ndarray]], steps: int) -> list[np.ndarray]:
-        """Model TE on the grid for each condition."""
+    def _phys_grid(self, active: list[tuple[Effect, np.ndarray]], steps: int,
+                   sensitivity: bool = False) -> list[np.ndarray]:
+        """Model TE on the grid for each condition (``sensitivity``: :func:`rvcalib.forward.te_at_many`'s)."""
         phys = [(e, p) for e, p in active if e.family != "measurement"]
-        return _raise_any(grid_te_many([self._case(c, phys) for c in range(len(self.cond_base))], steps))
+        return _raise_any(grid_te_many([self._case(c, phys) for c in range(len(self.cond_base))], steps,
+                                       sensitivity=sensitivity))
 
     def _meas(self, active, input_deg: np.ndarray, output_deg: np.ndarray) -> np.ndarray:
         out = np.zeros(np.asarray(input_deg).size)
@@ -175,18 +177,20 @@ class LoopModel:
             raise out
         return out
 
-    def predict_many(self, actives: list[list[tuple[Effect, np.ndarray]]]
+    def predict_many(self, actives: list[list[tuple[Effect, np.ndarray]]], sensitivity: bool = False
                      ) -> list[list[np.ndarray] | ModelEvaluationError]:
         """:meth:`predict` of several model states in one batch of the forward runner (with several
         workers the states' solves spread over them); a state rvdyn cannot evaluate gives its
-        :class:`ModelEvaluationError` in its place."""
+        :class:`ModelEvaluationError` in its place. ``sensitivity``: sensitivity solves from the newest
+        converged state of each run condition (:func:`rvcalib.forward.te_at_many`), for differences taken
+        from that state (a Jacobian's columns)."""
         nc = len(self._cond_runs)
         xs = [np.concatenate([self.runs[i].input_deg for i in members]) for members in self._cond_runs]
         cases = []
         for active in actives:
             phys = [(e, p) for e, p in active if e.family != "measurement"]
             cases += [self._case(c, phys) for c in range(nc)]
-        tes = te_at_many(cases, xs * len(actives))
+        tes = te_at_many(cases, xs * len(actives), sensitivity=sensitivity)
         result: list[list[np.ndarray] | ModelEvaluationError] = []
         for k, active in enumerate(actives):
             mine = tes[k * nc:(k + 1) * nc]
@@ -204,11 +208,12 @@ class LoopModel:
             result.append(out)
         return result
 
-    def predict_grid(self, active, ms: int | None = None) -> list[np.ndarray]:
+    def predict_grid(self, active, ms: int | None = None, sensitivity: bool = False) -> list[np.ndarray]:
         """Model TE at the points of an ``ms``-point grid (default the coarse grid) for every run,
-        solved on that grid (``ms`` divides the coarse grid)."""
+        solved on that grid (``ms`` divides the coarse grid). ``sensitivity``: as in :meth:`predict_many`
+        (for a difference from the state solved last on that grid)."""
         ms = self.m if ms is None else int(ms)
-        g = self._phys_grid(active, ms)
+        g = self._phys_grid(active, ms, sensitivity)
         sub = self.m // ms
         meas = self._meas(active, self.coarse_in_deg[::sub], self.coarse_out_deg[::sub])
         return [g[self.cond_of[i]] + meas for i in range(len(self.runs))]

@@ -92,6 +92,9 @@ class Job:
     theta_in_deg : tuple of float or None
         Explicit input angles, deg, in the order of motion (they replace ``steps`` and
         ``revolutions``; see :func:`rvdyn.te.run_te`). Their float64 bytes enter the key.
+    max_outer : int or None
+        None: a converged solve. 1: a sensitivity solve (:func:`rvdyn.te.run_te`'s ``max_outer``: one
+        linearisation from a warm start); it enters the key (not the neighbourhood's).
     """
 
     case: Case
@@ -100,9 +103,11 @@ class Job:
     revolutions: float = 1.0
     law: ContactLaw = field(default_factory=ContactLaw)
     theta_in_deg: tuple[float, ...] | None = None
+    max_outer: int | None = None
 
     def settings(self) -> dict[str, Any]:
-        """Solver settings that enter the key (besides the case)."""
+        """Solver settings that enter the key (besides the case); ``max_outer`` only when given (the keys of
+        converged solves are unchanged)."""
         law = {"K": float(self.law.K), "n": float(self.law.n), "rigid": bool(self.law.rigid)}
         if self.law.kind != "impact":  # the law's kind reaches the worker and the key (impact keys unchanged)
             law["kind"] = self.law.kind
@@ -112,6 +117,8 @@ class Job:
             th = np.asarray(self.theta_in_deg, dtype=np.float64)
             d["steps"] = int(th.size)
             d["theta_in_deg_sha256"] = hashlib.sha256(th.tobytes()).hexdigest()
+        if self.max_outer is not None:
+            d["max_outer"] = int(self.max_outer)
         return d
 
     def key(self) -> str:
@@ -128,6 +135,7 @@ class Job:
         c = self.case.to_dict()
         d = {"design": c.get("design"), "load_Nm": c.get("load_Nm"), "direction": c.get("direction"),
              **self.settings()}
+        d.pop("max_outer", None)  # sensitivity solves start from their converged neighbours' states
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:32]
 
     def to_payload(self) -> dict[str, Any]:
@@ -265,9 +273,14 @@ class StateStore:
         self.hits += 1
         return x
 
+    def peek(self, key: str) -> np.ndarray | None:
+        """The state kept under ``key`` (read-only), or None, without counting a hit or a miss."""
+        return self._d.get(key)
+
     def put(self, key: str, state: np.ndarray) -> None:
         """Keep a state (a read-only float64 copy) as its neighbourhood's newest; drop the oldest beyond the budget."""
-        x = np.array(state, dtype=np.float64)
+        x = state if (isinstance(state, np.ndarray) and state.dtype == np.float64
+                      and not state.flags.writeable) else np.array(state, dtype=np.float64)
         x.setflags(write=False)
         old = self._d.pop(key, None)
         if old is not None:

@@ -106,7 +106,8 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     payload : dict
         ``case`` (case dict), ``solver``, ``steps``, ``revolutions``, ``law`` ({K, n, rigid}), ``key``
         and optionally ``theta_in_deg`` (list of input angles, deg, replacing steps and revolutions),
-        ``x_init`` (start states of the solve, a nearby case's converged states: a warm start) and
+        ``x_init`` (start states of the solve, a nearby case's converged states: a warm start), ``max_outer``
+        (1: a sensitivity solve from ``x_init``, :func:`rvdyn.te.run_te`) and
         ``want_state`` (True: return the converged states as ``state``).
 
     Returns
@@ -125,7 +126,8 @@ def solve_job(payload: dict[str, Any]) -> dict[str, Any]:
     th = payload.get("theta_in_deg")
     try:
         r = run_te(case, payload["solver"], int(payload["steps"]), float(payload["revolutions"]), law=law,
-                   theta_in_deg=None if th is None else np.asarray(th, dtype=float), x_init=payload.get("x_init"))
+                   theta_in_deg=None if th is None else np.asarray(th, dtype=float), x_init=payload.get("x_init"),
+                   max_outer=payload.get("max_outer"))
     except _SOLVE_ERRORS as exc:  # ImportError (missing software) is none of these and propagates
         return _failed(payload["key"], exc, time.perf_counter() - t0)
     return _ok(payload["key"], r, state=payload.get("want_state", False))
@@ -186,7 +188,8 @@ def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str,
             t0 = time.perf_counter()
             try:  # a pair that cannot be solved comes back as its error, the others as results
                 rs = te.run_te_many(case, payload["solver"], steps, loads=loads, revolutions=revs, law=law, geom=geom,
-                                    errors="return", theta_in_deg=given, x_init=starts)
+                                    errors="return", theta_in_deg=given, x_init=starts,
+                                    max_outer=jobs[idx[0]].get("max_outer"))
             except _SOLVE_ERRORS:
                 rs = None  # solved job by job below
             if rs is not None:
@@ -200,7 +203,8 @@ def _solve_group(payload: dict[str, Any], solve_fn: SolveFn | None) -> dict[str,
             t0 = time.perf_counter()
             try:
                 r = te.run_te(case, payload["solver"], n, revs, load, d, law, geom=geom,
-                              theta_in_deg=None if th is None else np.asarray(th, dtype=float), x_init=xi)
+                              theta_in_deg=None if th is None else np.asarray(th, dtype=float), x_init=xi,
+                              max_outer=jobs[i].get("max_outer"))
             except _SOLVE_ERRORS as exc:
                 results[i] = _failed(jobs[i]["key"], exc, time.perf_counter() - t0)
                 continue
@@ -385,6 +389,9 @@ class Runner:
         self.executor: Executor = executor
         self.memory = MemoryCache(memory_bytes)
         self.states = StateStore(warm_bytes)
+        # the state of each converged solve by its job key (the same arrays as ``states``, within the same budget), so
+        # that a case taken from a cache can be made its neighbourhood's newest state again
+        self.job_states = StateStore(warm_bytes)
         self.cache = cache if isinstance(cache, CaseCache) else CaseCache(cache)
         self.solver = solver
         self.law = law
@@ -397,8 +404,13 @@ class Runner:
         self.worker_seconds = 0.0
 
     def jobs(self, cases: Sequence[Case], steps: int | Sequence[int] | None = None,
-             theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None) -> list[Job]:
+             theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None,
+             max_outer: int | None = None) -> list[Job]:
         """The jobs of a batch (see :meth:`__call__` for the arguments)."""
+        if max_outer is not None and (isinstance(max_outer, bool) or not isinstance(max_outer, (int, np.integer))
+                                      or max_outer < 1):
+            raise ValueError(f"max_outer {max_outer!r} must be None or an integer >= 1 (outer iterations of a warm "
+                             "start)")
         cases = list(cases)
         n = len(cases)
         if steps is None or isinstance(steps, (int, np.integer)):
@@ -419,12 +431,14 @@ class Runner:
                     raise ValueError(f"theta_in_deg[{i}] must be a 1-D array of at least 2 finite angles (deg); "
                                      f"got shape {arr.shape}")
                 th[i] = tuple(float(x) for x in arr)
+        mo = None if max_outer is None else int(max_outer)
         return [Job(c, self.solver, s, self.revolutions, self.law if self.law is not None else law_from_model(c.model),
-                    t) for c, s, t in zip(cases, st, th)]
+                    t, mo) for c, s, t in zip(cases, st, th)]
 
     def __call__(self, cases: Sequence[Case], desc: str = "cases", *, steps: int | Sequence[int] | None = None,
                  theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None,
-                 group: Sequence[Any] | None = None, keep: bool = False) -> list[dict[str, Any]]:
+                 group: Sequence[Any] | None = None, keep: bool = False,
+                 max_outer: int | None = None) -> list[dict[str, Any]]:
         """Solve a batch of cases.
 
         Parameters
@@ -444,6 +458,11 @@ class Runner:
             case keeps its own cache entry, so grouped and single solves share the cache.
         keep : bool
             Keep the results in memory for later calls (:meth:`prefetch`).
+        max_outer : int or None
+            1: sensitivity solves (:func:`rvdyn.te.run_te`'s ``max_outer``): each case that has a warm start
+            (``warm_bytes``) moves by one linearisation from its neighbourhood's newest converged state; their
+            results have keys of their own and their states are not kept as warm starts (the next solves start
+            from converged equilibria). None (default): converged solves.
 
         Returns
         -------
@@ -453,7 +472,7 @@ class Runner:
         from tqdm.auto import tqdm
 
         t0 = time.perf_counter()
-        jobs = self.jobs(cases, steps, theta_in_deg)
+        jobs = self.jobs(cases, steps, theta_in_deg, max_outer)
         keys = [j.key() for j in jobs]
         unique: dict[str, Job] = {}
         for k, j in zip(keys, jobs):
@@ -476,6 +495,15 @@ class Runner:
             else:
                 results[k] = {**hit, "cached": True}
         self.reused += len(results) - len(prefetched)
+        if self.states.max_bytes > 0:
+            # a converged case asked for again (taken from a cache) is its neighbourhood's newest state once more: the
+            # solves after it start from the case last asked for (e.g. a Jacobian's columns from the state at which
+            # they are taken, even when other solves of that run condition came in between)
+            for k in unique:
+                if k in results and unique[k].max_outer is None:
+                    st = self.job_states.peek(k)
+                    if st is not None:
+                        self.states.put(unique[k].neighbour_key(), st)
         tasks = self._tasks(todo, keys, group, len(jobs))
         payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
                     for t in tasks]
@@ -514,7 +542,7 @@ class Runner:
                         if r.get("key") != k:
                             raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
                         state = r.pop("state", None)
-                        if state is not None and k in near:
+                        if state is not None and k in near and unique[k].max_outer is None:
                             arrived.append((i, k, state))
                         self.cache.put(k, r)
                         results[k] = {**self._keep(k, r), "cached": False}
@@ -523,6 +551,9 @@ class Runner:
                     bar.update(len(got))
                 for _, k, state in sorted(arrived, key=lambda a: a[0]):  # stable: a task's jobs in their order
                     self.states.put(near[k], state)
+                    kept = self.states.peek(near[k])
+                    if kept is not None:
+                        self.job_states.put(k, kept)
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0
@@ -599,7 +630,7 @@ class Runner:
         for j in jobs[1:]:
             c = j.case
             if (c.raw_errors != a.case.raw_errors or c.design != a.case.design or c.model != a.case.model
-                    or j.solver != a.solver or j.law != a.law):
+                    or j.solver != a.solver or j.law != a.law or j.max_outer != a.max_outer):
                 raise ValueError(f"group of cases {a.case.name!r} and {c.name!r}: the cases of one group must differ "
                                  "only in load and direction (same design, errors, model, solver and law)")
         key = "group-" + hashlib.sha256("".join(keys).encode()).hexdigest()[:32]

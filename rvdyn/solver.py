@@ -97,6 +97,11 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
     #: Compute the wind-up parts (:attr:`Solution.parts_rad`, unit-load method) and the cam forces at each
     #: solution; False (:func:`rvdyn.te.run_te`, which reports neither) leaves them out, the TE is the same bit for bit.
     want_parts: bool = True
+    #: At most this many outer iterations (linearisations) for a warm-started state (``x_init``); None (default):
+    #: to convergence. 1 is a *sensitivity solve*: the state moves by one linearisation from its start, a nearby
+    #: equilibrium, and stops there; its TE change from the start is within about 1e-3 of the converged change
+    #: (the outer loop's contraction, docs/physics.md "Sensitivity solves"). Cold states always converge.
+    max_outer: int | None = None
 
     def __init__(self, geom: ReducerGeometry, contacts, law: ContactLaw | None = None,
                  tol: Tolerances = TOL) -> None:
@@ -552,6 +557,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             q = np.maximum(big / np.maximum(prev_ch[rows], 1e-300), CONTRACTION_MAX)
             settled = (may_settle[rows] & (big <= trust[rows]) & (big < LOOSE_MIN_STEP * tol_mm)
                        & (q <= CONTRACTION_MAX) & (CONTRACTION_MAX / (1.0 - CONTRACTION_MAX) * big < tol_mm))
+            if self.max_outer is not None and it + 1 >= self.max_outer:
+                settled = settled | may_settle[rows]  # a sensitivity solve's warm states stop here
             prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
             if expand:
                 cut[rows] = big > trust[rows]

@@ -106,7 +106,7 @@ def input_angles(ratio: float, steps: int, revolutions: float, direction: int) -
 def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: float = 1.0,
            load_Nm: float | None = None, direction: int | None = None, law: ContactLaw | None = None,
            geom: ReducerGeometry | None = None, theta_in_deg: np.ndarray | None = None,
-           x_init: np.ndarray | None = None) -> TEResult:
+           x_init: np.ndarray | None = None, max_outer: int | None = None) -> TEResult:
     """Quasi-static TE of a case.
 
     Parameters
@@ -133,7 +133,13 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
         Start states: :attr:`TEResult.state` of a nearby case (same design, load, direction, law and
         angles) for a warm start; the equilibrium is the same within the solver tolerance. A start of
         another shape (another model's coordinates) is not used: the solve starts as without one.
+    max_outer : int or None
+        At most this many outer iterations (linearisations) from a warm start (``x_init``): 1 is a sensitivity
+        solve, the TE one linearisation away from the nearby equilibrium ``x_init`` (its change from there within
+        about 1e-3 of the converged change; :attr:`rvdyn.solver.QuasiStaticSolver.max_outer`). None: converged.
+        Without a usable ``x_init`` the solve converges whatever this says.
     """
+    _check_max_outer(max_outer)
     if solver not in SOLVERS:
         raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
     load = case.load_Nm if load_Nm is None else float(load_Nm)
@@ -145,9 +151,16 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, make_contacts(g, solver), law)
     s.want_parts = False                                 # the TE table needs neither the wind-up parts nor cam forces
+    s.max_outer = max_outer
     sol = s.solve(th, direction=d, load_Nm=load, chunk=None if solver == "analytic" else FCL_CHUNK,
                   x_init=_usable_start(x_init, th.size, s.ndof))
     return _te_result(case, solver, s, sol, steps, revolutions, d, load, time.perf_counter() - t0)
+
+
+def _check_max_outer(max_outer) -> None:
+    if max_outer is not None and (isinstance(max_outer, bool) or not isinstance(max_outer, (int, np.integer))
+                                  or max_outer < 1):
+        raise ValueError(f"max_outer {max_outer!r} must be None or an integer >= 1 (outer iterations of a warm start)")
 
 
 def _usable_start(x_init, n: int, ndof: int) -> np.ndarray | None:
@@ -196,7 +209,8 @@ def _te_result(case: Case, solver: str, s: QuasiStaticSolver, sol, steps: int, r
 def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 720,
                 loads: list[tuple[float, int]] | None = None, revolutions: float = 1.0,
                 law: ContactLaw | None = None, geom: ReducerGeometry | None = None,
-                errors: str = "raise", theta_in_deg: list | None = None, x_init: list | None = None) -> list:
+                errors: str = "raise", theta_in_deg: list | None = None, x_init: list | None = None,
+                max_outer: int | None = None) -> list:
     """Quasi-static TE of one case under several (load, direction) pairs, solved as one batch.
 
     ``run_te_many(case, "analytic", 37, loads=[(5.01, 1), (5.01, -1), (167.0, 1), (167.0, -1)])`` returns
@@ -236,6 +250,8 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     x_init : list of (array or None), or None
         Per pair, start states (``run_te``'s ``x_init``: a nearby case's :attr:`TEResult.state` at that pair's
         angles, a warm start) or None.
+    max_outer : int or None
+        As in ``run_te``: 1 makes the warm-started pairs sensitivity solves; pairs without a start converge.
 
     Returns
     -------
@@ -244,6 +260,7 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     """
     if errors not in ("raise", "return"):
         raise ValueError(f"errors {errors!r} must be 'raise' or 'return'")
+    _check_max_outer(max_outer)
     if solver not in SOLVERS:
         raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
     if loads is None or isinstance(loads, (str, bytes)) or len(loads) == 0:
@@ -280,7 +297,8 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
         out: list = []
         for n, (L, d), a, xi in zip(counts, pairs, given, starts):
             try:
-                out.append(run_te(case, solver, n, revolutions, L, d, law, geom=g, theta_in_deg=a, x_init=xi))
+                out.append(run_te(case, solver, n, revolutions, L, d, law, geom=g, theta_in_deg=a, x_init=xi,
+                                  max_outer=max_outer))
             except (InterferenceError, RuntimeError) as err:
                 if errors == "raise":
                     raise
@@ -289,6 +307,7 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, AnalyticContacts(g, per_point=True), law)
     s.want_parts = False
+    s.max_outer = max_outer
     xs = [_usable_start(xi, th.size, s.ndof) for xi, th in zip(starts, ths)]
     sols = s.solve_many(ths, [d for _, d in pairs], [L for L, _ in pairs], errors=errors,
                         x_init=None if all(xi is None for xi in xs) else xs)

@@ -37,8 +37,9 @@ class CountingModel(Fitting):
             out = out + self.a[e.name] * x + self.b[e.name] * x * x
         return [out]
 
-    def predict_many(self, actives):
-        """The model's batch (a Jacobian's difference points): :meth:`predict` of each state, in order."""
+    def predict_many(self, actives, sensitivity=False):
+        """The model's batch (a Jacobian's difference points): :meth:`predict` of each state, in order (exact
+        whatever ``sensitivity`` says)."""
         return [self.predict(a) for a in actives]
 
     def fit(self, names: list[str], p0: list[float]):

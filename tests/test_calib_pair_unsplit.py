@@ -52,8 +52,9 @@ class LinearLoop(Groups):
             out = out + self.basis[e.name] * float(p[0])
         return [out]
 
-    def predict_many(self, actives):
-        """The model's batch (a Jacobian's difference points): :meth:`predict` of each state, in order."""
+    def predict_many(self, actives, sensitivity=False):
+        """The model's batch (a Jacobian's difference points): :meth:`predict` of each state, in order (exact
+        whatever ``sensitivity`` says)."""
         return [self.predict(a) for a in actives]
 
     def over_budget(self):
