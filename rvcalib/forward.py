@@ -190,10 +190,12 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
     rvdyn cannot evaluate (or whose angles are None) gives a :class:`ModelEvaluationError` in its place.
 
     ``sensitivity``: sensitivity solves (:meth:`rvdyn.runner.Runner.__call__`'s ``max_outer=1``): each case with a
-    warm start moves by one linearisation from its run condition's newest converged state. For the
-    differences of nearby states the loop takes as sensitivities (a Jacobian's columns, the screening signatures,
-    the members' parts), whose change from that state they give within about 1e-3 of itself at about 0.55 of the
-    CPU; the residual of a fit, which its decisions compare, is always a converged solve."""
+    warm start moves by one linearisation from its run condition's newest converged state (the case asked for
+    last). For the differences the loop takes over small steps from that state (a Jacobian's finite-difference
+    columns, the joint step's columns), which they give within about 1 % of themselves at about 0.55 of the CPU;
+    not for the screening signatures or the members' parts (steps of a whole scale or size, where contacts open
+    or close: 14 % off for 10 um of pin-circle diameter), and never for a residual that a decision compares
+    (a fit's evaluations converge). docs/calibration.md, "Loop speed"."""
     if len(input_deg) != len(case_dicts):
         raise ValueError(f"input_deg has {len(input_deg)} entries for {len(case_dicts)} cases")
     runner = forward_runner()

@@ -99,7 +99,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
     want_parts: bool = True
     #: At most this many outer iterations (linearisations) for a warm-started state (``x_init``); None (default):
     #: to convergence. 1 is a *sensitivity solve*: the state moves by one linearisation from its start, a nearby
-    #: equilibrium, and stops there; its TE change from the start is within about 1e-3 of the converged change
+    #: equilibrium, and stops there; its TE change from the start is within about 1 % of the converged change
     #: (the outer loop's contraction, docs/physics.md "Sensitivity solves"). Cold states always converge.
     max_outer: int | None = None
 

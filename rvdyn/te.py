@@ -136,7 +136,7 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     max_outer : int or None
         At most this many outer iterations (linearisations) from a warm start (``x_init``): 1 is a sensitivity
         solve, the TE one linearisation away from the nearby equilibrium ``x_init`` (its change from there within
-        about 1e-3 of the converged change; :attr:`rvdyn.solver.QuasiStaticSolver.max_outer`). None: converged.
+        about 1 % of the converged change; :attr:`rvdyn.solver.QuasiStaticSolver.max_outer`). None: converged.
         Without a usable ``x_init`` the solve converges whatever this says.
     """
     _check_max_outer(max_outer)
