@@ -34,7 +34,10 @@ and beside it, pinned outside that budget until :meth:`MemoryCache.clear`, the r
 Warm starts (``Runner(warm_bytes=...)``, off by default): the runner keeps the newest converged solver state of each
 neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`: the same design, load, direction, solver, law and angles) in a
 :class:`rvdyn.cache.StateStore` and starts the next solve of that neighbourhood from it (``x_init`` of :func:`rvdyn.te.run_te`);
-results equal the cold solves' within the solver tolerance. The states never enter the result caches.
+results equal the cold solves' within the solver tolerance. The states never enter the result caches. A converged
+case taken from a cache becomes its neighbourhood's newest state again (its state kept by job key, ``job_states``),
+so the solves after it start from the case asked for last. Sensitivity solves (``max_outer=1``, see
+:func:`rvdyn.te.run_te`) have keys of their own and leave no state behind.
 
 Executors (:mod:`rvdyn.executors`) run the same worker function, :func:`solve_job`, on JSON-ready job payloads
 (:meth:`rvdyn.cache.Job.to_payload`) and yield ``(index, result)`` pairs as they finish. The results
@@ -353,7 +356,8 @@ class Runner:
         finite-difference columns, trial steps, candidates at the current state), which then take fewer
         outer and Newton iterations. Each result equals the cold solve's within the solver tolerance
         (``Tolerances.solver_angle_rad``); which state a solve starts from depends on the order of the
-        solves, so results are reproducible to that tolerance, not bit for bit.
+        solves, so results are reproducible to that tolerance, not bit for bit. A converged case taken from a cache
+        is its neighbourhood's newest state again (:attr:`job_states`, the same budget).
 
     Attributes
     ----------
