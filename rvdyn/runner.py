@@ -71,7 +71,7 @@ from rvdyn.cache import CaseCache, Job, StateStore
 from rvdyn.executors import (PARENT_POLL_S, DaskExecutor, Executor, LocalPoolExecutor, SchedulerError, SerialExecutor,
                              SolveFn, make_executor)
 from rvdyn.solver import law_from_model
-from rvdyn.te import SOLVERS, run_te
+from rvdyn.te import SOLVERS, check_max_outer, run_te
 
 __all__ = ["Runner", "run_cases", "solve_job", "solve_group", "MemoryCache", "StateStore", "ENTRY_OVERHEAD_BYTES",
            # executors (rvdyn.executors), re-exported: the runner is where users meet them
@@ -411,10 +411,7 @@ class Runner:
              theta_in_deg: Sequence[Sequence[float] | np.ndarray | None] | None = None,
              max_outer: int | None = None) -> list[Job]:
         """The jobs of a batch (see :meth:`__call__` for the arguments)."""
-        if max_outer is not None and (isinstance(max_outer, bool) or not isinstance(max_outer, (int, np.integer))
-                                      or max_outer < 1):
-            raise ValueError(f"max_outer {max_outer!r} must be None or an integer >= 1 (outer iterations of a warm "
-                             "start)")
+        check_max_outer(max_outer)
         cases = list(cases)
         n = len(cases)
         if steps is None or isinstance(steps, (int, np.integer)):
@@ -517,7 +514,7 @@ class Runner:
             for t, p in zip(tasks, payloads):
                 for k, q in zip(t, p["jobs"] if "jobs" in p else [p]):
                     near[k] = unique[k].neighbour_key()
-                    q["want_state"] = True
+                    q["want_state"] = unique[k].max_outer is None  # a sensitivity solve leaves no state behind
             waves = self._waves(tasks, near)
         fn = self.solve_fn if all(len(t) == 1 for t in tasks) else functools.partial(_solve_task,
                                                                                      solve_fn=self.solve_fn)
@@ -546,7 +543,7 @@ class Runner:
                         if r.get("key") != k:
                             raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
                         state = r.pop("state", None)
-                        if state is not None and k in near and unique[k].max_outer is None:
+                        if state is not None and k in near:
                             arrived.append((i, k, state))
                         self.cache.put(k, r)
                         results[k] = {**self._keep(k, r), "cached": False}

@@ -139,7 +139,7 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
         about 1 % of the converged change; :attr:`rvdyn.solver.QuasiStaticSolver.max_outer`). None: converged.
         Without a usable ``x_init`` the solve converges whatever this says.
     """
-    _check_max_outer(max_outer)
+    check_max_outer(max_outer)
     if solver not in SOLVERS:
         raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
     load = case.load_Nm if load_Nm is None else float(load_Nm)
@@ -157,7 +157,8 @@ def run_te(case: Case, solver: str = "analytic", steps: int = 720, revolutions: 
     return _te_result(case, solver, s, sol, steps, revolutions, d, load, time.perf_counter() - t0)
 
 
-def _check_max_outer(max_outer) -> None:
+def check_max_outer(max_outer) -> None:
+    """ValueError naming ``max_outer`` unless it is None or an integer >= 1."""
     if max_outer is not None and (isinstance(max_outer, bool) or not isinstance(max_outer, (int, np.integer))
                                   or max_outer < 1):
         raise ValueError(f"max_outer {max_outer!r} must be None or an integer >= 1 (outer iterations of a warm start)")
@@ -260,7 +261,7 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     """
     if errors not in ("raise", "return"):
         raise ValueError(f"errors {errors!r} must be 'raise' or 'return'")
-    _check_max_outer(max_outer)
+    check_max_outer(max_outer)
     if solver not in SOLVERS:
         raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
     if loads is None or isinstance(loads, (str, bytes)) or len(loads) == 0:
