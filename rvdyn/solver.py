@@ -546,8 +546,8 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
                 flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
                 trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
                 if expand:
-                    e_here = e_start                      # the potential at xs, from the inner solve
-                    e_now = e_here + np.einsum("nd,nd->n", last_dx[rows], B[rows])
+                    # the potential at xs (from the inner solve) plus the load's work over the last step
+                    e_now = e_start + np.einsum("nd,nd->n", last_dx[rows], B[rows])
                     pred = e_old[rows] - e_pred[rows]
                     good = cut[rows] & ~flip & (pred > 0) & (e_old[rows] - e_now > 0.75 * pred)
                     trust[rows] = np.where(good, np.minimum(4.0 * trust[rows], MAX_TRUST_MM), trust[rows])
@@ -562,7 +562,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
             if expand:
                 cut[rows] = big > trust[rows]
-                e_old[rows] = e_here if it > 0 else e_start
+                e_old[rows] = e_start                 # the linearised potential at xs, from the inner solve
                 e_pred[rows] = energy_sub(self, xs, G, J, B[rows], step_law, dx, arms)
             last_dx[rows] = dx
             xs += dx
