@@ -39,7 +39,7 @@ from scipy import stats
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
-from rvcalib.basins import BasinCheck
+from rvcalib.dropswap import DropSwap
 from rvcalib.pairs import CHI2_95, CORRELATION_LIMIT
 
 #: Smallest log-determinant gain for which a run is said to split a group (a factor 2 in det).
@@ -55,7 +55,7 @@ REC_POINTS_PER_PIN = 2
 RESOLVE_FACTOR = 25.0
 
 
-class Groups(BasinCheck):
+class Groups(DropSwap):
     """Identifiability groups and recommended runs (methods on the loop)."""
 
     def identifiability_groups(self, fitted: list[FittedEffect], unexplained: list[Unexplained]) -> list[dict]:

@@ -103,6 +103,7 @@ class Calibrator(Groups):
         self._replaced_at: set = set()   # model states at which the replacement refit was tried
         self._instances_at: set = set()  # model states at which the instance check was made
         self._lookalike_at: set = set()  # model states at which the look-alike refit was made
+        self._dropswap_at: set = set()   # model states at which the drop-swap refit was tried
         self._harmonic_checked_at: set = set()  # states checked before a harmonic entered (greedy step)
         eliminated = False      # the backward elimination ran on the present model (nothing changed since)
         while True:
@@ -314,7 +315,7 @@ class Calibrator(Groups):
                 change = self._refits_before_stop(it)
                 if change:
                     log["decision"] = f"{change[0]} before the stop: {change[1]}"
-                    if change[0] == "look-alike refit":
+                    if change[0] in ("look-alike refit", "drop-swap refit"):
                         self.log(log["decision"] + f" (RMS {math.sqrt(self.rss_full / self.n):.4g} arcsec)")
                     eliminated = False
                     dec = "physical"
@@ -379,9 +380,9 @@ class Calibrator(Groups):
         return f"{change[0]}: {change[1]}" if change else None
 
     def _refits_before_stop(self, it: int) -> tuple[str, str] | None:
-        """The instance check, the restart of collinear members (:mod:`rvcalib.basins`) and (below the term
-        limit) the look-alike refit, each once per model state: ``(check, what changed)`` of the first that
-        changed the model, or None."""
+        """The instance check, the restart of collinear members (:mod:`rvcalib.basins`), (below the term
+        limit) the look-alike refit and the drop-swap refit (:mod:`rvcalib.dropswap`), each once per model
+        state: ``(check, what changed)`` of the first that changed the model, or None."""
         if not self.joint:
             return None
         sw_i = self._instances_before_stop(it)
@@ -396,6 +397,11 @@ class Calibrator(Groups):
             la = self.lookalike_refit(it)
             if la:
                 return "look-alike refit", f"added {la[1]} beside {la[0]}"
+        if key not in self._dropswap_at:
+            self._dropswap_at.add(key)
+            ds = self.drop_swap_refit(it)
+            if ds:
+                return "drop-swap refit", f"{ds[1]} in place of {ds[0]}"
         return None
 
     def _instances_before_stop(self, it: int, iterations: list[dict] | None = None) -> list[tuple[str, str]]:
@@ -420,9 +426,10 @@ class Calibrator(Groups):
 
     def replacement_before_stop(self, it: int, iterations: list[dict] | None = None) -> tuple[str, str] | None:
         """The instance check (:meth:`_instances_before_stop`), then the replacement refit
-        (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`), each once per model state before the
-        loop stops at the term limit, with the restart of collinear members (:mod:`rvcalib.basins`) between
-        them; the (last) swap made (old, new), ``("restart", message)``, or None."""
+        (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`) and when it swaps nothing the drop-swap
+        refit (:mod:`rvcalib.dropswap`), each once per model state before the loop stops at the term limit,
+        with the restart of collinear members (:mod:`rvcalib.basins`) after the instance check; the (last)
+        swap made (old, new), ``("restart", message)``, or None."""
         sw_i = self._instances_before_stop(it, iterations)
         if sw_i:
             return sw_i[-1]
@@ -438,12 +445,15 @@ class Calibrator(Groups):
         if key in self._replaced_at:
             return None
         self._replaced_at.add(key)
-        sw = self.replacement_refit(it)
+        sw, how = self.replacement_refit(it), "replacement refit"
+        if not sw and key not in self._dropswap_at:
+            self._dropswap_at.add(key)
+            sw, how = self.drop_swap_refit(it), "drop-swap refit"
         if sw:
-            self.log(f"replacement refit at the term limit: {sw[1]} in place of {sw[0]} (RMS "
+            self.log(f"{how} at the term limit: {sw[1]} in place of {sw[0]} (RMS "
                      f"{math.sqrt(self.rss_full / self.n):.4g} arcsec)")
             if iterations is not None:
-                iterations.append({"iteration": it, "decision": f"replacement refit at the term limit: {sw[1]} "
+                iterations.append({"iteration": it, "decision": f"{how} at the term limit: {sw[1]} "
                                                                 f"in place of {sw[0]}"})
         return sw
 

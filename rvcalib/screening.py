@@ -79,11 +79,12 @@ class Screening(LoopModel):
         ms = e.screen_steps or self.m
         return ms if (ms < self.m and self.m % ms == 0 and ms % self.design.z_pins == 0) else self.m
 
-    def coarse_residual(self) -> list[np.ndarray]:
-        """The residual of every run at the current state (data minus the model solved at the
-        readings) taken to the screening grid (:func:`coarse_values`), arcsec, one array per run."""
+    def coarse_residual(self, pairs: list[tuple[Effect, np.ndarray]] | None = None) -> list[np.ndarray]:
+        """The residual of every run at the current state, or at the effects and parameters ``pairs``
+        (data minus the model solved at the readings), taken to the screening grid
+        (:func:`coarse_values`), arcsec, one array per run."""
         return [coarse_values(r, y - q, self.m, self.period)
-                for r, y, q in zip(self.runs, self.y, self.predict(self._pairs()))]
+                for r, y, q in zip(self.runs, self.y, self.predict(self._pairs() if pairs is None else pairs))]
 
     def screening_signatures(self) -> None:
         """Solve every template candidate at its trial values on its screening grid, per condition,

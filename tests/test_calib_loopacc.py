@@ -121,7 +121,7 @@ def test_instances_the_data_split_stay_separate():
     assert merged == set() and out == []
 
 
-def _harmonic_gate(av_found: bool, swaps: list, lookalike):
+def _harmonic_gate(av_found: bool, swaps: list, lookalike, dropswap):
     """A Calibrator stand-in at one model state whose checks before a harmonic return the given results;
     records which checks ran."""
     from rvcalib.identify import Calibrator
@@ -129,7 +129,7 @@ def _harmonic_gate(av_found: bool, swaps: list, lookalike):
     c = Calibrator.__new__(Calibrator)
     e = Effect("disc_phase[disc=0]", "disc_phase", "table4", "deg", "disc 0")
     c.joint, c.active, c.empirical, c.max_terms = True, [Active(e, np.array([0.01]), 1)], [], 12
-    c._harmonic_checked_at, c._lookalike_at, c._instances_at = set(), set(), set()
+    c._harmonic_checked_at, c._lookalike_at, c._instances_at, c._dropswap_at = set(), set(), set(), set()
     c.over_budget = lambda: False
     ran: list[str] = []
     cand = [object()] if av_found else []
@@ -156,31 +156,39 @@ def _harmonic_gate(av_found: bool, swaps: list, lookalike):
         ran.append("restart")
         return None
 
+    def drop_swap_refit(it):
+        ran.append("dropswap")
+        return dropswap
+
     c._instances_before_stop, c.lookalike_refit, c.restart_refit = instances, lookalike_refit, restart_refit
+    c.drop_swap_refit = drop_swap_refit
     return c, ran
 
 
-@pytest.mark.parametrize("av_found, instances, lookalike, expect, checks", [
-    (True, [], None, "added-variable test: joint: added pin_radius", ["added_variable", "joint_step"]),
-    (False, [("pin_pitch[pin=0]", "pin_pitch[pin=20]")], None, "instance refit: pin_pitch[pin=20] in place of "
+@pytest.mark.parametrize("av_found, instances, lookalike, dropswap, expect, checks", [
+    (True, [], None, None, "added-variable test: joint: added pin_radius", ["added_variable", "joint_step"]),
+    (False, [("pin_pitch[pin=0]", "pin_pitch[pin=20]")], None, None, "instance refit: pin_pitch[pin=20] in place of "
      "pin_pitch[pin=0]", ["added_variable", "instances"]),
-    (False, [], ("pin_radius", "pin_circle_diameter"), "look-alike refit: added pin_circle_diameter beside "
+    (False, [], ("pin_radius", "pin_circle_diameter"), None, "look-alike refit: added pin_circle_diameter beside "
      "pin_radius", ["added_variable", "instances", "restart", "lookalike"]),
-    (False, [], None, None, ["added_variable", "instances", "restart", "lookalike"]),
+    (False, [], None, ("planet_eccentricity[crank=1]", "sun_eccentricity"), "drop-swap refit: sun_eccentricity in "
+     "place of planet_eccentricity[crank=1]", ["added_variable", "instances", "restart", "lookalike", "dropswap"]),
+    (False, [], None, None, None, ["added_variable", "instances", "restart", "lookalike", "dropswap"]),
 ])
-def test_the_checks_before_the_stop_run_before_a_harmonic_enters(av_found, instances, lookalike, expect, checks):
-    c, ran = _harmonic_gate(av_found, instances, lookalike)
+def test_the_checks_before_the_stop_run_before_a_harmonic_enters(av_found, instances, lookalike, dropswap, expect,
+                                                                 checks):
+    c, ran = _harmonic_gate(av_found, instances, lookalike, dropswap)
     log: dict = {}
     assert c._physical_before_harmonic(7, log, None, None, None, None, []) == expect
     assert ran == checks and "added_variable_before_harmonic" in log
     # once per model state: at the same state nothing runs again and the harmonic is judged as before
     ran.clear()
     assert c._physical_before_harmonic(8, {}, None, None, None, None, []) is None and ran == []
-    # at the term limit the look-alike refit (which adds a term) is not tried
-    c2, ran2 = _harmonic_gate(False, [], ("pin_radius", "pin_circle_diameter"))
+    # at the term limit the look-alike refit (which adds a term) is not tried; the drop-swap (which does not) is
+    c2, ran2 = _harmonic_gate(False, [], ("pin_radius", "pin_circle_diameter"), None)
     c2.max_terms = 1
     assert c2._physical_before_harmonic(7, {}, None, None, None, None, []) is None
-    assert ran2 == ["added_variable", "instances", "restart"]
+    assert ran2 == ["added_variable", "instances", "restart", "dropswap"]
 
 
 def _elimination_case(cost: float):

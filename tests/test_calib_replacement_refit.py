@@ -34,9 +34,9 @@ TRUTH = {"errors": {"planet_eccentricity": 2.7, "cam_phase": 1.1, "cam_eccentric
 NOISE = 0.1
 
 
-@pytest.fixture(scope="module")
-def stand_in(tmp_path_factory):
-    root = tmp_path_factory.mktemp("replace") / "ds"
+def stand_in_state(root):
+    """The loop at the stand-in state (both planet eccentricities fitted from 14 um, no cam phase) on the
+    simulator's data in ``root``; returns the calibrator and its RMS."""
     runs = [{"run": f"{'fw' if d > 0 else 'bw'}{L:g}", "load_Nm": float(L), "direction": d}
             for L, d in [(10, 1), (10, -1), (30, 1), (30, -1)]]
     simulate_dataset(root, runs, TRUTH, samples_per_rev=200, start_deg=0.37, seed=7, noise_arcsec=NOISE,
@@ -52,7 +52,12 @@ def stand_in(tmp_path_factory):
     cal.active = [Active(e, p, 1) for e, p in zip(eff, params)]
     r, cal.emp_coef = cal.full_residual([(a.effect, a.p) for a in cal.active], [])
     cal.rss_full = float(r @ r)
-    rms_before = math.sqrt(cal.rss_full / cal.n)
+    return cal, math.sqrt(cal.rss_full / cal.n)
+
+
+@pytest.fixture(scope="module")
+def stand_in(tmp_path_factory):
+    cal, rms_before = stand_in_state(tmp_path_factory.mktemp("replace") / "ds")
     swap = cal.replacement_refit(5)
     return cal, rms_before, swap
 
