@@ -33,7 +33,6 @@ import numpy as np
 
 from rvcalib.basins import BasinCheck
 from rvcalib.forward import ModelEvaluationError
-from rvcalib.joint import JOINT_BIC_MARGIN
 from rvcalib.lsq import bic
 from rvcalib.results import Active
 from rvcalib.selection import linear_removal_costs
@@ -93,15 +92,9 @@ class DropSwap(BasinCheck):
                     break
                 x = d.effect
                 p0 = list(params) + [np.clip(np.asarray(d.p, dtype=float), x.lower, x.upper)]
-                try:
-                    params2, rss2, *_ = self.fit_full([a.effect for a in keep] + [x], p0, self.empirical)
-                except ModelEvaluationError:
-                    continue
-                b_new = bic(rss2, self.n, p_cur - gone.effect.n_params + x.n_params)
-                self.log(f"drop-swap refit: {x.name} in place of {gone.effect.name}: RMS "
-                         f"{math.sqrt(rss2 / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
-                if b_new < bic_cur - JOINT_BIC_MARGIN and (found is None or b_new < found[0]):
-                    found = (b_new, i, x, params2, rss2)
+                k = p_cur - gone.effect.n_params + x.n_params
+                found = self.swap_trial([a.effect for a in keep] + [x], p0, k, bic_cur,
+                                        f"drop-swap refit: {x.name} in place of {gone.effect.name}", found, i, x)
         if found is None:
             return None
         b_new, i, x, params2, rss2 = found

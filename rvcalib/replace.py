@@ -248,15 +248,9 @@ class ReplacementRefit(JointSelection):
             effects = [x if k == i else a.effect for k, a in enumerate(self.active)]
             p0 = [np.clip(np.asarray(d.p, dtype=float), x.lower, x.upper) if k == i else a.p
                   for k, a in enumerate(self.active)]
-            try:
-                params, rss, *_ = self.fit_full(effects, p0, self.empirical)
-            except ModelEvaluationError:
-                continue
-            b_new = bic(rss, self.n, p_cur - self.active[i].effect.n_params + x.n_params)
-            self.log(f"replacement refit: {x.name} in place of {self.active[i].effect.name} (screened {expl:.3f}): "
-                     f"RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
-            if b_new < bic_cur - JOINT_BIC_MARGIN and (found is None or b_new < found[0]):
-                found = (b_new, i, x, params, rss)
+            found = self.swap_trial(effects, p0, p_cur - self.active[i].effect.n_params + x.n_params, bic_cur,
+                                    f"replacement refit: {x.name} in place of {self.active[i].effect.name} "
+                                    f"(screened {expl:.3f})", found, i, x)
         if found is None:
             return None
         _, i, x, params, rss = found
@@ -268,6 +262,22 @@ class ReplacementRefit(JointSelection):
             "selection": {"method": "replacement refit at the term limit", "iteration": it, "replaced": old}})
         r_full = self.refresh_state()
         return old, x.name
+
+    def swap_trial(self, effects: list[Effect], p0: list[np.ndarray], k: int, bic_cur: float, what: str,
+                   found: tuple | None, i: int, x: Effect) -> tuple | None:
+        """A swap of member ``i`` for ``x`` (the model's ``effects``) refitted through rvdyn from ``p0`` (``k``
+        parameters in all, the empirical terms projected out) and logged as ``what`` with its RMS and the BIC's
+        change from ``bic_cur``: ``(BIC, i, x, parameters, RSS)`` when it lowers the BIC by more than
+        :data:`JOINT_BIC_MARGIN` and below ``found`` (the best swap so far, or None), else ``found``."""
+        try:
+            params, rss, *_ = self.fit_full(effects, p0, self.empirical)
+        except ModelEvaluationError:
+            return found
+        b_new = bic(rss, self.n, k)
+        self.log(f"{what}: RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
+        if b_new < bic_cur - JOINT_BIC_MARGIN and (found is None or b_new < found[0]):
+            return b_new, i, x, params, rss
+        return found
 
     def lookalike_refit(self, it: int) -> tuple[str, str] | None:
         """Before the loop stops below the term limit: the model refitted through rvdyn with each member's
