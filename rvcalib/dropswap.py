@@ -22,8 +22,8 @@ The check (:meth:`DropSwap.drop_swap_refit`, once per model state before the loo
    :data:`DROP_SWAP_CANDIDATES` best candidates of another family than the member's (its own instances left out:
    the instance refit moves those), not expensive and not in the model, are each added (from their screened
    size) and the model refitted through rvdyn.
-3. The swap that lowers the BIC on all samples most, by more than ``JOINT_BIC_MARGIN``, replaces the state (the
-   same number of terms or fewer: a swap never adds a term).
+3. The swap that lowers the BIC on all samples most, by more than ``JOINT_BIC_MARGIN``, replaces the state (one
+   effect for one: the number of terms stays, so the check runs at the term limit too).
 """
 from __future__ import annotations
 
