@@ -15,7 +15,10 @@ Two modes:
   the compliance found against the truth, every named effect against the truth of its type and
   the seconds, and whether the "done" conditions hold: RMS after within 1.5x the noise, the
   compliance within 15 %, every named Table 4 effect within max(1 um, 25 %) of its type's truth
-  (max(0.001 deg, 25 %) for angles), each draw under 180 s.
+  (max(0.001 deg, 25 %) for angles), each draw under 180 s. For a draw that fails on accuracy, a basin check
+  refits the truth's effects (from the truth) and prints the BIC of the loop's end above it: tens to hundreds
+  of units say the loop ended in a wrong basin (its search failed), about zero that the data cannot tell the
+  two apart.
 
 Run: ``python benchmarks/bench_calibrate.py [--out DIR] [--steps N] [--samples-per-rev N]
 [--start-deg A] [--revolutions R]`` or ``python benchmarks/bench_calibrate.py --realistic 3 [--seed S]
@@ -43,7 +46,9 @@ from rvcad.errors import ERROR_TYPES  # noqa: E402
 from rvcalib.dataset import read_dataset  # noqa: E402
 from rvcalib import forward  # noqa: E402
 from rvcalib.forward import cache_stats, clear_cache  # noqa: E402
-from rvcalib.identify import calibrate  # noqa: E402
+from rvcalib.effects import polar_to_xy  # noqa: E402
+from rvcalib.identify import Calibrator, calibrate  # noqa: E402
+from rvcalib.lsq import bic  # noqa: E402
 from rvcalib.report import write_report  # noqa: E402
 from rvcalib.simulate import simulate_dataset, standard_runs  # noqa: E402
 
@@ -110,6 +115,37 @@ def check_realistic(res, hidden: dict, noise: float, seconds: float) -> dict:
             "named": named, "named_ok": ok_named, "seconds_ok": seconds < DRAW_TARGET_S}
 
 
+def loop_parameters(res) -> int:
+    """The loop's final model's parameter count from its result: the named effects, the found member of each
+    group not named (``unsplit``: it stays in the model), two per harmonic empirical term and one per other."""
+    k = sum(len(e.params) for e in res.effects)
+    for g in res.groups:
+        if g["kind"] == "unsplit":
+            m = next(m for m in g["members"] if m["name"] == g["found"])
+            k += 2 if "angle_deg" in m else 1
+    return k + sum(2 if u.kind == "harmonic" else 1 for u in res.unexplained)
+
+
+def basin_check(folder: Path, ans: dict, res) -> str:
+    """For a draw that fails: the truth's effects (the answer key) refitted through the full model from the
+    truth, against the loop's end. A truth that fits far better (lower BIC) says the loop ended in a wrong
+    basin, a search failure; one that fits no better says the data cannot tell them apart."""
+    cal = Calibrator(read_dataset(folder))
+    effs, p0 = [], []
+    for e in ans["expected_effects"]:
+        eff = cal.lib.by_name(e["name"])
+        effs.append(eff)
+        p0.append(polar_to_xy(e["value"], e.get("angle_deg", 0.0)) if eff.n_params == 2 else np.array([e["value"]]))
+    _, rss, *_ = cal.fit_full(effs, p0, [])
+    k_t, k_l = sum(e.n_params for e in effs), loop_parameters(res)
+    d = bic(res.rms_after ** 2 * cal.n, cal.n, k_l) - bic(rss, cal.n, k_t)
+    kind = ("a wrong basin (a search failure)" if d > 10 else
+            "as good a fit as the truth's (within 10 BIC units: what it got wrong, the data cannot tell)")
+    return (f"  basin check: the truth's {len(effs)} effects refitted from the truth leave RMS "
+            f"{(rss / cal.n) ** 0.5:.4g} arcsec ({k_t} parameters) against the loop's {res.rms_after:.4g} ({k_l}): "
+            f"the loop's end is {kind}, BIC {d:+.1f} above the truth's")
+
+
 def run_realistic(args) -> int:
     root = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench-calibrate-real-"))
     rng = np.random.default_rng(args.seed)
@@ -153,6 +189,9 @@ def run_realistic(args) -> int:
         others = [e.name for e in res.effects if e.family != "table4"]
         print(f"  other effects: {others}; unexplained: {[u.label for u in res.unexplained]}; groups: "
               f"{len(res.groups)}; stopped by: {res.stopped_by}")
+        if not (c["rms_ok"] and c["compliance_ok"] and c["named_ok"]):
+            with forward_workers(args.workers):
+                print(basin_check(root / f"draw{k}", ans, res))
         all_ok &= c["rms_ok"] and c["compliance_ok"] and c["named_ok"] and c["seconds_ok"]
         print(f"BENCH calibrate_realistic_draw{k}_seconds {secs:.1f}  (result: {root / f'result{k}.json'})")
     print(f"realistic reducers: {'all conditions hold' if all_ok else 'NOT all conditions hold'}")

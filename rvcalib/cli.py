@@ -121,7 +121,8 @@ def summary(res, paths: dict) -> str:
                    + ")") if e.alternatives else ""
             if e.implied_total is not None:
                 alt += f"; declared {e.declared_value:.5g}, implied total {e.implied_total:.5g} {e.unit}"
-            lines.append(f"  {e.name} = {e.value:.5g} {e.unit}{ang}, 95 % [{e.ci_low:.5g}, {e.ci_high:.5g}]{alt}")
+            bnd = f" (at the {e.at_bound} bound of its range: a one-sided limit)" if e.at_bound else ""
+            lines.append(f"  {e.name} = {e.value:.5g} {e.unit}{ang}, 95 % [{e.ci_low:.5g}, {e.ci_high:.5g}]{bnd}{alt}")
     if res.unexplained:
         lines.append("unexplained (outside the library):")
         for u in res.unexplained:

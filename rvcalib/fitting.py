@@ -14,7 +14,7 @@ from rvcad.errors import ERROR_TYPES
 
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError
-from rvcalib.lsq import chord_fit, fd_jac, projector
+from rvcalib.lsq import chord_fit, fd_jac, profile_limit, projector
 from rvcalib.residual import lag1_autocorr
 from rvcalib.results import EmpiricalTerm, FittedEffect
 from rvcalib.screening import Screening
@@ -33,6 +33,17 @@ def _same_state(kept: np.ndarray | None, p: np.ndarray) -> bool:
     if kept is None:
         return not np.any(p)
     return kept.shape == p.shape and np.array_equal(kept, p)
+
+
+def _bound_side(e: Effect, p: np.ndarray) -> str | None:
+    """``"lower"`` or ``"upper"`` when a one-parameter effect's value sits at that bound of its range (to 1e-9
+    of its scale), else None."""
+    v, tol = float(np.asarray(p, dtype=float)[0]), 1e-9 * e.scale
+    if math.isfinite(e.upper[0]) and v >= e.upper[0] - tol:
+        return "upper"
+    if math.isfinite(e.lower[0]) and v <= e.lower[0] + tol:
+        return "lower"
+    return None
 
 
 class Fitting(Screening):
@@ -310,6 +321,40 @@ class Fitting(Screening):
         # (backward: the upper bound at the point itself, so every forward step leaves it: fd_jac steps back)
         return x, r, fd_jac(fun, x, lo, np.minimum(hi, x) if backward else hi, h=0.01, f0=r, only=only)
 
+    def _one_sided_interval(self, effects: list[Effect], x: np.ndarray, r: np.ndarray, J: np.ndarray, j: int,
+                            e: Effect, side: str, drss: float) -> tuple[float, float]:
+        """The confidence interval of a one-parameter member at a bound of its range (``side``: ``"lower"`` or
+        ``"upper"``; ``j`` its index in the scaled vector ``x``): from the bound to the end of the region where
+        the profiled residual sum of squares rises by at most ``drss`` (:func:`rvcalib.lsq.profile_limit`, scanned
+        toward zero, the error's absence, or toward the other bound when zero is outside the range); the other
+        bound when the region reaches past zero. The linearised interval is meaningless there: at the bound the
+        residual is flat in the parameter (e.g. a pin out of contact at any larger size), so its standard error
+        is huge and centred on a value the fit could not go beyond."""
+        lo, hi = float(e.lower[0]), float(e.upper[0])
+        far = lo if side == "upper" else hi
+        toward = 0.0 if lo < 0.0 < hi else far
+        fun, _ = self.residual_function(effects, projector(self._emp_matrix(self.empirical)))
+        lim = profile_limit(fun, x, J, j, toward / e.scale, drss, r0=r)
+        end = far if lim is None else lim * e.scale
+        val = float(x[j]) * e.scale
+        self.notes.append(
+            f"{e.name} ended at the {side} bound of its range ({val:.4g} {e.unit}), where the residual does not "
+            f"depend on it: the data bound it on one side only, {'>=' if side == 'upper' else '<='} {end:.4g} "
+            f"{e.unit} (95 %, profile of the residual with the other effects readjusted linearly); within that the "
+            f"size is not determined")
+        return (end, val) if side == "upper" else (val, end)
+
+    def clip_to_ranges(self, fitted: list[FittedEffect]) -> None:
+        """Keep every reported interval of a one-parameter effect inside the effect's range: the fits cannot
+        leave it, and an interval that does (after the linear widenings of the final-state groups, e.g. a pin's
+        one-sided interval at the top of its range widened past it) names sizes the model cannot take."""
+        by_name = {e.name: e for e in self.lib}
+        for f in fitted:
+            e = by_name.get(f.name)
+            if e is None or e.polar:
+                continue
+            f.ci_low, f.ci_high = max(f.ci_low, float(e.lower[0])), min(f.ci_high, float(e.upper[0]))
+
     def intervals(self) -> list[FittedEffect]:
         """The reported effects: each active effect's size with its 95 % confidence interval from the
         Jacobian (forward differences) of the joint fit on all samples and the residual variance,
@@ -355,13 +400,17 @@ class Fitting(Screening):
                     params = {"value": float(a.p[0])}
                     angle = None
                 half = tq * se * infl
+                ci = (float(val - half), float(val + half))
+                side = None if e.polar else _bound_side(e, a.p)
+                if side is not None:
+                    ci = self._one_sided_interval(effects, x, r, J, i - k, e, side, (tq * infl) ** 2 * s2)
                 declared, total = self._declared_total(e, a.p)
                 fitted.append(FittedEffect(
-                    e.name, e.key, e.family, e.unit, e.meaning, float(val), float(val - half), float(val + half),
+                    e.name, e.key, e.family, e.unit, e.meaning, float(val), ci[0], ci[1],
                     angle, se, params, a.iteration, float(a.info.get("explained_fraction", float("nan"))),
                     float(a.info.get("F", float("nan"))), float(a.info.get("p_value", float("nan"))),
                     float(a.info.get("delta_bic", float("nan"))), list(a.info.get("alternatives", [])),
-                    declared, total, dict(a.info.get("selection", {"method": "greedy"}))))
+                    declared, total, dict(a.info.get("selection", {"method": "greedy"})), side))
             if rho > 0.2:
                 self.notes.append(f"the final residual is autocorrelated (lag-1 {rho:.2f}): the confidence intervals "
                                   f"are widened by {infl:.2f}")

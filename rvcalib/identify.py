@@ -467,6 +467,7 @@ class Calibrator(Groups):
             iterations.append({"iteration": len(iterations) + 1, "decision": msg})
         fitted = self.intervals()
         fitted, final_groups = self.final_state_groups(fitted)
+        self.clip_to_ranges(fitted)
         if not self.stopped_by.startswith("nothing"):
             self.notes.append(self.stopped_by)
         pairs = self._pairs()
@@ -501,7 +502,7 @@ class Calibrator(Groups):
                 verdict = (f"No candidate effect is supported, but the residual ({after.rms:.3g} arcsec RMS) is not "
                            f"white (dominant in run {after.runs[0].run}: {dom}).")
         else:
-            names = ", ".join(f"{f.name} = {f.value:.4g} {f.unit}" for f in fitted) or "none"
+            names = ", ".join(f.size_text() for f in fitted) or "none"
             status = "explained" if not unexplained and after.white else "unexplained"
             verdict = (f"Found {len(fitted)} effect(s): {names}. Residual RMS {before.rms:.3g} -> {after.rms:.3g} "
                        f"arcsec (noise {noise:.3g} arcsec); {'white' if after.white else 'not white'}.")

@@ -237,3 +237,52 @@ def chord_fit(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_iter: int
         if it >= max_iter and (not bic_n or rss <= 0.0 or bic_n * math.log((rss + act) / rss) <= BIC_CONVERGED):
             break
     return x, r, J, nfev
+
+
+def profile_limit(fun, x: np.ndarray, J: np.ndarray, i: int, toward: float, drss: float,
+                  r0: np.ndarray | None = None, n_bisect: int = 8, rel_floor: float = 1e-4) -> float | None:
+    """The end of a parameter's confidence region on the side of ``toward``, by a profile of the residual sum
+    of squares, for a parameter whose linearised interval means nothing (one at a bound of its range, where
+    the residual does not depend on it: a pin out of contact at any larger size).
+
+    Along the line from ``x[i]`` (a least-squares solution, other parameters as in ``x``) to ``toward``, the
+    profile is ``g(v) = |(I - Q Q^T) r(v)|^2``: the residual with ``x[i] = v`` solved through ``fun``, the other
+    parameters readjusted linearly (``Q`` an orthonormal basis of the columns of ``J`` other than ``i``). The
+    confidence region is ``g(v) <= g(x[i]) + drss`` (``drss = t^2 s^2``: the rise at the end of a linear
+    interval of ``t`` standard errors). If ``toward`` is inside, returns None (the region reaches past it);
+    else the crossing is bracketed in the distance from ``toward``, between ``rel_floor`` of the whole
+    distance (returned if inside) and the whole, and bisected ``n_bisect`` times geometrically (the distances'
+    ratio shrinks to ``(1/rel_floor)^(2^-n_bisect)``, 1.037 by default: a limit near ``toward`` is resolved as
+    well as one far from it); the innermost point known to lie inside is returned, so the interval errs wide
+    (assumes one crossing: flat, then rising; a point ``fun`` cannot evaluate counts as outside). Scaled units
+    as ``x``.
+    """
+    x = np.asarray(x, dtype=float)
+    others = np.delete(np.asarray(J, dtype=float), i, axis=1)
+    Q = np.linalg.qr(others)[0] if others.shape[1] else np.zeros((J.shape[0], 0))
+
+    def g(v: float) -> float:
+        xv = x.copy()
+        xv[i] = v
+        try:
+            r = np.asarray(fun(xv) if (v != x[i] or r0 is None) else r0, dtype=float)
+        except ModelEvaluationError:
+            return math.inf
+        u = r - Q @ (Q.T @ r)
+        return float(u @ u)
+
+    thr = g(float(x[i])) + float(drss)
+    if g(float(toward)) <= thr:
+        return None
+    d_in = abs(float(x[i]) - float(toward))
+    sign = 1.0 if float(x[i]) >= float(toward) else -1.0
+    d_out = rel_floor * d_in
+    if g(float(toward) + sign * d_out) <= thr:
+        return float(toward) + sign * d_out
+    for _ in range(n_bisect):
+        d = math.sqrt(d_in * d_out)
+        if g(float(toward) + sign * d) <= thr:
+            d_in = d
+        else:
+            d_out = d
+    return float(toward) + sign * d_in

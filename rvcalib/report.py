@@ -163,7 +163,8 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
                              for a in e.alternatives[:6]) + (" ..." if len(e.alternatives) > 6 else "")
             if e.implied_total is not None:
                 alts += f"; declared {e.declared_value:.5g} {e.unit}, implied total {e.implied_total:.5g} {e.unit}"
-            L.append(f"| `{e.name}` ({e.family}) | {e.value:.5g} | {e.unit} | [{e.ci_low:.5g}, {e.ci_high:.5g}] | "
+            bnd = f" (at the {e.at_bound} bound: one-sided)" if e.at_bound else ""
+            L.append(f"| `{e.name}` ({e.family}) | {e.value:.5g} | {e.unit} | [{e.ci_low:.5g}, {e.ci_high:.5g}]{bnd} | "
                      f"{_fmt(e.angle_deg)} | {e.explained_fraction:.3f} | {_fmt(e.F)} | {_fmt(e.p_value, 3)} | "
                      f"{_fmt(e.delta_bic)} | {alts or '-'} |")
         L.append("")

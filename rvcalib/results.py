@@ -298,6 +298,11 @@ class FittedEffect:
         How it was chosen: ``method`` (``joint best subset`` or ``greedy``); for a joint choice the
         BIC and AIC inclusion weights (sum of the model weights of the subsets that held it, at the
         step that chose it) and the effects chosen with it (see :mod:`rvcalib.joint`).
+    at_bound : str or None
+        ``"lower"`` or ``"upper"`` when the size ended at that bound of the effect's range, where the residual
+        does not depend on it (a pin out of contact at any larger size): the interval then runs from the
+        bound to the end of the profiled confidence region, a one-sided limit (``value`` is the bound, not a
+        measured size). None otherwise.
     """
 
     name: str
@@ -320,6 +325,16 @@ class FittedEffect:
     declared_value: float | None = None
     implied_total: float | None = None
     selection: dict = field(default_factory=dict)
+    at_bound: str | None = None
+
+    def size_text(self) -> str:
+        """The size for a verdict: ``name = value unit``, or the one-sided limit of a size at a bound of its range
+        (``name >= limit unit (at its upper bound value)``)."""
+        if self.at_bound == "upper":
+            return f"{self.name} >= {self.ci_low:.4g} {self.unit} (at its upper bound {self.value:.4g})"
+        if self.at_bound == "lower":
+            return f"{self.name} <= {self.ci_high:.4g} {self.unit} (at its lower bound {self.value:.4g})"
+        return f"{self.name} = {self.value:.4g} {self.unit}"
 
     @property
     def alternative_names(self) -> list[str]:
@@ -333,7 +348,7 @@ class FittedEffect:
              "params": self.params, "iteration": self.iteration, "explained_fraction": self.explained_fraction,
              "F": self.F, "p_value": self.p_value, "delta_bic": self.delta_bic, "alternatives": self.alternatives,
              "declared_value": self.declared_value, "implied_total": self.implied_total,
-             "selection": self.selection}
+             "selection": self.selection, "at_bound": self.at_bound}
         if self.angle_deg is not None:
             d["angle_deg"] = self.angle_deg
         return d
