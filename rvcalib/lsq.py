@@ -258,8 +258,7 @@ def profile_limit(fun, x: np.ndarray, J: np.ndarray, i: int, toward: float, drss
     as ``x``.
     """
     x = np.asarray(x, dtype=float)
-    others = np.delete(np.asarray(J, dtype=float), i, axis=1)
-    Q = np.linalg.qr(others)[0] if others.shape[1] else np.zeros((J.shape[0], 0))
+    P = projector(np.delete(np.asarray(J, dtype=float), i, axis=1))
 
     def g(v: float) -> float:
         xv = x.copy()
@@ -268,7 +267,7 @@ def profile_limit(fun, x: np.ndarray, J: np.ndarray, i: int, toward: float, drss
             r = np.asarray(fun(xv) if (v != x[i] or r0 is None) else r0, dtype=float)
         except ModelEvaluationError:
             return math.inf
-        u = r - Q @ (Q.T @ r)
+        u = P(r)
         return float(u @ u)
 
     thr = g(float(x[i])) + float(drss)
