@@ -302,6 +302,11 @@ class Fitting(Screening):
             return dv, float(math.hypot(dv + float(p[0]), float(p[1])))
         return dv, dv + float(p[0])
 
+    def _state_fun(self, effects: list[Effect]):
+        """The residual at every reading of the model with ``effects`` and the state's empirical terms projected
+        out, as a function of the scaled parameter vector (:meth:`residual_function`)."""
+        return self.residual_function(effects, projector(self._emp_matrix(self.empirical)))[0]
+
     def state_jacobian(self, effects: list[Effect], params: list[np.ndarray], only: list[int] | None = None,
                        backward: bool = False, f0: np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -315,7 +320,7 @@ class Fitting(Screening):
         scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
         lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
         hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
-        fun, _ = self.residual_function(effects, projector(self._emp_matrix(self.empirical)))
+        fun = self._state_fun(effects)
         x = np.concatenate([np.asarray(p, dtype=float) for p in params]) / scales
         r = fun(x) if f0 is None else np.asarray(f0, dtype=float)
         # (backward: the upper bound at the point itself, so every forward step leaves it: fd_jac steps back)
@@ -333,7 +338,7 @@ class Fitting(Screening):
         lo, hi = float(e.lower[0]), float(e.upper[0])
         far = lo if side == "upper" else hi
         toward = 0.0 if lo < 0.0 < hi else far
-        fun, _ = self.residual_function(effects, projector(self._emp_matrix(self.empirical)))
+        fun = self._state_fun(effects)
         lim = profile_limit(fun, x, J, j, toward / e.scale, drss, r0=r)
         end = far if lim is None else lim * e.scale
         val = float(x[j]) * e.scale
