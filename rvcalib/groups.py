@@ -41,6 +41,7 @@ from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
 from rvcalib.dropswap import DropSwap
 from rvcalib.pairs import CHI2_95, CORRELATION_LIMIT
+from rvcalib.selection import member_target
 
 #: Smallest log-determinant gain for which a run is said to split a group (a factor 2 in det).
 MIN_LOG_DET_GAIN = math.log(2.0)
@@ -157,11 +158,7 @@ class Groups(DropSwap):
 
         def target(i: int) -> tuple[np.ndarray, np.ndarray | None]:
             """An effect's contribution plus the final residual, and the other members' columns."""
-            m, a = members[i], self.active[i]
-            others = np.column_stack([blocks[j] for j in range(len(blocks)) if j != i]) if len(blocks) > 1 else None
-            t = r_fin + m.cols @ (coef[col0[i]:col0[i + 1]]) + (m.contribution if m.contribution is not None
-                                                                 else m.cols @ np.asarray(a.p, dtype=float))
-            return t, others
+            return member_target(members, blocks, i, r_fin, coef, col0)
 
         if resolve:
             # the signatures of the candidates near an alternative (stored ones: solved at earlier states)

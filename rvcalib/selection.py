@@ -377,6 +377,19 @@ class Selection(Fitting):
         return res[:top]
 
 
+def member_target(members: list[PoolMember], blocks: list[np.ndarray], i: int, r: np.ndarray, coef: np.ndarray,
+                  col0: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Member ``i`` of a joint linear fit taken out again: its present contribution plus its fitted change plus the
+    fit's residual ``r`` (what the others must explain without it), and the other blocks' columns (None when it is
+    alone). ``blocks`` are the members' columns (then any empirical terms'), ``coef`` the joint fit's coefficients,
+    ``col0`` each block's first column."""
+    m = members[i]
+    part = m.contribution if m.contribution is not None else m.cols @ np.asarray(m.active.p, dtype=float)
+    t = r + m.cols @ coef[col0[i]:col0[i + 1]] + part
+    others = np.column_stack([blocks[j] for j in range(len(blocks)) if j != i]) if len(blocks) > 1 else None
+    return t, others
+
+
 def linear_removal_costs(members: list[PoolMember], rc: np.ndarray, Ec: np.ndarray | None
                          ) -> list[tuple[float, int, np.ndarray, np.ndarray | None]]:
     """For each physical member (``members``: the model linearised at the state), the rise of the residual sum of
@@ -393,9 +406,7 @@ def linear_removal_costs(members: list[PoolMember], rc: np.ndarray, Ec: np.ndarr
     for i, m in enumerate(members):
         if m.effect is None:
             continue
-        part = m.contribution if m.contribution is not None else m.cols @ np.asarray(m.active.p, dtype=float)
-        t = r + m.cols @ coef[col0[i]:col0[i + 1]] + part
-        others = np.column_stack([blocks[j] for j in range(len(blocks)) if j != i]) if len(blocks) > 1 else None
+        t, others = member_target(members, blocks, i, r, coef, col0)
         if others is None:
             cost = float(t @ t) - rss
         else:
