@@ -32,6 +32,7 @@ import argparse
 import contextlib
 import json
 import os
+import re
 import resource
 import sys
 import tempfile
@@ -100,8 +101,9 @@ def check_realistic(res, hidden: dict, noise: float, seconds: float) -> dict:
             continue
         t = abs(truth[e.key])
         tol = max(1.0 if e.unit == "um" else 1e-3, 0.25 * t)
-        if e.angle_deg is None and "[" not in e.name:
-            # a scalar error of the default instance (e.g. all pins' pin_circle_diameter): the sign counts
+        if e.angle_deg is None and all(i == "0" for i in re.findall(r"=(\d+)", e.name)):
+            # a scalar error of the truth's own instance (the default instance: all pins, or crank 0, disc 0,
+            # hole 0, pin 0; conventions.md): the sign counts
             ok = abs(e.value - truth[e.key]) <= tol
         else:
             # a polar error (its sign goes with its angle) or another instance (a twin may need the
