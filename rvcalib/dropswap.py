@@ -34,7 +34,6 @@ import numpy as np
 from rvcalib.basins import BasinCheck
 from rvcalib.forward import ModelEvaluationError
 from rvcalib.lsq import bic
-from rvcalib.results import Active
 from rvcalib.selection import linear_removal_costs
 
 #: Members (those whose removal costs least in the model linearised at the state) each dropped through rvdyn
@@ -97,14 +96,4 @@ class DropSwap(BasinCheck):
                                         f"drop-swap refit: {x.name} in place of {gone.effect.name}", found, i, x)
         if found is None:
             return None
-        b_new, i, x, params2, rss2 = found
-        old = self.active[i].effect.name
-        keep = [a for k, a in enumerate(self.active) if k != i]
-        for a, p in zip(keep, params2):
-            a.p = p
-        keep.append(Active(x, params2[-1], it, info={
-            "explained_fraction": 1.0 - rss2 / self.rss_full, "delta_bic": b_new - bic_cur,
-            "selection": {"method": "drop-swap refit before the stop", "iteration": it, "replaced": old}}))
-        self.active = keep
-        self.refresh_state()
-        return old, x.name
+        return self.adopt_swap(found, it, "drop-swap refit before the stop")

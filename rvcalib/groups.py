@@ -39,7 +39,7 @@ from scipy import stats
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
-from rvcalib.dropswap import DropSwap
+from rvcalib.pinscan import PinScan
 from rvcalib.pairs import CHI2_95, CORRELATION_LIMIT
 from rvcalib.selection import member_target
 
@@ -56,7 +56,7 @@ REC_POINTS_PER_PIN = 2
 RESOLVE_FACTOR = 25.0
 
 
-class Groups(DropSwap):
+class Groups(PinScan):
     """Identifiability groups and recommended runs (methods on the loop)."""
 
     def identifiability_groups(self, fitted: list[FittedEffect], unexplained: list[Unexplained]) -> list[dict]:

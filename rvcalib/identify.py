@@ -104,6 +104,7 @@ class Calibrator(Groups):
         self._instances_at: set = set()  # model states at which the instance check was made
         self._lookalike_at: set = set()  # model states at which the look-alike refit was made
         self._dropswap_at: set = set()   # model states at which the drop-swap refit was tried
+        self._pinscan_at: set = set()    # model states at which every pin's instance was solved (the pin scan)
         self._harmonic_checked_at: set = set()  # states checked before a harmonic entered (greedy step)
         eliminated = False      # the backward elimination ran on the present model (nothing changed since)
         while True:
@@ -381,8 +382,9 @@ class Calibrator(Groups):
 
     def _refits_before_stop(self, it: int) -> tuple[str, str] | None:
         """The instance check, the restart of collinear members (:mod:`rvcalib.basins`), (below the term
-        limit) the look-alike refit and the drop-swap refit (:mod:`rvcalib.dropswap`), each once per model
-        state: ``(check, what changed)`` of the first that changed the model, or None."""
+        limit) the look-alike refit, the drop-swap refit (:mod:`rvcalib.dropswap`) and the pin scan
+        (:mod:`rvcalib.pinscan`), each once per model state: ``(check, what changed)`` of the first that changed
+        the model, or None."""
         if not self.joint:
             return None
         sw_i = self._instances_before_stop(it)
@@ -402,7 +404,19 @@ class Calibrator(Groups):
             ds = self.drop_swap_refit(it)
             if ds:
                 return "drop-swap refit", f"{ds[1]} in place of {ds[0]}"
+        ps = self._pin_scan_once(it)
+        if ps:
+            return "pin scan", f"{ps[1]} in place of {ps[0]}" if ps[0] else f"added {ps[1]}"
         return None
+
+    def _pin_scan_once(self, it: int) -> tuple[str, str] | None:
+        """The pin scan (:mod:`rvcalib.pinscan`) once per model state: ``(member, candidate)`` of a replacement,
+        ``("", candidate)`` of an addition, or None."""
+        key = self._state_key()
+        if key in self._pinscan_at or self.over_budget():
+            return None
+        self._pinscan_at.add(key)
+        return self.pin_scan_refit(it)
 
     def _instances_before_stop(self, it: int, iterations: list[dict] | None = None) -> list[tuple[str, str]]:
         """The instance check (:meth:`rvcalib.replace.ReplacementRefit.instance_refit`) once per model state
@@ -427,7 +441,8 @@ class Calibrator(Groups):
     def replacement_before_stop(self, it: int, iterations: list[dict] | None = None) -> tuple[str, str] | None:
         """The instance check (:meth:`_instances_before_stop`), then the replacement refit
         (:meth:`rvcalib.replace.ReplacementRefit.replacement_refit`) and when it swaps nothing the drop-swap
-        refit (:mod:`rvcalib.dropswap`), each once per model state before the loop stops at the term limit,
+        refit (:mod:`rvcalib.dropswap`), then the pin scan (:mod:`rvcalib.pinscan`, replacements only), each once
+        per model state before the loop stops at the term limit,
         with the restart of collinear members (:mod:`rvcalib.basins`) after the instance check; the (last)
         swap made (old, new), ``("restart", message)``, or None."""
         sw_i = self._instances_before_stop(it, iterations)
@@ -449,6 +464,8 @@ class Calibrator(Groups):
         if not sw and key not in self._dropswap_at:
             self._dropswap_at.add(key)
             sw, how = self.drop_swap_refit(it), "drop-swap refit"
+        if not sw:
+            sw, how = self._pin_scan_once(it), "pin scan"
         if sw:
             self.log(f"{how} at the term limit: {sw[1]} in place of {sw[0]} (RMS "
                      f"{math.sqrt(self.rss_full / self.n):.4g} arcsec)")

@@ -285,3 +285,60 @@ def profile_limit(fun, x: np.ndarray, J: np.ndarray, i: int, toward: float, drss
         else:
             d_out = d
     return float(toward) + sign * d_in
+
+
+def bic_backward(r: np.ndarray, J: np.ndarray, x: np.ndarray, member_cols: list[np.ndarray], n: int,
+                 max_members: int | None = None, keep: set[int] | frozenset[int] = frozenset()) -> list[int]:
+    """Backward elimination by the BIC in the model linearised at a fit's solution.
+
+    Each step removes the member whose removal (its parameters set to zero, every other member refitted by
+    linear least squares, ``r(x') ~ r + J (x' - x)``) raises ``n ln(rss)`` least against the ``k ln n`` it saves,
+    while that lowers the BIC or more than ``max_members`` members are left.
+
+    Parameters
+    ----------
+    r : ndarray (n_rows,)
+        The residual at the solution.
+    J : ndarray (n_rows, p)
+        Its Jacobian in the (scaled) parameters ``x``.
+    x : ndarray (p,)
+    member_cols : list of ndarray of int
+        Each member's columns.
+    n : int
+        The number of samples of the BIC.
+    max_members : int or None
+        At most this many members are kept (removal goes on past the BIC's optimum down to it).
+    keep : set of int
+        Members never removed.
+
+    Returns
+    -------
+    list of int
+        The members kept, in their order.
+    """
+    alive = list(range(len(member_cols)))
+    t = r - J @ x   # the residual with every parameter at zero, in the linear model
+    rss_cur = float(r @ r)
+    while True:
+        cols_alive = [member_cols[i] for i in alive]
+        best = None
+        for i in alive:
+            if i in keep:
+                continue
+            others = np.concatenate([c for j, c in zip(alive, cols_alive) if j != i] or [np.zeros(0, dtype=int)])
+            if others.size:
+                z, *_ = np.linalg.lstsq(J[:, others], -t, rcond=None)
+                rr = t + J[:, others] @ z
+            else:
+                rr = t
+            rss = float(rr @ rr)
+            d = n * math.log(max(rss, 1e-300) / max(rss_cur, 1e-300)) - member_cols[i].size * math.log(n)
+            if best is None or d < best[0]:
+                best = (d, i, rss)
+        if best is None:
+            return alive
+        over = max_members is not None and len(alive) > max_members
+        if best[0] >= 0.0 and not over:
+            return alive
+        alive.remove(best[1])
+        rss_cur = best[2]

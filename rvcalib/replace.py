@@ -279,6 +279,24 @@ class ReplacementRefit(JointSelection):
             return b_new, i, x, params, rss
         return found
 
+    def adopt_swap(self, found: tuple, it: int, method: str) -> tuple[str, str]:
+        """Make the swap ``found`` (:meth:`swap_trial`'s ``(BIC, member index, candidate, parameters, RSS)``, the
+        candidate's parameters last): the member leaves, the others take their refitted sizes, the candidate
+        enters last with its selection record (``method``, the iteration ``it``, the member it replaced), and
+        the state is refreshed. Returns (member, candidate)."""
+        b_new, i, x, params, rss = found
+        bic_cur = bic(self.rss_full, self.n, self._p_cur())
+        old = self.active[i].effect.name
+        keep = [a for k, a in enumerate(self.active) if k != i]
+        for a, p in zip(keep, params):
+            a.p = p
+        keep.append(Active(x, params[-1], it, info={
+            "explained_fraction": 1.0 - rss / self.rss_full, "delta_bic": b_new - bic_cur,
+            "selection": {"method": method, "iteration": it, "replaced": old}}))
+        self.active = keep
+        self.refresh_state()
+        return old, x.name
+
     def lookalike_refit(self, it: int) -> tuple[str, str] | None:
         """Before the loop stops below the term limit: the model refitted through rvdyn with each member's
         closest look-alike of another error type *added* (the library ranked against the member's part

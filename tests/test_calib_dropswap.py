@@ -144,17 +144,18 @@ def test_at_the_term_limit_the_drop_swap_follows_a_replacement_refit_that_swaps_
 
     c = Calibrator.__new__(Calibrator)
     c.joint, c.active, c.empirical = True, [Active(_effect("A"), np.array([1.0]), 1)], []
-    c._replaced_at, c._dropswap_at, c._instances_at = set(), set(), set()
+    c._replaced_at, c._dropswap_at, c._instances_at, c._pinscan_at = set(), set(), set(), set()
     c.over_budget = lambda: False
     c.n, c.rss_full = N, 40.0
     said: list[str] = []
     c.log = said.append
     ran: list[str] = []
-    swap = {"replacement": None, "dropswap": ("A", "C")}
+    swap = {"replacement": None, "dropswap": ("A", "C"), "pinscan": None}
     c._instances_before_stop = lambda it, iterations=None: ran.append("instances") or []
     c.restart_refit = lambda adopt=True: ran.append("restart") or None
     c.replacement_refit = lambda it: ran.append("replacement") or swap["replacement"]
     c.drop_swap_refit = lambda it: ran.append("dropswap") or swap["dropswap"]
+    c.pin_scan_refit = lambda it: ran.append("pinscan") or swap["pinscan"]
     its: list[dict] = []
     assert c.replacement_before_stop(5, its) == ("A", "C")
     assert ran == ["instances", "restart", "replacement", "dropswap"]
@@ -170,3 +171,10 @@ def test_at_the_term_limit_the_drop_swap_follows_a_replacement_refit_that_swaps_
     assert c.replacement_before_stop(7, its) == ("B", "E")
     assert ran == ["instances", "restart", "replacement"]
     assert its[-1]["decision"] == "replacement refit at the term limit: E in place of B"
+    # neither swaps: the pin scan (replacements only at the limit) is the last check
+    c.active = [Active(_effect("F"), np.array([1.0]), 1)]
+    ran.clear()
+    swap.update(replacement=None, dropswap=None, pinscan=("F", "pin_pitch[pin=3]"))
+    assert c.replacement_before_stop(8, its) == ("F", "pin_pitch[pin=3]")
+    assert ran == ["instances", "restart", "replacement", "dropswap", "pinscan"]
+    assert its[-1]["decision"] == "pin scan at the term limit: pin_pitch[pin=3] in place of F"

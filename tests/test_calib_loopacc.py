@@ -121,7 +121,7 @@ def test_instances_the_data_split_stay_separate():
     assert merged == set() and out == []
 
 
-def _harmonic_gate(av_found: bool, swaps: list, lookalike, dropswap):
+def _harmonic_gate(av_found: bool, swaps: list, lookalike, dropswap, pinscan=None):
     """A Calibrator stand-in at one model state whose checks before a harmonic return the given results;
     records which checks ran."""
     from rvcalib.identify import Calibrator
@@ -130,6 +130,7 @@ def _harmonic_gate(av_found: bool, swaps: list, lookalike, dropswap):
     e = Effect("disc_phase[disc=0]", "disc_phase", "table4", "deg", "disc 0")
     c.joint, c.active, c.empirical, c.max_terms = True, [Active(e, np.array([0.01]), 1)], [], 12
     c._harmonic_checked_at, c._lookalike_at, c._instances_at, c._dropswap_at = set(), set(), set(), set()
+    c._pinscan_at = set()
     c.over_budget = lambda: False
     ran: list[str] = []
     cand = [object()] if av_found else []
@@ -160,8 +161,12 @@ def _harmonic_gate(av_found: bool, swaps: list, lookalike, dropswap):
         ran.append("dropswap")
         return dropswap
 
+    def pin_scan_refit(it):
+        ran.append("pinscan")
+        return pinscan
+
     c._instances_before_stop, c.lookalike_refit, c.restart_refit = instances, lookalike_refit, restart_refit
-    c.drop_swap_refit = drop_swap_refit
+    c.drop_swap_refit, c.pin_scan_refit = drop_swap_refit, pin_scan_refit
     return c, ran
 
 
@@ -173,7 +178,7 @@ def _harmonic_gate(av_found: bool, swaps: list, lookalike, dropswap):
      "pin_radius", ["added_variable", "instances", "restart", "lookalike"]),
     (False, [], None, ("planet_eccentricity[crank=1]", "sun_eccentricity"), "drop-swap refit: sun_eccentricity in "
      "place of planet_eccentricity[crank=1]", ["added_variable", "instances", "restart", "lookalike", "dropswap"]),
-    (False, [], None, None, None, ["added_variable", "instances", "restart", "lookalike", "dropswap"]),
+    (False, [], None, None, None, ["added_variable", "instances", "restart", "lookalike", "dropswap", "pinscan"]),
 ])
 def test_the_checks_before_the_stop_run_before_a_harmonic_enters(av_found, instances, lookalike, dropswap, expect,
                                                                  checks):
@@ -188,7 +193,13 @@ def test_the_checks_before_the_stop_run_before_a_harmonic_enters(av_found, insta
     c2, ran2 = _harmonic_gate(False, [], ("pin_radius", "pin_circle_diameter"), None)
     c2.max_terms = 1
     assert c2._physical_before_harmonic(7, {}, None, None, None, None, []) is None
-    assert ran2 == ["added_variable", "instances", "restart", "dropswap"]
+    assert ran2 == ["added_variable", "instances", "restart", "dropswap", "pinscan"]
+    # the pin scan is the last check: its replacement or addition is taken when nothing before it changed the model
+    for got, said in [(("pin_radius[pin=19]", "pin_pitch[pin=0]"), "pin scan: pin_pitch[pin=0] in place of "
+                       "pin_radius[pin=19]"), (("", "pin_pitch[pin=0]"), "pin scan: added pin_pitch[pin=0]")]:
+        c3, ran3 = _harmonic_gate(False, [], None, None, pinscan=got)
+        assert c3._physical_before_harmonic(7, {}, None, None, None, None, []) == said
+        assert ran3 == ["added_variable", "instances", "restart", "lookalike", "dropswap", "pinscan"]
 
 
 def _elimination_case(cost: float):

@@ -1,0 +1,286 @@
+"""Every pin's instance of the pin-wise errors solved at the model state: which pin, chosen by the full model.
+
+The loop screens a pin-wise error (one pin's pitch, radial position or radius) by shifting its template's
+signature, solved at the declared model, by whole pin pitches. Under the physical law at a realistic state that
+shift is not the instance's TE: the load a pin carries depends on every other error present, so a pin's pitch
+error and a neighbour's radius error change places in the ranking, the wrong instance enters, and the errors of
+other types then take sizes far from their own to make up the difference. Realistic seed 9 on the 2026-11-28
+machine (stop 36, main 449a259): the loop ended at RMS 0.348 arcsec (noise 0.2) with pin 19's radius at +3.6 um
+standing in for pin 0's pitch (-0.0068 deg), the carrier-hole and disc-hole eccentricities missing and a cam
+eccentricity on the wrong disc; the truth's effects refitted from the truth leave 0.197 arcsec. Refitting the
+loop's end with every error type it lacked added (one instance each, chosen by the screening: pin 32's pitch)
+stayed in the loop's basin (0.40 arcsec), from zero too (0.47-0.66), with or without a prior on the sizes; with
+pin 0's pitch in place of pin 19's radius the same refit went to 0.209 arcsec with every size near its truth
+(carrier hole 3.33 um for 3.81, cam eccentricity 2.32 for 2.19, pin 0's pitch -0.0068 deg). The instance's own
+TE solved at the loop's end ranked pin 0's pitch first in place of pin 19's radius (the residual's sum of squares
+in the model linearised there 393 -> 225 arcsec^2, the state's own 245; the shifted signature had not offered
+it). Seed 10: the loop ended at 0.218 arcsec with pin 38's diameter standing in for pin 0's pitch
+(-0.0025 deg); solved at the state, pin 0's pitch ranks first as an addition (65.5 -> 61.5 arcsec^2).
+(docs/calibration.md, "Stop 36".)
+
+The check (:meth:`PinScan.pin_scan_refit`, once per model state, the last of the checks before the loop stops;
+not made when the state's residual is already within the noise estimate, :func:`rvcalib.residual.structured_noise`:
+no refit can then gain beyond chance, and the scan's 119 instances x 2 sides x the run conditions solves would
+double the cost of a loop that has found its answer, e.g. the 5-run benchmark's):
+
+1. For every pin and each error type of :data:`PIN_SCAN_KEYS`, the instance not in the model is added to the
+   state at +-:data:`PIN_SCAN_STEP` of its scale and the model solved at every reading (one batch of sensitivity
+   solves of the forward runner); the change of the residual is the instance's column on each side of zero
+   (the TE has a kink there: a pin that moves in takes load, one that moves out sheds it).
+2. In the model linearised at the state (the members' Jacobian columns, scaled parameters), each column is
+   fitted, with a size >= 0 along its own side, as an addition (every member refitted) and in place of each
+   physical member (the member's part back in the residual, the other members refitted)
+   (:func:`scan_ranking`).
+3. The best addition (below the term limit) and the best replacement whose linear fit leaves less than the
+   state are refitted through rvdyn from their linear sizes. An addition is kept when it passes the loop's F
+   test on all samples and lowers the BIC by more than ``JOINT_BIC_MARGIN``, a replacement (one effect for one)
+   when it lowers the BIC by more than the margin; the better of the two is made and the search goes on.
+4. When neither is kept, the best replacement is refitted with one instance of every error family the model
+   then lacks beside it (each the best of its family in the screening at the state, from zero; expensive and
+   measurement effects left out; the empirical terms dropped), members are removed by the BIC in the model linearised at that fit (down to
+   the term limit, :func:`rvcalib.lsq.bic_backward`) and the rest refitted; kept when the BIC falls by more than
+   the margin. Why: a stand-in pin holds the other errors where they make up for it, and with it gone alone they
+   cannot move there one at a time (seed 9: pin 0's pitch in pin 19's place alone, the rest refitted, rose by
+   158 BIC units; with the families the model lacked beside it, by hand, it fell by 1876).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rvcalib.dropswap import DropSwap
+from rvcalib.forward import ModelEvaluationError
+from rvcalib.joint import JOINT_BIC_MARGIN
+from rvcalib.lsq import bic, bic_backward, ftest, projector
+from rvcalib.residual import structured_noise
+from rvcalib.results import Active
+
+#: The pin-wise error types whose every pin is solved at the state. A pin's radius and its radial position
+#: (``pin_circle_diameter[pin=k]``, twice the radial shift) nearly coincide on the data (a radius smaller by d
+#: moves the pin's innermost point as an outward shift by d does, the contact normals differ slightly), but not
+#: at a realistic state (seed 10: in place of pin 38's diameter, pin 38's radius leaves 70.4 arcsec^2 in the
+#: model linearised there, the state 65.5), so both are solved.
+PIN_SCAN_KEYS = ("pin_pitch", "pin_circle_diameter", "pin_radius")
+#: The trial step of each instance, in units of its effect's scale (0.005 deg of pitch, 5 um of diameter,
+#: 2.5 um of radius): the size of a realistic error (paper Table 4 / 3), where the kink at zero is left behind.
+PIN_SCAN_STEP = 0.5
+
+
+def _fit_along(t: np.ndarray, d: np.ndarray, Q: np.ndarray) -> tuple[float, float]:
+    """Least squares of ``t + a d`` over ``a >= 0`` with the columns of ``Q`` (orthonormal) projected out:
+    (residual sum of squares, a)."""
+    tq = t - Q @ (Q.T @ t)
+    dq = d - Q @ (Q.T @ d)
+    den = float(dq @ dq)
+    a = max(0.0, -float(dq @ tq) / den) if den > 0.0 else 0.0
+    rr = tq + a * dq
+    return float(rr @ rr), a
+
+
+def scan_ranking(r: np.ndarray, J: np.ndarray, x: np.ndarray, member_cols: list[np.ndarray],
+                 cols: dict[tuple[str, float], np.ndarray]) -> tuple[list, dict[int, list]]:
+    """The candidates' columns ranked in the model linearised at the state.
+
+    Parameters
+    ----------
+    r : ndarray (n,)
+        The residual at the state (arcsec, empirical terms projected out).
+    J : ndarray (n, p)
+        Its Jacobian in the members' scaled parameters (``r(x') ~ r + J (x' - x)``).
+    x : ndarray (p,)
+        The members' scaled parameters.
+    member_cols : list of ndarray of int
+        Each member's columns of ``J``.
+    cols : dict
+        ``(name, sign) -> d``: the change of the residual when the candidate ``name`` is added at ``sign`` times
+        the trial step (arcsec, the same rows as ``r``).
+
+    Returns
+    -------
+    additions : list of (rss, name, steps)
+        Each column fitted beside every member (refitted): the residual sum of squares it leaves and the
+        candidate's size in trial steps (signed), best first.
+    replacements : dict
+        Member index -> list of (rss, name, steps): each column fitted in the member's place (the member's part
+        ``J_m x_m`` back in the residual, the other members refitted), best first.
+    """
+    p = J.shape[1]
+    Q = np.linalg.qr(J)[0] if p else np.zeros((r.size, 0))
+    additions = []
+    for (name, sign), d in cols.items():
+        rss, a = _fit_along(r, d, Q)
+        additions.append((rss, name, sign * a))
+    additions.sort()
+    replacements: dict[int, list] = {}
+    for i, mc in enumerate(member_cols):
+        others = np.setdiff1d(np.arange(p), mc)
+        Qo = np.linalg.qr(J[:, others])[0] if others.size else np.zeros((r.size, 0))
+        t = r - J[:, mc] @ x[mc]
+        got = []
+        for (name, sign), d in cols.items():
+            rss, a = _fit_along(t, d, Qo)
+            got.append((rss, name, sign * a))
+        got.sort()
+        replacements[i] = got
+    return additions, replacements
+
+
+class PinScan(DropSwap):
+    """Every pin's instance solved at the state before the loop stops (see the module docstring)."""
+
+    def _pin_candidates(self) -> list:
+        """The library's single-pin instances of :data:`PIN_SCAN_KEYS` not in the model."""
+        in_model = {a.effect.name for a in self.active}
+        return [e for e in self.lib if e.key in PIN_SCAN_KEYS and dict(e.instance).get("pin") is not None
+                and e.name not in in_model and not e.expensive]
+
+    def pin_scan_refit(self, it: int) -> tuple[str, str] | None:
+        """The pin scan (module docstring): returns ``(member, candidate)`` for a replacement made,
+        ``("", candidate)`` for an addition, or None."""
+        cands = self._pin_candidates()
+        if not self.active or not cands or self.over_budget():
+            return None
+        r_now, _ = self.full_residual(self._pairs(), self.empirical)
+        sigma = structured_noise(self.ds, self.split(r_now))
+        if math.isfinite(sigma) and self.rss_full <= self.n * sigma ** 2:
+            self.log(f"pin scan: not made, the state's residual ({math.sqrt(self.rss_full / self.n):.4g} arcsec RMS) "
+                     f"is within the noise estimate ({sigma:.4g} arcsec)")
+            return None
+        effects = [a.effect for a in self.active]
+        params = [np.asarray(a.p, dtype=float) for a in self.active]
+        P = projector(self._emp_matrix(self.empirical))
+        self.keep_state_jacobian()
+        J, known = self._cached_jacobian(effects, params, self.empirical, P)
+        try:
+            if J is None or known is None or not bool(np.all(known)):
+                x, r, J = self.state_jacobian(effects, params)
+            else:
+                scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
+                x = np.concatenate(params) / scales
+                r = self._state_fun(effects)(x)
+        except ModelEvaluationError:
+            return None
+        state = list(zip(effects, params))
+        trials = [(c, s) for c in cands for s in (-1.0, 1.0)]
+        preds = self.predict_many([state + [(c, np.array([s * PIN_SCAN_STEP * c.scale]))] for c, s in trials],
+                                  sensitivity=True)
+        cols = {}
+        for (c, s), pred in zip(trials, preds):
+            if isinstance(pred, ModelEvaluationError):
+                continue
+            cols[(c.name, s)] = P(np.concatenate([y - q for y, q in zip(self.y, pred)])) - r
+        if not cols:
+            return None
+        sizes = np.cumsum([0] + [e.n_params for e in effects])
+        member_cols = [np.arange(sizes[i], sizes[i + 1]) for i in range(len(effects))]
+        additions, replacements = scan_ranking(r, J, x, member_cols, cols)
+        rss_state = float(r @ r)
+        by_name = {c.name: c for c in cands}
+        p_cur = self._p_cur()
+        bic_cur = bic(self.rss_full, self.n, p_cur)
+        best_rep = min(((got[0], i) for i, got in replacements.items()
+                        if got and effects[i].family != "measurement" and got[0][0] < rss_state), default=None)
+        self.log(f"pin scan: {len(cands)} instances solved at the state; best addition "
+                 f"{additions[0][1]} ({rss_state:.4g} -> {additions[0][0]:.4g} arcsec^2 linearised)"
+                 + (f", best replacement {best_rep[0][1]} in place of {effects[best_rep[1]].name} "
+                    f"({best_rep[0][0]:.4g})" if best_rep else ", no replacement below the state"))
+        found = None
+        if best_rep is not None and not self.over_budget():
+            (_, name, steps), i = best_rep
+            c = by_name[name]
+            keep = [a for k, a in enumerate(self.active) if k != i]
+            p0 = [a.p for a in keep] + [np.array([steps * PIN_SCAN_STEP * c.scale])]
+            k = p_cur - effects[i].n_params + c.n_params
+            found = self.swap_trial([a.effect for a in keep] + [c], p0, k, bic_cur,
+                                    f"pin scan: {name} in place of {effects[i].name}", None, i, c)
+        add = None
+        if (len(self.active) + len(self.empirical) < self.max_terms and additions[0][0] < rss_state
+                and not self.over_budget()):
+            _, name, steps = additions[0]
+            c = by_name[name]
+            try:
+                got = self.fit_full(effects + [c], params + [np.array([steps * PIN_SCAN_STEP * c.scale])],
+                                    self.empirical)
+            except ModelEvaluationError:
+                got = None
+            if got is not None:
+                params2, rss2 = got[0], got[1]
+                k = p_cur + c.n_params
+                b_new = bic(rss2, self.n, k)
+                F, pv = ftest(self.rss_full, rss2, c.n_params, self.n, k)
+                self.log(f"pin scan: {name} added: RMS {math.sqrt(rss2 / self.n):.4g}, dBIC {b_new - bic_cur:.1f}, "
+                         f"p {pv:.3g}")
+                if pv < self.thr and b_new < bic_cur - JOINT_BIC_MARGIN:
+                    add = (b_new, c, params2, rss2, F, pv)
+        if add is not None and (found is None or add[0] < found[0]):
+            b_new, c, params2, rss2, F, pv = add
+            for a, p in zip(self.active, params2):
+                a.p = p
+            self.active.append(Active(c, params2[-1], it, info={
+                "explained_fraction": 1.0 - rss2 / self.rss_full, "F": F, "p_value": pv, "delta_bic": b_new - bic_cur,
+                "selection": {"method": "pin scan before the stop", "iteration": it}}))
+            self.refresh_state()
+            return "", c.name
+        if found is not None:
+            return self.adopt_swap(found, it, "pin scan before the stop")
+        if best_rep is None or self.over_budget():
+            return None
+        (_, name, steps), i = best_rep
+        return self._with_missing_types(i, by_name[name], steps * PIN_SCAN_STEP * by_name[name].scale, it)
+
+    def _with_missing_types(self, i: int, c, p_c: float, it: int) -> tuple[str, str] | None:
+        """Member ``i`` replaced by the pin instance ``c`` (from its linear size ``p_c``) with one instance of every
+        error family the model lacks beside them (each the best of its family in the screening at the state,
+        from zero; expensive and measurement effects left out), refitted through rvdyn without the empirical
+        terms (they stand for what the model lacked: the loop judges them again from the new state); then members
+        removed by the BIC in the model linearised at that fit (:func:`rvcalib.lsq.bic_backward`, down to the term
+        limit) and the rest refitted. Kept when the BIC on all samples (the state's with its empirical terms) falls
+        by more than ``JOINT_BIC_MARGIN``; returns (members and empirical terms gone, members come) or None."""
+        old = [a for k, a in enumerate(self.active) if k != i]
+        effects = [a.effect for a in old] + [c]
+        present = {e.template or e.name for e in effects}
+        rc = np.concatenate(self.coarse_residual())
+        extra, seen = [], set()
+        for d in self.rank(rc, None):
+            e = d.effect
+            if d.family_key in present or d.family_key in seen or e.expensive or e.family == "measurement":
+                continue
+            seen.add(d.family_key)
+            extra.append(e)
+        effects += extra
+        p0 = [a.p for a in old] + [np.array([p_c])] + [np.zeros(e.n_params) for e in extra]
+        bic_cur = bic(self.rss_full, self.n, self._p_cur())
+        try:
+            params, rss, x, fun, J = self.fit_full(effects, p0, [])
+            sizes = np.cumsum([0] + [e.n_params for e in effects])
+            alive = bic_backward(fun(x), J, x, [np.arange(sizes[j], sizes[j + 1]) for j in range(len(effects))],
+                                 self.n, max_members=self.max_terms)
+            kept = [effects[j] for j in alive]
+            params2, rss2, *_ = self.fit_full(kept, [params[j] for j in alive], [])
+        except ModelEvaluationError:
+            return None
+        b_new = bic(rss2, self.n, sum(e.n_params for e in kept))
+        self.log(f"pin scan: {c.name} in place of {self.active[i].effect.name} with {len(extra)} error types the "
+                 f"model lacked ({math.sqrt(rss / self.n):.4g} arcsec), {len(kept)} members kept by the BIC: RMS "
+                 f"{math.sqrt(rss2 / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
+        if b_new >= bic_cur - JOINT_BIC_MARGIN:
+            return None
+        by_name = {a.effect.name: a for a in self.active}
+        gone = [a.effect.name for a in self.active if a.effect not in kept]
+        come = [e.name for e in kept if e.name not in by_name]
+        new_active = []
+        for e, p in zip(kept, params2):
+            a = by_name.get(e.name)
+            if a is not None:
+                a.p = p
+                new_active.append(a)
+            else:
+                new_active.append(Active(e, p, it, info={
+                    "explained_fraction": 1.0 - rss2 / self.rss_full, "delta_bic": b_new - bic_cur,
+                    "selection": {"method": "pin scan before the stop, refitted with the error types the model lacked",
+                                  "iteration": it, "replaced": ", ".join(gone), "with": c.name}}))
+        gone += [t.label for t in self.empirical]
+        self.active, self.empirical = new_active, []
+        self.refresh_state()
+        return ", ".join(gone), ", ".join(come)
