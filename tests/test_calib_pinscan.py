@@ -38,13 +38,15 @@ def test_a_stand_in_is_replaced_by_the_candidate_it_stands_in_for():
     r = y - G @ x
     cols = {("R", 1.0): -g_r, ("R", -1.0): g_r / 3.0, ("A", 1.0): -g_a, ("A", -1.0): g_a / 3.0}
     member_cols = [np.array([0]), np.array([1]), np.array([2])]
-    additions, replacements = scan_ranking(r, -G, x, member_cols, cols)
+    additions, replacements, removals = scan_ranking(r, -G, x, member_cols, cols)
     best = replacements[1][0]
     assert best[1] == "R" and best[2] == pytest.approx(1.5, abs=0.01)
     assert best[0] == pytest.approx(float(noise @ noise), rel=0.05)   # to the noise
     assert best[0] < float(r @ r) / 10                                 # far below the state
     # in place of member 0 or 2 (which the data hold) the best leaves far more
     assert min(replacements[0][0][0], replacements[2][0][0]) > 100 * best[0]
+    # without member 1 (the others refitted) R's part is back: far above what R leaves in its place
+    assert removals[1] > 100 * best[0] and removals[1] > float(r @ r)
     # as an addition (member 1 refitted beside it, to about zero) R leaves the same: the refits' BIC decides
     assert additions[0][1] == "R" and additions[0][0] == pytest.approx(best[0], rel=0.01)
 
@@ -58,7 +60,7 @@ def test_a_size_stays_on_its_own_side_of_the_kink():
     x, *_ = np.linalg.lstsq(G, y, rcond=None)
     r = y - G @ x
     cols = {("A", 1.0): -t_pos, ("A", -1.0): -t_neg}
-    additions, _ = scan_ranking(r, -G, x, [np.array([0]), np.array([1]), np.array([2])], cols)
+    additions, _, _ = scan_ranking(r, -G, x, [np.array([0]), np.array([1]), np.array([2])], cols)
     rss, name, steps = additions[0]
     assert name == "A" and steps == pytest.approx(-3.0, abs=0.02)
     assert rss == pytest.approx(float(noise @ noise), rel=0.05)
