@@ -196,7 +196,8 @@ class PinScan(DropSwap):
         best_rep = min(((got[0], i) for i, got in replacements.items()
                         if got and effects[i].family != "measurement" and got[0][0] < rss_state
                         and earns_its_place(i, got[0][0], got[0][1])), default=None)
-        self.log(f"pin scan: {len(cands)} instances solved at the state; best addition "
+        self.log(f"pin scan: {len(cands)} instances solved at the state (RMS {math.sqrt(self.rss_full / self.n):.5g}, "
+                 f"noise estimate {sigma:.5g} arcsec); best addition "
                  f"{additions[0][1]} ({rss_state:.4g} -> {additions[0][0]:.4g} arcsec^2 linearised)"
                  + (f", best replacement {best_rep[0][1]} in place of {effects[best_rep[1]].name} "
                     f"({best_rep[0][0]:.4g})" if best_rep else ", no replacement below the state"))
