@@ -158,13 +158,13 @@ class PinScan(DropSwap):
         P = projector(self._emp_matrix(self.empirical))
         self.keep_state_jacobian()
         J, known = self._cached_jacobian(effects, params, self.empirical, P)
+        r = r_now   # the state's residual with the empirical terms projected out, solved once above
         try:
             if J is None or known is None or not bool(np.all(known)):
-                x, r, J = self.state_jacobian(effects, params)
+                x, _, J = self.state_jacobian(effects, params, f0=r)
             else:
                 scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
                 x = np.concatenate(params) / scales
-                r = self._state_fun(effects)(x)
         except ModelEvaluationError:
             return None
         state = list(zip(effects, params))

@@ -224,7 +224,6 @@ def test_no_scan_when_the_state_is_within_the_noise():
     s.keep_state_jacobian = lambda: None
     s._emp_matrix = lambda terms, coarse=False: None
     s._cached_jacobian = lambda *a: (np.zeros((r.size, 1)), np.array([True]))
-    s._state_fun = lambda effects: (lambda x: r)
     run = types.SimpleNamespace(input_deg=np.linspace(0.0, 121.0 * 360.0, r.size, endpoint=False), ratio=121.0)
     s.ds = types.SimpleNamespace(runs=[run], design=Design())
     sigma = structured_noise(s.ds, [r])
