@@ -245,6 +245,11 @@ class Groups(PinScan):
                     unsplit.add(g["found"])
                 unsplit.update(m["name"] for m in g["members"] if m.get("named") is False)
                 alt_names.setdefault(g["found"], set()).update(m["name"] for m in g["members"][1:])
+        # 1d. a look-alike refit of the final state that the BIC cannot tell from it, moving a named effect beyond
+        #     its interval: the effect is not named (its size depends on whether the candidate is present)
+        for g in self.lookalike_ties(by_name, unsplit, rms_model):
+            groups.append(g)
+            alt_names.setdefault(g["found"], set()).update(m["name"] for m in g["members"][1:])
         # 2. honest intervals: each named effect's interval in the model plus any one candidate left out
         #    (profiled over the size the data give that candidate), the union over candidates
         res_groups: dict[int, tuple] = {}

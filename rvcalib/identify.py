@@ -349,11 +349,6 @@ class Calibrator(Groups):
         self._drop_empirical(iterations)
         return self._finish(r0, before, iterations, t_start)
 
-    def _state_key(self) -> tuple:
-        """The present model state (its effects and empirical terms) as a key: the checks before the stop run
-        once per state."""
-        return tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical)
-
     def _physical_before_harmonic(self, it: int, log: dict, rc, rc_cat, Ec, r_full, harms) -> str | None:
         """The checks the loop makes before it stops, made before a harmonic enters by the greedy step
         (physics first: an empirical term is the last resort), once per model state: the added-variable test

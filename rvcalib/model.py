@@ -184,8 +184,28 @@ class LoopModel:
         :class:`ModelEvaluationError` in its place. ``sensitivity``: sensitivity solves from the newest
         converged state of each run condition (:func:`rvcalib.forward.te_at_many`), for differences taken
         from that state (a Jacobian's columns)."""
+        return self._solve_states(actives, None, sensitivity)
+
+    def predict_rows(self, actives: list[list[tuple[Effect, np.ndarray]]], keep: np.ndarray,
+                     sensitivity: bool = False) -> list[np.ndarray | ModelEvaluationError]:
+        """Model TE of several states at some of the samples only: ``keep`` (bool, one per sample of the
+        concatenated runs) selects them; each state's TE comes back concatenated over the kept samples (arcsec).
+        The physics is solved at the kept readings alone, exactly as :meth:`predict_many` solves all of them;
+        ``sensitivity`` as there (from the newest converged solve at the same readings)."""
+        keep = np.asarray(keep, dtype=bool)
+        if keep.shape != (self.n,):
+            raise ValueError(f"keep has shape {keep.shape}; one flag per sample ({self.n}) is needed")
+        out = []
+        for got in self._solve_states(actives, self.split(keep), sensitivity):
+            out.append(got if isinstance(got, ModelEvaluationError) else np.concatenate(got))
+        return out
+
+    def _solve_states(self, actives, keep: list[np.ndarray] | None, sensitivity: bool
+                      ) -> list[list[np.ndarray] | ModelEvaluationError]:
+        """The states' TE per run, at each run's samples (``keep``: a mask per run, else all)."""
         nc = len(self._cond_runs)
-        xs = [np.concatenate([self.runs[i].input_deg for i in members]) for members in self._cond_runs]
+        sel = [slice(None) if keep is None else keep[i] for i in range(len(self.runs))]
+        xs = [np.concatenate([self.runs[i].input_deg[sel[i]] for i in members]) for members in self._cond_runs]
         cases = []
         for active in actives:
             phys = [(e, p) for e, p in active if e.family != "measurement"]
@@ -203,8 +223,9 @@ class LoopModel:
                 j = 0
                 for i in members:
                     r = self.runs[i]
-                    out[i] = te[j:j + r.input_deg.size] + self._meas(active, r.input_deg, r.output_deg)
-                    j += r.input_deg.size
+                    a, b = r.input_deg[sel[i]], r.output_deg[sel[i]]
+                    out[i] = te[j:j + a.size] + self._meas(active, a, b)
+                    j += a.size
             result.append(out)
         return result
 
@@ -260,6 +281,11 @@ class LoopModel:
             out.append(v[i:i + y.size])
             i += y.size
         return out
+
+    def _state_key(self) -> tuple:
+        """The present model state (its effects and empirical terms) as a key: the checks before the stop run
+        once per state, and what they leave for the final state is kept under it."""
+        return tuple(sorted(a.effect.name for a in self.active)), tuple(t.label for t in self.empirical)
 
     def _p_cur(self) -> int:
         """Parameters in the model now (effects' components and empirical columns)."""

@@ -397,6 +397,13 @@ class ReplacementRefit(JointSelection):
         r_full = self.refresh_state()
         return mname, " and ".join(x.name for x in xs)
 
+    def lookalike_store(self) -> dict:
+        """The look-alike refits made: model state (:meth:`_state_key`) -> list of ``{effects, params, rss,
+        delta_bic, added, beside}``, one per trial, kept or not."""
+        if not hasattr(self, "_lookalike_fits"):
+            self._lookalike_fits: dict = {}
+        return self._lookalike_fits
+
     def _lookalike_trial(self, xs: list, mname: str, p_cur: int, bic_cur: float, why: str):
         """The model refitted through rvdyn with ``xs`` added from zero: (BIC, xs, parameters, RSS, member, F,
         p) when the addition passes the loop's F test on all samples and lowers the BIC by more than
@@ -413,6 +420,11 @@ class ReplacementRefit(JointSelection):
         F, pv = ftest(self.rss_full, rss, kx, self.n, k)
         self.log(f"look-alike refit: {' and '.join(x.name for x in xs)} added beside {mname} ({why}): "
                  f"RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}, p {pv:.3g}")
+        # every trial kept with its state: one the BIC cannot tell from the state is a group at the final state
+        # (rvcalib.pairs.PairCheck.lookalike_ties)
+        self.lookalike_store().setdefault(self._state_key(), []).append(
+            {"effects": effects, "params": params, "rss": float(rss), "delta_bic": float(b_new - bic_cur),
+             "added": [x.name for x in xs], "beside": mname})
         if pv < self.thr and b_new < bic_cur - JOINT_BIC_MARGIN:
             return b_new, list(xs), params, rss, mname, F, pv
         return None

@@ -327,3 +327,61 @@ def test_a_genuine_effect_beside_a_supported_candidate_stays_named(v_truth):
     assert f.ci_low <= v_truth <= f.ci_high
     # its interval beside z holds no zero: no refit without it (the rule's test is on both ends of the interval)
     assert not any("without v" in m for m in loop.logged), loop.logged
+
+
+def _tie_case(z_size: float, seed: int = 11, n: int = 600, noise: float = 0.2):
+    """x and u in the model; z (another error type) correlates 0.88 with x, under the pair check's limit, and
+    the data hold it at ``z_size``: a look-alike refit adds it beside x."""
+    rng = np.random.default_rng(seed)
+    x, d, u = rng.normal(size=(3, n))
+    z = x + 0.54 * d
+    basis = {"x": x, "z": z, "u": u}
+    y = 1.0 * x + z_size * z + 0.5 * u + noise * rng.normal(size=n)
+    loop = LinearLoop(basis, y, ["x", "u"])
+    loop.thr = 1e-4   # the loop's F-test level (alpha over the hypotheses): z beside x does not pass it
+    return loop
+
+
+def test_a_look_alike_fit_as_good_by_the_bic_unnames_the_effect_it_moves():
+    """Item 9 of "Groups and honest intervals": z beside the model (the look-alike refit, kept with its state)
+    lowers the BIC by less than the margin, so it is not added; x's size with z beside it (its truth, 1) lies
+    outside x's interval alone, so x is not named, and the group gives both fits' sizes."""
+    from rvcalib.joint import JOINT_BIC_MARGIN
+    from rvcalib.lsq import bic
+
+    loop = _tie_case(0.045)
+    by_name = loop.fitted()
+    fx = by_name["x"]
+    assert not fx.ci_low <= 1.0 <= fx.ci_high            # alone x holds z's part: a tight interval off its truth
+    bic_cur = bic(loop.rss_full, loop.n, loop._p_cur())
+    kept = loop._lookalike_trial([loop.lib.by_name("z")], "x", loop._p_cur(), bic_cur, "test")
+    assert kept is None                                   # the F test and the margin keep z out
+    (rec,) = loop.lookalike_store()[loop._state_key()]
+    assert rec["added"] == ["z"] and rec["beside"] == "x" and abs(rec["delta_bic"]) < JOINT_BIC_MARGIN
+    unsplit: set[str] = set()
+    groups = loop.lookalike_ties(by_name, unsplit, math.sqrt(loop.rss_full / loop.n))
+    assert unsplit == {"x"}                               # u does not move beyond its interval: it stays named
+    (g,) = groups
+    assert g["kind"] == "unsplit" and g["found"] == "x"
+    me, ce = g["members"]
+    assert me["value"] == pytest.approx(fx.value) and me["value_together"] == pytest.approx(1.0, abs=0.03)
+    assert ce["name"] == "z" and ce["found"] is False and ce["value"] == pytest.approx(0.045, abs=0.03)
+    assert g["delta_bic_together"] == pytest.approx(rec["delta_bic"])
+    assert ce["rms_after_arcsec"] < me["rms_after_arcsec"]
+    # a trial of another state is not read at this one
+    loop.active = loop.active[:1]
+    assert loop.lookalike_ties(loop.fitted(), set(), 0.2) == []
+
+
+def test_a_look_alike_the_bic_rejects_leaves_the_effect_named():
+    """Without z in the data the trial beside x costs more than the margin (its penalty, log n = 6.4, against a
+    chance fall of the residual): nothing is unnamed."""
+    from rvcalib.lsq import bic
+
+    loop = _tie_case(0.0)
+    by_name = loop.fitted()
+    bic_cur = bic(loop.rss_full, loop.n, loop._p_cur())
+    loop._lookalike_trial([loop.lib.by_name("z")], "x", loop._p_cur(), bic_cur, "test")
+    (rec,) = loop.lookalike_store()[loop._state_key()]
+    assert rec["delta_bic"] > 2.0
+    assert loop.lookalike_ties(by_name, set(), math.sqrt(loop.rss_full / loop.n)) == []

@@ -38,7 +38,7 @@ def test_a_stand_in_is_replaced_by_the_candidate_it_stands_in_for():
     r = y - G @ x
     cols = {("R", 1.0): -g_r, ("R", -1.0): g_r / 3.0, ("A", 1.0): -g_a, ("A", -1.0): g_a / 3.0}
     member_cols = [np.array([0]), np.array([1]), np.array([2])]
-    additions, replacements, removals = scan_ranking(r, -G, x, member_cols, cols)
+    additions, replacements, removals, _ = scan_ranking(r, -G, x, member_cols, cols)
     best = replacements[1][0]
     assert best[1] == "R" and best[2] == pytest.approx(1.5, abs=0.01)
     assert best[0] == pytest.approx(float(noise @ noise), rel=0.05)   # to the noise
@@ -60,7 +60,7 @@ def test_a_size_stays_on_its_own_side_of_the_kink():
     x, *_ = np.linalg.lstsq(G, y, rcond=None)
     r = y - G @ x
     cols = {("A", 1.0): -t_pos, ("A", -1.0): -t_neg}
-    additions, _, _ = scan_ranking(r, -G, x, [np.array([0]), np.array([1]), np.array([2])], cols)
+    additions, _, _, _ = scan_ranking(r, -G, x, [np.array([0]), np.array([1]), np.array([2])], cols)
     rss, name, steps = additions[0]
     assert name == "A" and steps == pytest.approx(-3.0, abs=0.02)
     assert rss == pytest.approx(float(noise @ noise), rel=0.05)
@@ -220,11 +220,12 @@ def test_no_scan_when_the_state_is_within_the_noise():
     def predict_many(*a, **k):
         raise Solved
 
-    s.predict_many = predict_many
+    s.predict_many = s.predict_rows = predict_many
     s.keep_state_jacobian = lambda: None
     s._emp_matrix = lambda terms, coarse=False: None
     s._cached_jacobian = lambda *a: (np.zeros((r.size, 1)), np.array([True]))
-    run = types.SimpleNamespace(input_deg=np.linspace(0.0, 121.0 * 360.0, r.size, endpoint=False), ratio=121.0)
+    run = types.SimpleNamespace(input_deg=np.linspace(0.0, 121.0 * 360.0, r.size, endpoint=False), ratio=121.0,
+                                n=r.size, revolutions=1.0)
     s.ds = types.SimpleNamespace(runs=[run], design=Design())
     sigma = structured_noise(s.ds, [r])
     assert sigma == pytest.approx(0.1, rel=0.02)
@@ -235,3 +236,28 @@ def test_no_scan_when_the_state_is_within_the_noise():
     s._pin_candidates = lambda: [Effect("pin_pitch[pin=1]", "pin_pitch", "table4", "deg", "p")]
     with pytest.raises(Solved):
         s.pin_scan_refit(3)
+
+
+@pytest.mark.usefixtures("calib_forward_cache")  # solves shared by the session (impact law)
+def test_the_model_at_some_readings_is_the_model_at_all_readings_there(tmp_path):
+    """LoopModel.predict_rows (the scan solves every third reading of the realistic draws): solved at the kept
+    readings alone, it gives the TE that the solve at every reading gives there, within the solver's tolerance."""
+    from rvcalib.dataset import read_dataset
+    from rvcalib.identify import Calibrator
+    from rvcalib.simulate import simulate_dataset
+
+    runs = [{"run": "fw20", "load_Nm": 20.0, "direction": 1}, {"run": "bw20", "load_Nm": 20.0, "direction": -1}]
+    simulate_dataset(tmp_path / "ds", runs, {"errors": {"pin_pitch": [{"pin": 3, "value": 0.01}]}},
+                     samples_per_rev=150, start_deg=0.41, seed=5, noise_arcsec=0.1)
+    cal = Calibrator(read_dataset(tmp_path / "ds"))
+    state = [(cal.lib.by_name("pin_radius[pin=7]"), np.array([2.0]))]
+    full = np.concatenate(cal.predict(state))
+    keep = np.zeros(cal.n, dtype=bool)
+    keep[1::3] = True
+    part = cal.predict_rows([state, []], keep)
+    assert part[0].shape == (int(keep.sum()),)
+    np.testing.assert_allclose(part[0], full[keep], rtol=0, atol=1e-6)
+    # another state at the same readings differs (the comparison can fail)
+    assert np.max(np.abs(part[1] - full[keep])) > 0.1
+    with pytest.raises(ValueError, match=r"keep has shape \(299,\); one flag per sample \(300\)"):
+        cal.predict_rows([state], keep[:-1])
