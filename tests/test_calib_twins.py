@@ -1,0 +1,102 @@
+"""The twin refit before the loop stops (rvcalib.replace.ReplacementRefit.twin_refit, issue 10, "#7").
+
+On a stub loop (the fit and the linearised members are stubs that record their calls): which members are
+tried (crank / disc / hole instances the data need, the most needed first, at most TWIN_REFITS), which twins
+(the other instances of the member's own family), from which start, and what is kept (the BIC margin).
+Realistic seed 11 (stop 36), by hand through rvdyn: disc 1's phase at -0.063 deg stood for disc 0's -0.062; with
+disc 0's phase at the same size in its place the BIC fell by 311 (docs/calibration.md, step 8b).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rvcalib.effects import Effect
+from rvcalib.joint import JOINT_BIC_MARGIN
+from rvcalib.lsq import bic
+from rvcalib.replace import TWIN_REFITS, ReplacementRefit
+from rvcalib.results import Active, PoolMember
+
+NC = 200
+N = 1000
+
+
+def _effect(name: str, template: str | None = None, family: str = "table4") -> Effect:
+    inst = tuple((k, int(v)) for k, v in (kv.split("=") for kv in name[name.index("[") + 1:-1].split(","))) \
+        if "[" in name else ()
+    return Effect(name, name.split("[")[0], family, "um", name, template=template, instance=inst)
+
+
+def _stub(rss_of: dict[str, float]):
+    """Members: A[crank=0] (large part), T[disc=1] (middle part, its family's head is T[disc=0]), B (no instance,
+    the largest part) and S[crank=0] (a part at the noise: the data do not need it). The library holds each
+    member's twins and an instance of another family of S's type. A swap to twin ``x`` leaves ``rss_of[x]``."""
+    rng = np.random.default_rng(5)
+    a, t, b, s = rng.normal(size=(4, NC))
+    lib = {"A[crank=0]": _effect("A[crank=0]"), "A[crank=1]": _effect("A[crank=1]", template="A[crank=0]"),
+           "T[disc=0]": _effect("T[disc=0]"), "T[disc=1]": _effect("T[disc=1]", template="T[disc=0]"),
+           "B": _effect("B"), "S[crank=0]": _effect("S[crank=0]"),
+           "S[crank=1]": _effect("S[crank=1]", template="S[crank=0]"), "S[disc=1]": _effect("S[disc=1]")}
+    sel = ReplacementRefit.__new__(ReplacementRefit)
+    sel.lib = list(lib.values())
+    sel.active = [Active(lib["B"], np.array([20.0]), 1), Active(lib["A[crank=0]"], np.array([8.0]), 1),
+                  Active(lib["T[disc=1]"], np.array([-0.06]), 1), Active(lib["S[crank=0]"], np.array([0.01]), 1)]
+    parts = {"B": 20.0 * b, "A[crank=0]": 8.0 * a, "T[disc=1]": 3.0 * t, "S[crank=0]": 0.01 * s}
+    sel.empirical, sel.n, sel.nc, sel.rss_full = [], N, NC, 40.0
+    said: list[str] = []
+    sel.log = said.append
+    sel.over_budget = lambda: False
+    sel._p_cur = lambda: sum(x.effect.n_params for x in sel.active)
+    refreshed: list[bool] = []
+    sel.refresh_state = lambda: refreshed.append(True)
+    sel._emp_matrix = lambda terms, coarse=False: None
+    sel.active_members = lambda Pc=None: [PoolMember(x.effect, (parts[x.effect.name] / float(x.p[0]))[:, None],
+                                                     parts[x.effect.name], lambda q: q, x) for x in sel.active]
+    noise = 0.2 * rng.normal(size=NC)
+    sel.coarse_residual = lambda pairs=None: [noise]
+    fits: list[tuple[list[str], list[float]]] = []
+
+    def fit_full(effects, p0, terms):
+        fits.append(([e.name for e in effects], [float(np.asarray(p)[0]) for p in p0]))
+        return [np.asarray(p, dtype=float) * 1.01 for p in p0], rss_of.get(effects[-1].name, 40.0), None, None, None
+
+    sel.fit_full = fit_full
+    return sel, fits, said, refreshed
+
+
+def test_the_twin_refit_swaps_a_needed_member_for_its_twin():
+    sel, fits, said, refreshed = _stub({"T[disc=0]": 30.0, "A[crank=1]": 45.0})
+    got = sel.twin_refit(4)
+    # the two most needed instance members (A, then T; B has no instance, S is not needed), each with its own
+    # family's twin in its place, from the member's own size; S's twins and the other family are not tried
+    assert TWIN_REFITS == 2
+    assert [f[0][-1] for f in fits] == ["A[crank=1]", "T[disc=0]"], said
+    assert fits[1][1][-1] == -0.06 and fits[0][1][-1] == 8.0
+    assert fits[1][0][:-1] == ["B", "A[crank=0]", "S[crank=0]"]
+    assert got == ("T[disc=1]", "T[disc=0]") and refreshed == [True]
+    a = sel.active[-1]
+    assert a.effect.name == "T[disc=0]" and float(a.p[0]) == -0.06 * 1.01
+    assert a.info["selection"] == {"method": "twin refit before the stop", "iteration": 4, "replaced": "T[disc=1]"}
+    assert a.info["delta_bic"] == bic(30.0, N, 4) - bic(40.0, N, 4)
+    assert [x.effect.name for x in sel.active] == ["B", "A[crank=0]", "S[crank=0]", "T[disc=0]"]
+
+
+def test_a_twin_within_the_margin_is_not_taken():
+    # a fall of the BIC smaller than the margin (rss 40 -> 39.95: 1000 ln(40/39.95) = 1.25 units)
+    gain = N * math.log(40.0 / 39.95)
+    assert 0 < gain < JOINT_BIC_MARGIN
+    sel, fits, said, refreshed = _stub({"T[disc=0]": 39.95})
+    assert sel.twin_refit(4) is None
+    assert len(fits) == 2 and refreshed == []
+    assert [x.effect.name for x in sel.active] == ["B", "A[crank=0]", "T[disc=1]", "S[crank=0]"]
+    assert any(s.startswith("twin refit: T[disc=0] in place of T[disc=1]") for s in said)
+
+
+def test_a_member_the_data_do_not_need_is_not_tried():
+    """S[crank=0]'s part is at the noise: its removal does not raise the BIC in the linearised model, so its twin
+    is not refitted (the 5-run benchmark's spare disc phase costs nothing this way)."""
+    sel, fits, said, refreshed = _stub({"S[crank=1]": 1.0})
+    sel.active = [a for a in sel.active if a.effect.name in ("B", "S[crank=0]")]
+    assert sel.twin_refit(4) is None
+    assert fits == [] and refreshed == []
