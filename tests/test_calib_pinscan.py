@@ -190,6 +190,16 @@ def test_the_swap_with_the_missing_error_types_is_adopted_by_the_bic(monkeypatch
     fits.clear()
     assert s._with_missing_types(1, P, -0.004, 8) is None
     assert [a.effect.name for a in s.active] == ["A", "B[crank=1]"] and s.empirical == [harmonic]
+    # no swap (step 5, at the term limit): the members as they are with the families the model lacks (C once;
+    # B's twin is B's own family, in the model), the elimination keeping A, B and C
+    rss_end = 40.0 * math.exp((-30.0 + math.log(1000)) / 1000)
+    fits.clear()
+    monkeypatch.setattr(ps, "bic_backward", lambda r, J, x, cols, n, max_members=None: [0, 1, 2])
+    got = s._with_missing_types(None, None, 0.0, 9)
+    assert fits[0] == ["A", "B[crank=1]", "C"] and fits[1] == ["A", "B[crank=1]", "C"]
+    assert got == (harmonic.label, "C")
+    assert [a.effect.name for a in s.active] == ["A", "B[crank=1]", "C"] and s.empirical == []
+    assert s.active[2].info["selection"]["with"] is None and s.active[2].info["selection"]["iteration"] == 9
 
 
 def test_no_scan_when_the_state_is_within_the_noise():
