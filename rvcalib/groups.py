@@ -245,11 +245,6 @@ class Groups(PinScan):
                     unsplit.add(g["found"])
                 unsplit.update(m["name"] for m in g["members"] if m.get("named") is False)
                 alt_names.setdefault(g["found"], set()).update(m["name"] for m in g["members"][1:])
-        # 1d. a look-alike refit of the final state that the BIC cannot tell from it, moving a named effect beyond
-        #     its interval: the effect is not named (its size depends on whether the candidate is present)
-        for g in self.lookalike_ties(by_name, unsplit, rms_model):
-            groups.append(g)
-            alt_names.setdefault(g["found"], set()).update(m["name"] for m in g["members"][1:])
         # 2. honest intervals: each named effect's interval in the model plus any one candidate left out
         #    (profiled over the size the data give that candidate), the union over candidates
         res_groups: dict[int, tuple] = {}
@@ -338,6 +333,9 @@ class Groups(PinScan):
         merged, combined = self._instance_sets(members, blocks, coef, col0, r_fin, rss_grid, w, s2, tq,
                                                by_name, unsplit)
         groups += [g for g, _ in combined]
+        # 4. the sizes averaged over the state and its look-alike fits by their BIC weights (a size that depends on
+        #    whether a candidate is present), with a group for each fit as good by the BIC that moves one
+        groups += self.lookalike_average(by_name, unsplit | merged, rms_model)
         kept = [f for f in fitted if f.name not in unsplit and f.name not in merged] + [f for _, f in combined]
         self.log(f"identifiability at the final state: {len(groups)} group(s), {len(unsplit)} effect(s) not named, "
                  f"{time.perf_counter() - t0:.1f} s")

@@ -480,8 +480,8 @@ class ReplacementRefit(JointSelection):
         F, pv = ftest(self.rss_full, rss, kx, self.n, k)
         self.log(f"look-alike refit: {' and '.join(x.name for x in xs)} added beside {mname} ({why}): "
                  f"RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}, p {pv:.3g}")
-        # every trial kept with its state: one the BIC cannot tell from the state is a group at the final state
-        # (rvcalib.pairs.PairCheck.lookalike_ties)
+        # every trial kept with its state: at the final state the sizes are averaged over them by their BIC weights
+        # (rvcalib.pairs.PairCheck.lookalike_average)
         self.lookalike_store().setdefault(self._state_key(), []).append(
             {"effects": effects, "params": params, "rss": float(rss), "delta_bic": float(b_new - bic_cur),
              "added": [x.name for x in xs], "beside": mname})

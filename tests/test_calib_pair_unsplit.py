@@ -342,46 +342,58 @@ def _tie_case(z_size: float, seed: int = 11, n: int = 600, noise: float = 0.2):
     return loop
 
 
-def test_a_look_alike_fit_as_good_by_the_bic_unnames_the_effect_it_moves():
+def test_a_look_alike_fit_as_good_by_the_bic_is_averaged_with_the_state():
     """Item 9 of "Groups and honest intervals": z beside the model (the look-alike refit, kept with its state)
-    lowers the BIC by less than the margin, so it is not added; x's size with z beside it (its truth, 1) lies
-    outside x's interval alone, so x is not named, and the group gives both fits' sizes."""
+    lowers the BIC by less than the margin, so it is not added; x's size with z beside it (near its truth, 1) lies
+    outside x's interval alone. x is named at the mean of the two fits weighted by exp(-dBIC/2), its interval
+    covering both, and the fit is a group of kind model_average with both sizes and z's."""
     from rvcalib.joint import JOINT_BIC_MARGIN
     from rvcalib.lsq import bic
 
     loop = _tie_case(0.045)
     by_name = loop.fitted()
-    fx = by_name["x"]
+    fx, fu = by_name["x"], by_name["u"]
+    v_state, u_state = fx.value, fu.value
     assert not fx.ci_low <= 1.0 <= fx.ci_high            # alone x holds z's part: a tight interval off its truth
     bic_cur = bic(loop.rss_full, loop.n, loop._p_cur())
     kept = loop._lookalike_trial([loop.lib.by_name("z")], "x", loop._p_cur(), bic_cur, "test")
     assert kept is None                                   # the F test and the margin keep z out
     (rec,) = loop.lookalike_store()[loop._state_key()]
     assert rec["added"] == ["z"] and rec["beside"] == "x" and abs(rec["delta_bic"]) < JOINT_BIC_MARGIN
-    unsplit: set[str] = set()
-    groups = loop.lookalike_ties(by_name, unsplit, math.sqrt(loop.rss_full / loop.n))
-    assert unsplit == {"x"}                               # u does not move beyond its interval: it stays named
-    (g,) = groups
-    assert g["kind"] == "unsplit" and g["found"] == "x"
+    v_z = float(rec["params"][0][0])                      # x's size beside z
+    assert v_z == pytest.approx(1.0, abs=0.03)
+    w = math.exp(-rec["delta_bic"] / 2)
+    groups = loop.lookalike_average(by_name, set(), math.sqrt(loop.rss_full / loop.n))
+    assert fx.value == pytest.approx((v_state + w * v_z) / (1 + w), rel=1e-12)
+    assert fx.ci_low <= v_z <= fx.ci_high and fx.ci_low <= v_state <= fx.ci_high
+    assert fx.selection["model_average"]["value_state"] == v_state
+    assert fx.selection["model_average"]["fits"][0]["weight"] == pytest.approx(w / (1 + w))
+    (g,) = groups                                         # u moves within its interval: not in the group
+    assert g["kind"] == "model_average" and g["found"] == "x"
     me, ce = g["members"]
-    assert me["value"] == pytest.approx(fx.value) and me["value_together"] == pytest.approx(1.0, abs=0.03)
+    assert me["value"] == fx.value and me["value_state"] == v_state and me["value_together"] == v_z
     assert ce["name"] == "z" and ce["found"] is False and ce["value"] == pytest.approx(0.045, abs=0.03)
-    assert g["delta_bic_together"] == pytest.approx(rec["delta_bic"])
-    assert ce["rms_after_arcsec"] < me["rms_after_arcsec"]
+    assert g["delta_bic_together"] == rec["delta_bic"] and ce["rms_after_arcsec"] < me["rms_after_arcsec"]
+    assert g["weight_together"] == pytest.approx(w / (1 + w))
+    assert fu.value != u_state and abs(fu.value - u_state) < (fu.ci_high - fu.ci_low) / 2   # averaged too, slightly
     # a trial of another state is not read at this one
     loop.active = loop.active[:1]
-    assert loop.lookalike_ties(loop.fitted(), set(), 0.2) == []
+    assert loop.lookalike_average(loop.fitted(), set(), 0.2) == []
 
 
-def test_a_look_alike_the_bic_rejects_leaves_the_effect_named():
+def test_a_look_alike_the_bic_rejects_barely_moves_the_sizes():
     """Without z in the data the trial beside x costs more than the margin (its penalty, log n = 6.4, against a
-    chance fall of the residual): nothing is unnamed."""
+    chance fall of the residual): its weight is small, x moves by a small part of its interval, and no group."""
     from rvcalib.lsq import bic
 
     loop = _tie_case(0.0)
     by_name = loop.fitted()
+    fx = by_name["x"]
+    v_state, half = fx.value, (fx.ci_high - fx.ci_low) / 2
     bic_cur = bic(loop.rss_full, loop.n, loop._p_cur())
     loop._lookalike_trial([loop.lib.by_name("z")], "x", loop._p_cur(), bic_cur, "test")
     (rec,) = loop.lookalike_store()[loop._state_key()]
     assert rec["delta_bic"] > 2.0
-    assert loop.lookalike_ties(by_name, set(), math.sqrt(loop.rss_full / loop.n)) == []
+    assert loop.lookalike_average(by_name, set(), math.sqrt(loop.rss_full / loop.n)) == []
+    assert 0 < abs(fx.value - v_state) < 0.1 * half
+    assert (fx.ci_high - fx.ci_low) / 2 == pytest.approx(half)
