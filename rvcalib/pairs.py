@@ -337,8 +337,8 @@ class PairCheck(ReplacementRefit):
                                 f"{rec['delta_bic']:+.1f}, RMS {rms_model:.4g} -> {rms_la:.4g} arcsec) fits as well by "
                                 f"the BIC and moves these effects beyond their intervals (value_state: the model's "
                                 f"size, value_together: beside {added}); each is named at the mean of the fits "
-                                f"weighted by exp(-dBIC/2) (weights {1.0 / total:.2f} and {w / total:.2f}), its interval "
-                                f"covering both"})
+                                f"weighted by exp(-dBIC/2) (weights {1.0 / total:.2f} and {w / total:.2f}), its "
+                                f"interval covering both"})
             self.log(f"model average: {added} beside the model (dBIC {rec['delta_bic']:+.1f}, weight {w / total:.2f}): "
                      + ", ".join(f"{m['name']} {m['value_state']:.4g} or {m['value_together']:.4g} -> {m['value']:.4g}"
                                  for m in mem))

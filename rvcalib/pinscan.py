@@ -35,9 +35,10 @@ double the cost of a loop that has found its answer, e.g. the 5-run benchmark's)
    against the model without the member (by ``JOINT_BIC_MARGIN``): a member the data do not need is not swapped
    for another. These BIC rules are taken on the scan's readings.
 3. The best addition (below the term limit, when it passes the BIC in the linearised model) and the best
-   replacement whose linear fit leaves less than the state are refitted through rvdyn from their linear sizes. An addition is kept when it passes the loop's F
-   test on all samples and lowers the BIC by more than ``JOINT_BIC_MARGIN``, a replacement (one effect for one)
-   when it lowers the BIC by more than the margin; the better of the two is made and the search goes on.
+   replacement whose linear fit leaves less than the state are refitted through rvdyn from their linear sizes.
+   An addition is kept when it passes the loop's F test on all samples and lowers the BIC by more than
+   ``JOINT_BIC_MARGIN``, a replacement (one effect for one) when it lowers the BIC by more than the margin; the
+   better of the two is made and the search goes on.
 4. When neither is kept, the best replacement is refitted with one instance of every error family the model
    then lacks beside it (each the best of its family in the screening at the state, from zero; expensive and
    measurement effects left out; the empirical terms dropped), members are removed by the BIC in the model linearised at that fit (down to
