@@ -429,7 +429,7 @@ class Calibrator(Groups):
         if not sw:
             got = self.twin_refit(it)
             sw = [got] if got else []
-        if sw:  # (both checks leave the state refreshed after a change)
+        if sw:  # (each check leaves the state refreshed after a change)
             msg = ", ".join(f"{n} in place of {o}" for o, n in sw)
             self.log(f"instance refit before the stop: {msg} (RMS {math.sqrt(self.rss_full / self.n):.4g} arcsec)")
             if iterations is not None:

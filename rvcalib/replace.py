@@ -16,7 +16,7 @@ from rvcalib.forward import ModelEvaluationError
 from rvcalib.joint import JOINT_BIC_MARGIN, JointSelection
 from rvcalib.lsq import bic, ftest, projector
 from rvcalib.results import Active, Candidate
-from rvcalib.selection import linear_removal_costs
+from rvcalib.selection import joint_linear_fit, linear_removal_costs, member_target
 
 #: Members refitted through rvdyn with another family's candidate in their place before the loop stops
 #: at the term limit (see :meth:`ReplacementRefit.replacement_refit`): the members whose best replacement
@@ -120,10 +120,9 @@ class ReplacementRefit(JointSelection):
         members = self.active_members()
         rc = np.concatenate(self.coarse_residual())
         Ec = self._emp_matrix(self.empirical, coarse=True)
-        costs = linear_removal_costs(members, rc, Ec)
-        X = np.column_stack([m.cols for m in members] + ([Ec] if Ec is not None else []))
-        coef, *_ = np.linalg.lstsq(X, rc, rcond=None)
-        rss_grid = float(np.sum((rc - X @ coef) ** 2))
+        fit = joint_linear_fit(members, rc, Ec)
+        costs = linear_removal_costs(members, rc, Ec, fit)
+        rss_grid = float(fit[3] @ fit[3])
         in_model = {a.effect.name for a in self.active}
         order = []
         for cost, i, _, _ in sorted(costs, key=lambda c: -c[0]):
@@ -278,20 +277,14 @@ class ReplacementRefit(JointSelection):
         members = self.active_members()
         Ec = self._emp_matrix(self.empirical, coarse=True)
         rc = np.concatenate(self.coarse_residual())
-        blocks = [m.cols for m in members] + ([Ec] if Ec is not None else [])
-        X = np.column_stack(blocks)
-        col0 = np.cumsum([0] + [b.shape[1] for b in blocks])
-        coef, *_ = np.linalg.lstsq(X, rc, rcond=None)
-        r = rc - X @ coef
+        blocks, col0, coef, r = joint_linear_fit(members, rc, Ec)
         in_model = {a.effect.name for a in self.active}
         trials = []
         for i, m in enumerate(members):
             if m.effect is None or m.effect.family == "measurement":
                 continue
             fam = m.effect.template or m.effect.name
-            part = m.contribution if m.contribution is not None else m.cols @ np.asarray(m.active.p, dtype=float)
-            t = r + m.cols @ coef[col0[i]:col0[i + 1]] + part
-            others = np.column_stack([blocks[j] for j in range(len(blocks)) if j != i]) if len(blocks) > 1 else None
+            t, others = member_target(members, blocks, i, r, coef, col0)
             best = next((d for d in self.rank(t, others, None)
                          if d.effect.family != "measurement" and not d.effect.expensive
                          and d.effect.name not in in_model and d.family_key != fam), None)

@@ -390,17 +390,27 @@ def member_target(members: list[PoolMember], blocks: list[np.ndarray], i: int, r
     return t, others
 
 
-def linear_removal_costs(members: list[PoolMember], rc: np.ndarray, Ec: np.ndarray | None
-                         ) -> list[tuple[float, int, np.ndarray, np.ndarray | None]]:
-    """For each physical member (``members``: the model linearised at the state), the rise of the residual sum of
-    squares on the screening grid when it is removed and every other member and empirical term (``Ec``) refitted
-    linearly, lowest first: ``(cost, index, target, others)`` with ``target`` the member's part plus the residual
-    of the joint fit and ``others`` the other members' and terms' columns (None when it is alone)."""
+def joint_linear_fit(members: list[PoolMember], rc: np.ndarray, Ec: np.ndarray | None
+                     ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, np.ndarray]:
+    """The joint linear fit of every member (``members``: the model linearised at the state) and empirical term
+    (``Ec``) to the residual ``rc`` on the screening grid: ``(blocks, col0, coef, r)``, the blocks' columns (the
+    members', then the terms'), each block's first column, the coefficients and the fit's residual (the arguments of
+    :func:`member_target`)."""
     blocks = [m.cols for m in members] + ([Ec] if Ec is not None else [])
     X = np.column_stack(blocks)
     col0 = np.cumsum([0] + [b.shape[1] for b in blocks])
     coef, *_ = np.linalg.lstsq(X, rc, rcond=None)
-    r = rc - X @ coef
+    return blocks, col0, coef, rc - X @ coef
+
+
+def linear_removal_costs(members: list[PoolMember], rc: np.ndarray, Ec: np.ndarray | None,
+                         fit: tuple | None = None) -> list[tuple[float, int, np.ndarray, np.ndarray | None]]:
+    """For each physical member (``members``: the model linearised at the state), the rise of the residual sum of
+    squares on the screening grid when it is removed and every other member and empirical term (``Ec``) refitted
+    linearly, lowest first: ``(cost, index, target, others)`` with ``target`` the member's part plus the residual
+    of the joint fit and ``others`` the other members' and terms' columns (None when it is alone). ``fit``: the
+    joint fit, :func:`joint_linear_fit` of the same arguments, when the caller has it."""
+    blocks, col0, coef, r = fit if fit is not None else joint_linear_fit(members, rc, Ec)
     rss = float(r @ r)
     cand = []
     for i, m in enumerate(members):
