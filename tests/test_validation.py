@@ -231,6 +231,17 @@ def test_tolerance_tables(tmp_path: Path) -> None:
     c.write_bytes(b"error,dist\n\xff\xfe,normal\n")
     with pytest.raises(TableError, match=r"cannot be read as CSV"):
         load_tolerances(c)
+    # a row with more fields than the header: pandas took the first column as the index and shifted the fields
+    # ("pin_radius,normal,1" read as error "normal"); an extra empty field (the fuzz test's example, which gave a
+    # TypeError on the row number) carries nothing and is read as the row without it
+    c.write_text("error,dist\npin_radius,normal,1\n")
+    with pytest.raises(TableError, match=r"a row has more fields than the header has columns; allowed: one field"):
+        load_tolerances(c)
+    c.write_text("error,dist\n0,,\n,")
+    with pytest.raises(TableError, match=r"row 1: tolerance 0: error key '0' is unknown"):
+        load_tolerances(c)
+    c.write_text("error,dist,p1\npin_radius,normal,1\n")
+    assert load_tolerances(c)["pin_radius"].params == (1.0,)
     with pytest.raises(TableError, match=r"pin_radius=normal:200.*reaches 1200 um; allowed: draws within \|value\| <= 1000"):
         parse_tolerance("pin_radius=normal:200")
     with pytest.raises(TableError, match=r"disc_phase=uniform:-9:1.*reaches 9 deg"):
