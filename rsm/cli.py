@@ -61,6 +61,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from .csvio import read_csv_strict
+
 __all__ = ["main", "jsonable", "build_parser"]
 
 
@@ -199,12 +201,10 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     new_data = None
     if args.new_data is not None:
         npath = Path(args.new_data)
-        if not npath.is_file():
-            raise ValueError(f"--new-data file '{npath}' does not exist")
-        new_data = pd.read_csv(npath)
+        new_data = read_csv_strict(npath, "--new-data file")
         if len(new_data) == 0:
             raise ValueError(f"--new-data file '{npath}' has no rows")
-    data = pd.read_csv(path)
+    data = read_csv_strict(path, "data file")
     terms = args.terms if args.terms else args.model
     model = ResponseSurfaceModel(data, args.factors, args.response, terms=terms,
                                  levels=args.levels, units=args.units)
@@ -248,11 +248,10 @@ def _cmd_fit(args: argparse.Namespace) -> int:
                      float_format=lambda v: f"{v:.6g}"),
                  f"cost of not refitting the paper's terms: +{_clean(comp.shortcut_cost, res.ss_total):.6g}"
                  " residual SS"]
+    vdata = None
     if args.validate:
-        vpath = Path(args.validate)
-        if not vpath.is_file():
-            raise ValueError(f"validation file '{vpath}' does not exist")
-        vr = final.validate(pd.read_csv(vpath), units=args.units)
+        vdata = read_csv_strict(args.validate, "validation file")
+        vr = final.validate(vdata, units=args.units)
         out["validation"] = vr.to_dict()
         text += ["", f"Validation on {vr.n} held-out runs: RMSE {vr.rmse:.4g}, max |error| "
                      f"{vr.max_abs_error:.4g}, bias {vr.bias:.4g}, R2 {vr.r2:.4f}, "
@@ -260,7 +259,6 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     if args.plots:
         from .plots import plot_all
 
-        vdata = pd.read_csv(args.validate) if args.validate else None
         paths = plot_all(final, args.plots, validation=vdata)
         out["plots"] = [str(p) for p in paths]
         text += ["", f"wrote {len(paths)} figures to {args.plots}"]

@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .csvio import read_csv_strict
+
 __all__ = ["FactorLevels", "Levels"]
 
 
@@ -123,10 +125,7 @@ class Levels:
     @classmethod
     def from_csv(cls, path: str | Path) -> "Levels":
         """Read a levels CSV (``factor,meaning,unit,low,center,high`` as in Table 5)."""
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"levels file '{path}' does not exist")
-        return cls.from_frame(pd.read_csv(path))
+        return cls.from_frame(read_csv_strict(path, "levels file"))
 
     @classmethod
     def coerce(cls, levels: "Levels | pd.DataFrame | str | Path | None") -> "Levels | None":

@@ -28,6 +28,7 @@ from scipy import linalg
 
 from .checks import NotEstimableError, check_numeric_column
 from .coding import Levels
+from .csvio import read_csv_strict
 from .results import RSMResults
 from .terms import Monomial, model_matrix, parse_terms, term_name, validate_factor_names
 
@@ -164,10 +165,7 @@ class ResponseSurfaceModel:
         cls, path: str | Path, factors: Sequence[str], response: str, **kwargs
     ) -> "ResponseSurfaceModel":
         """Read the data from a CSV file (``.`` decimal point, header row)."""
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"data file '{path}' does not exist")
-        return cls(pd.read_csv(path), factors, response, **kwargs)
+        return cls(read_csv_strict(path, "data file"), factors, response, **kwargs)
 
     # ------------------------------------------------------------------ fit
     def fit(self, alpha: float = 0.05, warn: bool = True) -> "RSMResults":

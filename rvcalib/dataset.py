@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from rsm.csvio import read_csv_strict
 from rvcad.errors import ERROR_TYPES, Case
 from rvcad.params import Design
 from rvcad.validation import DatasetError, read_json_file
@@ -250,13 +251,7 @@ def load_design(source: "str | Path | dict | Design | None", folder: Path | None
 def _read_csv(path: Path, what: str) -> pd.DataFrame:
     if not path.is_file():
         raise DatasetError(f"{what} file '{path}' does not exist (a dataset folder holds runs.csv and samples.csv)")
-    try:
-        df = pd.read_csv(path, dtype={"run": str}, skipinitialspace=True)
-    except pd.errors.EmptyDataError:
-        raise DatasetError(f"{what} file '{path}' is empty") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"{what} file '{path}' is not a readable CSV: {exc}") from None
-    df.columns = [str(c).strip() for c in df.columns]
+    df = read_csv_strict(path, f"{what} file", DatasetError, dtype={"run": str}, skipinitialspace=True)
     if len(df) == 0:
         raise DatasetError(f"{what} file '{path}' has a header but no rows")
     dup = [c for c in df.columns if list(df.columns).count(c) > 1]

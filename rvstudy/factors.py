@@ -11,6 +11,7 @@ import pandas as pd
 
 import rsm
 import rvpaper as paper
+from rsm.csvio import read_csv_strict
 from rvcad.errors import ERROR_TYPES, MAX_ABS
 from rvcad.params import Design
 from rvcad.validation import TableError
@@ -79,11 +80,8 @@ def load_factors(levels_path: str | None, factors: list[str] | None) -> FactorSe
         p = Path(levels_path)
         if not p.is_file():
             raise TableError(f"--levels file {str(p)!r} does not exist")
-        try:
-            df = pd.read_csv(p)
-        except Exception as exc:  # noqa: BLE001 - any parse problem is a bad option (messages on one line)
-            exc = " ".join(str(exc).split())
-            raise TableError(f"--levels file {str(p)!r} cannot be read as CSV: {exc}") from None
+        df = read_csv_strict(p, "--levels file", lambda m: TableError(m, field="--levels", value=str(p),
+                                                                         allowed="CSV factor,unit,low,center,high"))
     df.columns = [str(c).strip() for c in df.columns]
     if "factor" not in df.columns:
         raise TableError(f"--levels file needs a 'factor' column; columns are {list(df.columns)}")

@@ -31,7 +31,6 @@ components of the offset are drawn independently from the distribution (a true-p
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +42,7 @@ from scipy import stats
 
 from rvcad.errors import ERROR_TYPES, MAX_ABS
 from rvdyn.options import MODEL_OPTIONS
+from rsm.csvio import read_csv_strict
 from rvcad.validation import TableError, read_json_file
 
 DISTRIBUTIONS = ("normal", "uniform", "truncnormal", "triangular", "fixed", "none")
@@ -310,22 +310,8 @@ def load_tolerances(path: str | Path) -> dict[str, Tolerance]:
             t = _parse_spec(k, v, f"--tolerances {p.name} key {k!r}")
             out[t.error] = t
         return out
-    try:
-        # a row with more fields than the header: pandas would take the first column as the index (the fields shift
-        # one column: "A,normal,1,2" under "error,dist" read as error 1, dist 2) or, with index_col=False, drop the
-        # extra fields with a ParserWarning (not for extra empty fields, which carry nothing); either reads what the
-        # file does not say, so the warning is an error
-        with warnings.catch_warnings():
-            warnings.simplefilter("error", pd.errors.ParserWarning)
-            df = pd.read_csv(p, dtype=str, index_col=False).fillna("")
-    except pd.errors.ParserWarning:
-        raise TableError(f"--tolerances file {str(p)!r}: a row has more fields than the header has columns; allowed: "
-                         "one field per column of the header (error,dist,p1,p2,p3)", field="--tolerances",
-                         value=str(p), allowed="CSV error,dist,p1,p2,p3") from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
-        raise TableError(f"--tolerances file {str(p)!r} cannot be read as CSV: {' '.join(str(exc).split())}",
-                         field="--tolerances", value=str(p), allowed="CSV error,dist,p1,p2,p3") from None
-    df.columns = [str(c).strip() for c in df.columns]
+    df = read_csv_strict(p, "--tolerances file", lambda m: TableError(
+        m, field="--tolerances", value=str(p), allowed="CSV error,dist,p1,p2,p3"), dtype=str).fillna("")
     for c in ("error", "dist"):
         if c not in df.columns:
             raise TableError(f"--tolerances file {str(p)!r} needs columns error,dist,p1..p3; '{c}' is missing",
