@@ -322,11 +322,17 @@ class ReplacementRefit(JointSelection):
         parameters in all, the empirical terms projected out) and logged as ``what`` with its RMS and the BIC's
         change from ``bic_cur``: ``(BIC, i, x, parameters, RSS)`` when it lowers the BIC by more than
         :data:`JOINT_BIC_MARGIN` and below ``found`` (the best swap so far, or None), else ``found``."""
+        member = self.active[i].effect.name
+        why = self.swap_hopeless(member, x.name, bic_cur)
+        if why:
+            self.log(f"{what}: not refitted: {why}")
+            return found
         try:
             params, rss, *_ = self.fit_full(effects, p0, self.empirical)
         except ModelEvaluationError:
             return found
         b_new = bic(rss, self.n, k)
+        self.note_swap(member, x.name, bic_cur, b_new)
         self.log(f"{what}: RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")
         if b_new < bic_cur - JOINT_BIC_MARGIN and (found is None or b_new < found[0]):
             return b_new, i, x, params, rss

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from rvcalib.effects import Effect
-from rvcalib.joint import JOINT_BIC_MARGIN
+from rvcalib.joint import JOINT_BIC_MARGIN, REPEAT_HOPELESS
 from rvcalib.lsq import bic
 from rvcalib.replace import TWIN_REFITS, ReplacementRefit
 from rvcalib.results import Active, PoolMember
@@ -100,3 +100,32 @@ def test_a_member_the_data_do_not_need_is_not_tried():
     sel.active = [a for a in sel.active if a.effect.name in ("B", "S[crank=0]")]
     assert sel.twin_refit(4) is None
     assert fits == [] and refreshed == []
+
+
+def test_a_swap_that_lost_far_at_an_earlier_state_is_not_refitted_again():
+    """The repeat rule (rvcalib.joint.JointSelection.swap_hopeless, REPEAT_HOPELESS): a swap refitted at an earlier
+    state is skipped at a later one when it lost by more than REPEAT_HOPELESS times the BIC the state has gained
+    since (plus the margin); it is refitted again when the state has gained enough, or when it lost little.
+    Realistic seed 2 (stop 38) refitted the same two twin swaps at two consecutive stops, losing 2867 and 2056
+    units, then 3271 and 1976 after a change that gained 108."""
+    sel, fits, said, refreshed = _stub({"T[disc=0]": 400.0, "A[crank=1]": 41.0})
+    assert sel.twin_refit(4) is None and len(fits) == 2
+    lost_T = bic(400.0, N, 4) - bic(40.0, N, 4)    # ~2303 units
+    lost_A = bic(41.0, N, 4) - bic(40.0, N, 4)     # ~24.7 units
+    # a later state that gained 50 BIC units (rss 40 -> 38.07 at the same parameter count)
+    sel.rss_full = 40.0 * math.exp(-50.0 / N)
+    gained = 50.0
+    assert lost_T > REPEAT_HOPELESS * gained + JOINT_BIC_MARGIN > lost_A
+    fits.clear()
+    assert sel.twin_refit(5) is None
+    assert [f[0][-1] for f in fits] == ["A[crank=1]"], said     # T[disc=0] skipped, A[crank=1] refitted
+    assert any("twin refit: T[disc=0] in place of T[disc=1]: not refitted: it raised the BIC by 2302.6 at an "
+               "earlier state, and the state has gained 50.0 since" in s for s in said), said
+    # a state that gained more than a tenth of the loss: refitted again
+    sel.rss_full = 40.0 * math.exp(-250.0 / N)
+    fits.clear()
+    sel.twin_refit(6)
+    assert sorted(f[0][-1] for f in fits) == ["A[crank=1]", "T[disc=0]"]
+    # the memo holds the last refit of each swap (its loss at that state)
+    memo = sel._swap_memo()
+    assert memo[("T[disc=1]", "T[disc=0]")][0] == bic(sel.rss_full, N, 4)
