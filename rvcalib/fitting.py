@@ -145,7 +145,28 @@ class Fitting(Screening):
         self._keep_jacobian(effects, params, terms, np.asarray(sol.jac, dtype=float))
         return params, float(2.0 * sol.cost), sol.x, fun, sol.jac
 
-    def residual_function(self, effects: list[Effect], P):
+    def fit_rows(self, effects: list[Effect], p0: list[np.ndarray], terms: list[EmpiricalTerm],
+                 rows: np.ndarray) -> tuple[list[np.ndarray], float] | None:
+        """The joint nonlinear fit of :meth:`fit_full` at some readings only (``rows``, bool per sample; the empirical
+        terms projected out there), every column of the start Jacobian differenced (the kept Jacobians of
+        :meth:`fit_full` are neither used nor replaced: they hold every reading). Returns (params, rss at those
+        readings), or None when no decrease could be made or rvdyn cannot evaluate the start."""
+        scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
+        lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
+        hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
+        E = self._emp_matrix(terms)
+        P = projector(None if E is None else E[rows])
+        fun, unpack = self.residual_function(effects, P, rows)
+        x0 = np.clip(np.concatenate([np.asarray(p, dtype=float) for p in p0]) / scales, lo, hi)
+        got = chord_fit(fun, x0, lo, hi, deadline=self._deadline(), bic_n=int(np.count_nonzero(rows)))
+        if got is None:
+            return None
+        x, r, _, nfev = got
+        self.fit_stats.append({"effects": [e.name for e in effects], "method": "chord, readings subset",
+                               "nfev": nfev, "rows": int(np.count_nonzero(rows))})
+        return [p for _, p in unpack(x)], float(r @ r)
+
+    def residual_function(self, effects: list[Effect], P, rows: np.ndarray | None = None):
         """The residual of the model with ``effects`` at every reading (empirical terms projected out by
         ``P``) as a function of the scaled parameter vector, and the vector's unpacking into (effect,
         parameters). The function carries ``many`` (the residuals of a list of vectors in one batch of the
@@ -162,15 +183,32 @@ class Fitting(Screening):
                 i += k
             return out
 
-        def residual(pred: list[np.ndarray]) -> np.ndarray:
-            return P(np.concatenate([y - p for y, p in zip(self.y, pred)]))
+        if rows is None:
+            def residual(pred: list[np.ndarray]) -> np.ndarray:
+                return P(np.concatenate([y - p for y, p in zip(self.y, pred)]))
+
+            def solve(states: list, sensitivity: bool) -> list:
+                return self.predict_many(states, sensitivity=sensitivity)
+        else:
+            y_rows = np.concatenate(self.y)[rows]
+
+            def residual(pred: np.ndarray) -> np.ndarray:
+                return P(y_rows - pred)
+
+            def solve(states: list, sensitivity: bool) -> list:
+                return self.predict_rows(states, rows, sensitivity=sensitivity)
 
         def fun(xs: np.ndarray) -> np.ndarray:
-            return residual(self.predict(unpack(xs)))
+            if rows is None:
+                return residual(self.predict(unpack(xs)))
+            got = solve([unpack(xs)], False)[0]
+            if isinstance(got, ModelEvaluationError):
+                raise got
+            return residual(got)
 
         def many(points: list[np.ndarray]) -> list:
             return [p if isinstance(p, ModelEvaluationError) else residual(p)
-                    for p in self.predict_many([unpack(x) for x in points], sensitivity=True)]
+                    for p in solve([unpack(x) for x in points], True)]
         fun.many = many  # type: ignore[attr-defined]
         return fun, unpack
 

@@ -103,6 +103,15 @@ SIBLING_REFITS = 2
 #: largest recovery seen on the realistic draws was 4.2 g (seed 7, stop 37: a disc phase in the compliance's
 #: place lost 3799 units, then 2092 after the state had gained about 409).
 REPEAT_HOPELESS = 10.0
+#: A swap trial is refitted first at every k-th reading of each run, k the largest that leaves at least this many
+#: readings per output revolution (the pin scan's ``PIN_SCAN_ROWS_PER_REV``: k = 3 on the realistic draws), and
+#: through every reading only when its BIC at those readings is not above the state's by more than
+#: :data:`SUBSET_HOPELESS` (:meth:`JointSelection.trial_refit`).
+SUBSET_ROWS_PER_REV = 110
+#: ... BIC units at the subset's readings: a third of the readings scale a BIC change by about a third, so 10 there
+#: is about 30 on every reading, far beyond the margin a swap must win by; the state is not refitted at the subset
+#: (the trial is), which favours the trial.
+SUBSET_HOPELESS = 10.0
 
 
 def _pool_basis(pool: list[PoolMember], n: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
@@ -426,11 +435,23 @@ class JointSelection(Selection):
                     continue
                 effects = [x if b is a else b.effect for b in self.active]
                 p0 = [np.clip(q, x.lower, x.upper) if b is a else b.p for b in self.active]
+                k_new = k_cur - a.effect.n_params + x.n_params
                 try:
-                    params, rss, *_ = self.fit_full(effects, p0, self.empirical)
+                    # the checks before the stop (other families: mostly far worse) at the subset first; a new
+                    # instance's neighbours (near ties, decided by the fit's end point) on every reading from the start
+                    if other_families:
+                        got = self.trial_refit(effects, p0, k_new)
+                    else:
+                        params, rss, *_ = self.fit_full(effects, p0, self.empirical)
+                        got = (params, float(rss))
                 except ModelEvaluationError:
                     continue
-                b_new = bic(rss, self.n, k_cur - a.effect.n_params + x.n_params)
+                if not isinstance(got, tuple):
+                    if got:
+                        self.log(f"sibling refit: {x.name} in place of {a.effect.name}: {got}")
+                    continue
+                params, rss = got
+                b_new = bic(rss, self.n, k_new)
                 self.note_swap(a.effect.name, x.name, bic_cur, b_new)
                 self.log(f"sibling refit: {x.name} in place of {a.effect.name}: RMS {math.sqrt(rss / self.n):.4g}, "
                          f"dBIC {b_new - bic_cur:.1f}")
@@ -477,6 +498,46 @@ class JointSelection(Selection):
         """Keep a swap refitted at the present state (BIC ``bic_now``; the swap's ``bic_swap``) for
         :meth:`swap_hopeless`."""
         self._swap_memo()[(member, candidate)] = (bic_now, bic_swap - bic_now)
+
+    def trial_refit(self, effects: list[Effect], p0: list[np.ndarray], k: int
+                    ) -> tuple[list[np.ndarray], float] | str | None:
+        """A swap trial (the model's ``effects`` from ``p0``, ``k`` parameters with the empirical terms) refitted
+        at the subset's readings (:data:`SUBSET_ROWS_PER_REV`), then from there through every reading unless its
+        BIC at the subset is above the state's there by more than :data:`SUBSET_HOPELESS`. Returns (params, rss
+        on all samples), the reason it was left at the subset (a message), or None when no fit could be made.
+        Raises ModelEvaluationError as :meth:`fit_full` does."""
+        rows = self.subset_rows(SUBSET_ROWS_PER_REV)
+        m = int(np.count_nonzero(rows))
+        if m < self.n:
+            rss_state = self._subset_state_rss(rows)
+            got = self.fit_rows(effects, p0, self.empirical, rows) if rss_state is not None else None
+            if got is not None:
+                p_sub, rss_sub = got
+                d = bic(rss_sub, m, k) - bic(rss_state, m, self._p_cur())
+                if d > SUBSET_HOPELESS:
+                    return (f"left at {m} of {self.n} readings: RMS there {math.sqrt(rss_sub / m):.4g} against the "
+                            f"state's {math.sqrt(rss_state / m):.4g}, dBIC {d:.1f}")
+                p0 = p_sub
+        params, rss, *_ = self.fit_full(effects, p0, self.empirical)
+        return params, float(rss)
+
+    def _subset_state_rss(self, rows: np.ndarray) -> float | None:
+        """The present state's residual sum of squares at ``rows`` (its sizes as they are, the empirical terms
+        projected out there), kept per state."""
+        key = (self._state_key(), self.rss_full, int(np.count_nonzero(rows)))
+        kept = getattr(self, "_subset_state", None)
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        got = self.predict_rows([self._pairs()], rows)[0]
+        if isinstance(got, ModelEvaluationError):
+            return None
+        r = np.concatenate(self.y)[rows] - got
+        E = self._emp_matrix(self.empirical)
+        if E is not None:
+            coef, *_ = np.linalg.lstsq(E[rows], r, rcond=None)
+            r = r - E[rows] @ coef
+        self._subset_state = (key, float(r @ r))
+        return self._subset_state[1]
 
     # ------------------------------------------------------------------ subsets
     def best_subsets(self, pool: list[PoolMember], rc: np.ndarray, max_members: int) -> list[SubsetFit]:

@@ -200,6 +200,17 @@ class LoopModel:
             out.append(got if isinstance(got, ModelEvaluationError) else np.concatenate(got))
         return out
 
+    def subset_rows(self, per_rev: float) -> np.ndarray:
+        """Every k-th reading of each run (bool per sample of the concatenated runs), k the largest that leaves at
+        least ``per_rev`` readings per output revolution (every reading of a sparser run)."""
+        keep = []
+        for run in self.runs:
+            k = max(1, int(run.n / max(run.revolutions, 1e-12) // per_rev))
+            m = np.zeros(run.n, dtype=bool)
+            m[::k] = True
+            keep.append(m)
+        return np.concatenate(keep)
+
     def _solve_states(self, actives, keep: list[np.ndarray] | None, sensitivity: bool
                       ) -> list[list[np.ndarray] | ModelEvaluationError]:
         """The states' TE per run, at each run's samples (``keep``: a mask per run, else all)."""

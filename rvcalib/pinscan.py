@@ -65,7 +65,7 @@ from rvcalib.dropswap import DropSwap
 from rvcalib.forward import ModelEvaluationError
 from rvcalib.joint import JOINT_BIC_MARGIN
 from rvcalib.lsq import bic, bic_backward, ftest, projector
-from rvcalib.residual import samples_per_rev, structured_noise
+from rvcalib.residual import structured_noise
 from rvcalib.results import Active
 
 #: The pin-wise error types whose every pin is solved at the state. A pin's radius and its radial position
@@ -165,13 +165,7 @@ class PinScan(DropSwap):
 
     def _scan_rows(self) -> np.ndarray:
         """The readings the scan solves (bool per sample): every k-th of each run (:data:`PIN_SCAN_ROWS_PER_REV`)."""
-        keep = []
-        for run in self.ds.runs:
-            k = max(1, int(samples_per_rev(run) // PIN_SCAN_ROWS_PER_REV))
-            m = np.zeros(run.n, dtype=bool)
-            m[::k] = True
-            keep.append(m)
-        return np.concatenate(keep)
+        return self.subset_rows(PIN_SCAN_ROWS_PER_REV)
 
     def pin_scan_refit(self, it: int) -> tuple[str, str] | None:
         """The pin scan (module docstring): returns ``(member, candidate)`` for a replacement made,

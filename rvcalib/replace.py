@@ -328,9 +328,14 @@ class ReplacementRefit(JointSelection):
             self.log(f"{what}: not refitted: {why}")
             return found
         try:
-            params, rss, *_ = self.fit_full(effects, p0, self.empirical)
+            got = self.trial_refit(effects, p0, k)
         except ModelEvaluationError:
             return found
+        if not isinstance(got, tuple):
+            if got:
+                self.log(f"{what}: {got}")
+            return found
+        params, rss = got
         b_new = bic(rss, self.n, k)
         self.note_swap(member, x.name, bic_cur, b_new)
         self.log(f"{what}: RMS {math.sqrt(rss / self.n):.4g}, dBIC {b_new - bic_cur:.1f}")

@@ -237,6 +237,7 @@ def test_no_scan_when_the_state_is_within_the_noise():
     run = types.SimpleNamespace(input_deg=np.linspace(0.0, 121.0 * 360.0, r.size, endpoint=False), ratio=121.0,
                                 n=r.size, revolutions=1.0)
     s.ds = types.SimpleNamespace(runs=[run], design=Design())
+    s.runs = s.ds.runs
     sigma = structured_noise(s.ds, [r])
     assert sigma == pytest.approx(0.1, rel=0.02)
     s.rss_full = 0.98 * r.size * sigma ** 2        # below the noise estimate's variance: nothing is solved
@@ -271,3 +272,28 @@ def test_the_model_at_some_readings_is_the_model_at_all_readings_there(tmp_path)
     assert np.max(np.abs(part[1] - full[keep])) > 0.1
     with pytest.raises(ValueError, match=r"keep has shape \(299,\); one flag per sample \(300\)"):
         cal.predict_rows([state], keep[:-1])
+
+
+@pytest.mark.usefixtures("calib_forward_cache")  # solves shared by the session (impact law)
+def test_a_fit_at_a_third_of_the_readings_finds_the_size_of_a_fit_at_every_reading(tmp_path):
+    """Fitting.fit_rows (the first refit of a swap trial, JointSelection.trial_refit): the data of a pin's pitch
+    error with noise, fitted at every third reading only, give the size the fit at every reading gives, within the
+    subset's standard error; the state's sum of squares there is the subset's part of the full one."""
+    from rvcalib.dataset import read_dataset
+    from rvcalib.identify import Calibrator
+    from rvcalib.simulate import simulate_dataset
+
+    runs = [{"run": "fw20", "load_Nm": 20.0, "direction": 1}, {"run": "bw20", "load_Nm": 20.0, "direction": -1}]
+    simulate_dataset(tmp_path / "ds", runs, {"errors": {"pin_pitch": [{"pin": 3, "value": 0.01}]}},
+                     samples_per_rev=150, start_deg=0.41, seed=5, noise_arcsec=0.1)
+    cal = Calibrator(read_dataset(tmp_path / "ds"))
+    e = cal.lib.by_name("pin_pitch[pin=3]")
+    keep = cal.subset_rows(45)                      # every third of 150 readings a run
+    assert keep.sum() == 100 and keep[::3].all()
+    p_full, rss_full, *_ = cal.fit_full([e], [np.array([0.006])], [])
+    p_sub, rss_sub = cal.fit_rows([e], [np.array([0.006])], [], keep)
+    assert abs(float(p_full[0][0]) - 0.01) < 2e-4
+    assert abs(float(p_sub[0][0]) - float(p_full[0][0])) < 3e-4
+    assert rss_sub < rss_full and rss_sub / keep.sum() == pytest.approx(rss_full / cal.n, rel=0.4)
+    # the subset's residual is the data's at those readings: the wrong pin leaves far more there
+    assert cal.fit_rows([cal.lib.by_name("pin_pitch[pin=20]")], [np.array([0.006])], [], keep)[1] > 2 * rss_sub

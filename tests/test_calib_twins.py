@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from rvcalib.effects import Effect
-from rvcalib.joint import JOINT_BIC_MARGIN, REPEAT_HOPELESS
+from rvcalib.joint import JOINT_BIC_MARGIN, REPEAT_HOPELESS, SUBSET_HOPELESS
 from rvcalib.lsq import bic
 from rvcalib.replace import TWIN_REFITS, ReplacementRefit
 from rvcalib.results import Active, PoolMember
@@ -62,6 +62,7 @@ def _stub(rss_of: dict[str, float]):
         return [np.asarray(p, dtype=float) * 1.01 for p in p0], rss_of.get(effects[-1].name, 40.0), None, None, None
 
     sel.fit_full = fit_full
+    sel.subset_rows = lambda per_rev: np.ones(N, dtype=bool)   # every reading: the trials go to fit_full directly
     return sel, fits, said, refreshed
 
 
@@ -129,3 +130,50 @@ def test_a_swap_that_lost_far_at_an_earlier_state_is_not_refitted_again():
     # the memo holds the last refit of each swap (its loss at that state)
     memo = sel._swap_memo()
     assert memo[("T[disc=1]", "T[disc=0]")][0] == bic(sel.rss_full, N, 4)
+
+
+def test_a_swap_trial_is_refitted_at_a_third_of_the_readings_first():
+    """JointSelection.trial_refit: at a subset of the readings (SUBSET_ROWS_PER_REV), a trial whose BIC there is above
+    the state's by more than SUBSET_HOPELESS is left there (no fit on every reading); one within it is refitted on every
+    reading from the subset's sizes. The state's RSS at the subset is solved once per state."""
+    sel, fits, said, refreshed = _stub({})
+    rows = np.zeros(N, dtype=bool)
+    rows[::3] = True
+    m = int(rows.sum())
+    sel.subset_rows = lambda per_rev: rows
+    sel.y = [np.zeros(N)]
+    sel._pairs = lambda: [(a.effect, a.p) for a in sel.active]
+    sel._state_key = lambda: ("state",)
+    state_solves: list[int] = []
+
+    def predict_rows(states, keep, sensitivity=False):
+        state_solves.append(int(keep.sum()))
+        return [np.full(int(keep.sum()), 0.2)]                 # the state leaves 0.2 arcsec at every kept reading
+    sel.predict_rows = predict_rows
+    rss_state = m * 0.04
+    sub_rss: dict[str, float] = {}
+    sub_fits: list[list[float]] = []
+
+    def fit_rows(effects, p0, terms, keep):
+        assert keep is rows
+        sub_fits.append([float(np.asarray(p)[0]) for p in p0])
+        return [np.asarray(p, dtype=float) * 2.0 for p in p0], sub_rss[effects[-1].name]
+    sel.fit_rows = fit_rows
+    effects = [a.effect for a in sel.active]
+    p0 = [a.p for a in sel.active]
+    k = sel._p_cur()
+    # hopeless at the subset: dBIC there = m ln(1.5) ~ 135 > SUBSET_HOPELESS
+    sub_rss[effects[-1].name] = 1.5 * rss_state
+    got = sel.trial_refit(effects, p0, k)
+    assert isinstance(got, str) and got.startswith(f"left at {m} of {N} readings") and f"dBIC {m * math.log(1.5):.1f}" in got
+    assert fits == [] and len(sub_fits) == 1
+    # within it (dBIC there = m ln(1.01) ~ 3.3): refitted through every reading from the subset's sizes
+    sub_rss[effects[-1].name] = 1.01 * rss_state
+    assert SUBSET_HOPELESS > m * math.log(1.01) > JOINT_BIC_MARGIN
+    params, rss = sel.trial_refit(effects, p0, k)
+    assert fits[-1][1] == [2.0 * float(np.asarray(p)[0]) for p in p0]
+    assert rss == 40.0 and len(state_solves) == 1            # the state at the subset solved once for both trials
+    # a new state: solved again
+    sel._state_key = lambda: ("another state",)
+    sel.trial_refit(effects, p0, k)
+    assert len(state_solves) == 2
