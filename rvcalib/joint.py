@@ -446,9 +446,8 @@ class JointSelection(Selection):
                         got = (params, float(rss))
                 except ModelEvaluationError:
                     continue
-                if not isinstance(got, tuple):
-                    if got:
-                        self.log(f"sibling refit: {x.name} in place of {a.effect.name}: {got}")
+                if isinstance(got, str):
+                    self.log(f"sibling refit: {x.name} in place of {a.effect.name}: {got}")
                     continue
                 params, rss = got
                 b_new = bic(rss, self.n, k_new)
@@ -500,12 +499,13 @@ class JointSelection(Selection):
         self._swap_memo()[(member, candidate)] = (bic_now, bic_swap - bic_now)
 
     def trial_refit(self, effects: list[Effect], p0: list[np.ndarray], k: int
-                    ) -> tuple[list[np.ndarray], float] | str | None:
+                    ) -> tuple[list[np.ndarray], float] | str:
         """A swap trial (the model's ``effects`` from ``p0``, ``k`` parameters with the empirical terms) refitted
         at the subset's readings (:data:`SUBSET_ROWS_PER_REV`), then from there through every reading unless its
         BIC at the subset is above the state's there by more than :data:`SUBSET_HOPELESS`. Returns (params, rss
-        on all samples), the reason it was left at the subset (a message), or None when no fit could be made.
-        Raises ModelEvaluationError as :meth:`fit_full` does."""
+        on all samples), or the reason it was left at the subset (a message). When the subset gives nothing to
+        judge by (the state or the trial not evaluated there, no decrease) the trial is refitted through every
+        reading from ``p0``. Raises ModelEvaluationError as :meth:`fit_full` does."""
         rows = self.subset_rows(SUBSET_ROWS_PER_REV)
         m = int(np.count_nonzero(rows))
         if m < self.n:

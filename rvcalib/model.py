@@ -13,6 +13,7 @@ from rvcalib.dataset import MeasuredDataset
 from rvcalib.effects import Effect, Library, build_library
 from rvcalib.forward import ModelEvaluationError, grid_te_many, merge_case, te_at_many
 from rvcalib.orders import screen_grid
+from rvcalib.residual import samples_per_rev
 from rvcalib.results import Active, EmpiricalTerm
 
 
@@ -205,7 +206,7 @@ class LoopModel:
         least ``per_rev`` readings per output revolution (every reading of a sparser run)."""
         keep = []
         for run in self.runs:
-            k = max(1, int(run.n / max(run.revolutions, 1e-12) // per_rev))
+            k = max(1, int(samples_per_rev(run) // per_rev))
             m = np.zeros(run.n, dtype=bool)
             m[::k] = True
             keep.append(m)

@@ -63,7 +63,7 @@ import numpy as np
 
 from rvcalib.dropswap import DropSwap
 from rvcalib.forward import ModelEvaluationError
-from rvcalib.joint import JOINT_BIC_MARGIN
+from rvcalib.joint import JOINT_BIC_MARGIN, SUBSET_ROWS_PER_REV
 from rvcalib.lsq import bic, bic_backward, ftest, projector
 from rvcalib.residual import structured_noise
 from rvcalib.results import Active
@@ -81,8 +81,9 @@ PIN_SCAN_STEP = 0.5
 #: revolution (about three per pin pitch of the 40-pin reducer; every reading of a sparser run):
 #: the scan ranks, it does not decide (the refits are solved at every reading), and the instances' columns vary
 #: on the scale of a pin pitch. The cost of the scan falls as 1/k (k = 3 on the 5-run benchmark's 360 readings per
-#: revolution and on the realistic draws' 333).
-PIN_SCAN_ROWS_PER_REV = 110
+#: revolution and on the realistic draws' 333). The swap trials' first refits use the same subset
+#: (:data:`rvcalib.joint.SUBSET_ROWS_PER_REV`).
+PIN_SCAN_ROWS_PER_REV = SUBSET_ROWS_PER_REV
 
 
 def _fit_along(t: np.ndarray, d: np.ndarray, Q: np.ndarray) -> tuple[float, float]:

@@ -331,9 +331,8 @@ class ReplacementRefit(JointSelection):
             got = self.trial_refit(effects, p0, k)
         except ModelEvaluationError:
             return found
-        if not isinstance(got, tuple):
-            if got:
-                self.log(f"{what}: {got}")
+        if isinstance(got, str):
+            self.log(f"{what}: {got}")
             return found
         params, rss = got
         b_new = bic(rss, self.n, k)
