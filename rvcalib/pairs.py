@@ -271,7 +271,10 @@ class PairCheck(ReplacementRefit):
         ``exp(-dBIC/2)``, the state 1. Each named effect's parameters are averaged with these weights (a polar
         effect's two components, so its magnitude and angle come from the mean vector); its value and angle become
         the mean's, its interval covers the mean and, for each fit within the margin (``dBIC < JOINT_BIC_MARGIN``),
-        the effect's size there give or take the state's half-width; ``selection["model_average"]`` gives the
+        the effect's size there give or take the state's half-width, widened by the ratio of the effect's standard
+        errors in that fit and at the state when it is larger (the fit's own interval; seed 7 at stop 38: the pin
+        circle diameter beside the pin radius, which correlate 0.88-0.90, and the truth 0.09 um outside the interval
+        with the state's half-width); ``selection["model_average"]`` gives the
         state's size and each fit's size and weight. Each fit within the margin that moves a named effect beyond
         its interval is a group (kind ``model_average``): the moved effects at their mean, the state's and the
         fit's sizes, the fit's candidates at their sizes, the RMS of both fits and the weights."""
@@ -310,7 +313,11 @@ class PairCheck(ReplacementRefit):
                         d["angle_deg"] = float(e.magnitude_angle(p_avg)[1])
                         d["angle_deg_together"] = float(e.magnitude_angle(q)[1])
                     moved_by.setdefault(k, []).append(d)
-                lo, hi = min(lo, v - half), max(hi, v + half)
+                # the fit's own interval: the state's half-width scaled by the ratio of the effect's standard errors
+                # in the fit and at the state (a candidate beside a correlated member widens the member's)
+                se_fit = rec.get("std_err", {}).get(name)
+                h = half * max(1.0, se_fit / f.std_err) if se_fit and f.std_err and f.std_err > 0 else half
+                lo, hi = min(lo, v - h), max(hi, v + h)
             f.selection["model_average"] = {"value_state": f.value, "weight_state": 1.0 / total, "fits": per_fit}
             f.value, f.ci_low, f.ci_high = v_avg, float(lo), float(hi)
             if f.implied_total is not None:   # a mis-declared error: the total from the mean correction

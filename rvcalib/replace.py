@@ -474,7 +474,7 @@ class ReplacementRefit(JointSelection):
         effects = [a.effect for a in self.active] + list(xs)
         p0 = [a.p for a in self.active] + [np.zeros(x.n_params) for x in xs]
         try:
-            params, rss, *_ = self.fit_full(effects, p0, self.empirical)
+            params, rss, _, _, J = self.fit_full(effects, p0, self.empirical)
         except ModelEvaluationError:
             return None
         kx = sum(x.n_params for x in xs)
@@ -487,10 +487,26 @@ class ReplacementRefit(JointSelection):
         # (rvcalib.pairs.PairCheck.lookalike_average)
         self.lookalike_store().setdefault(self._state_key(), []).append(
             {"effects": effects, "params": params, "rss": float(rss), "delta_bic": float(b_new - bic_cur),
-             "added": [x.name for x in xs], "beside": mname})
+             "added": [x.name for x in xs], "beside": mname, "std_err": _std_errors(effects, J, rss, self.n, k)})
         if pv < self.thr and b_new < bic_cur - JOINT_BIC_MARGIN:
             return b_new, list(xs), params, rss, mname, F, pv
         return None
+
+
+def _std_errors(effects: list[Effect], J: np.ndarray | None, rss: float, n: int, k: int) -> dict[str, float]:
+    """Standard errors (effect units) of the one-parameter effects of a fit from its Jacobian ``J`` at the solution
+    (scaled parameters, the empirical terms projected out), ``sigma^2 (J^T J)^-1`` with ``sigma^2 = rss / (n - k)``
+    (``k`` parameters with the empirical terms); empty without a Jacobian."""
+    if J is None or np.size(J) == 0:
+        return {}
+    J = np.asarray(J, dtype=float)
+    cov = (rss / max(1, n - k)) * np.linalg.pinv(J.T @ J)
+    out, i = {}, 0
+    for e in effects:
+        if e.n_params == 1 and i < cov.shape[0]:
+            out[e.name] = float(math.sqrt(max(cov[i, i], 0.0))) * e.scale
+        i += e.n_params
+    return out
 
 
 def _correlation(a: np.ndarray, b: np.ndarray) -> float:

@@ -67,7 +67,7 @@ class LinearLoop(Groups):
         A = np.column_stack([self.basis[e.name] for e in effects])
         c, *_ = np.linalg.lstsq(A, self.y[0], rcond=None)
         r = self.y[0] - A @ c
-        return [np.array([v]) for v in c], float(r @ r), c, None, None
+        return [np.array([v]) for v in c], float(r @ r), c, None, -A    # the residual's exact Jacobian
 
     def fitted(self) -> dict[str, FittedEffect]:
         """The named effects with their plain 95 % intervals (exact for the linear model)."""
@@ -379,6 +379,31 @@ def test_a_look_alike_fit_as_good_by_the_bic_is_averaged_with_the_state():
     # a trial of another state is not read at this one
     loop.active = loop.active[:1]
     assert loop.lookalike_average(loop.fitted(), set(), 0.2) == []
+
+
+def test_the_averaged_interval_covers_the_look_alike_fit_s_own_interval():
+    """Seed 7 at stop 38: the interval covered the look-alike fit's size give or take the state's half-width, and the
+    truth lay 0.09 um outside it; beside a correlated candidate the member's own standard error is larger. Here x's
+    interval covers x's exact 95 % interval in the fit with z (the 2-column least squares), which is wider than the
+    state's half-width around the same size."""
+    from rvcalib.lsq import bic
+
+    loop = _tie_case(0.045)
+    by_name = loop.fitted()
+    fx = by_name["x"]
+    half_state = (fx.ci_high - fx.ci_low) / 2
+    bic_cur = bic(loop.rss_full, loop.n, loop._p_cur())
+    loop._lookalike_trial([loop.lib.by_name("z")], "x", loop._p_cur(), bic_cur, "test")
+    (rec,) = loop.lookalike_store()[loop._state_key()]
+    A = np.column_stack([loop.basis[k] for k in ("x", "u", "z")])
+    cov = rec["rss"] / (loop.n - 3) * np.linalg.inv(A.T @ A)
+    se_z = math.sqrt(cov[0, 0])
+    assert rec["std_err"]["x"] == pytest.approx(se_z, rel=1e-9)
+    assert se_z > 1.5 * fx.std_err                        # z correlates 0.88 with x: x's error grows beside it
+    v_z = float(rec["params"][0][0])
+    loop.lookalike_average(by_name, set(), math.sqrt(loop.rss_full / loop.n))
+    own = half_state * se_z / fx.std_err
+    assert fx.ci_low <= v_z - own + 1e-12 and v_z - half_state > fx.ci_low + 0.5 * (own - half_state)
 
 
 def test_a_look_alike_the_bic_rejects_barely_moves_the_sizes():
