@@ -35,6 +35,16 @@ def _same_state(kept: np.ndarray | None, p: np.ndarray) -> bool:
     return kept.shape == p.shape and np.array_equal(kept, p)
 
 
+def _scaled_bounds(effects: list[Effect]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The effects' parameter scales and their bounds in scaled units (empty arrays for no effects)."""
+    if not effects:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
+    lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
+    hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
+    return scales, lo, hi
+
+
 def _bound_side(e: Effect, p: np.ndarray) -> str | None:
     """``"lower"`` or ``"upper"`` when a one-parameter effect's value sits at that bound of its range (to 1e-9
     of its scale), else None."""
@@ -119,9 +129,7 @@ class Fitting(Screening):
         jac : ndarray
             Jacobian of ``fun`` at the solution (scaled parameters).
         """
-        scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects]) if effects else np.zeros(0)
-        lo = np.concatenate([np.array(e.lower) for e in effects]) / scales if effects else np.zeros(0)
-        hi = np.concatenate([np.array(e.upper) for e in effects]) / scales if effects else np.zeros(0)
+        scales, lo, hi = _scaled_bounds(effects)
         P = projector(self._emp_matrix(terms))
         fun, unpack = self.residual_function(effects, P)
         if not effects:
@@ -151,9 +159,7 @@ class Fitting(Screening):
         terms projected out there), every column of the start Jacobian differenced (the kept Jacobians of
         :meth:`fit_full` are neither used nor replaced: they hold every reading). Returns (params, rss at those
         readings), or None when no decrease could be made or rvdyn cannot evaluate the start."""
-        scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
-        lo = np.concatenate([np.array(e.lower) for e in effects]) / scales
-        hi = np.concatenate([np.array(e.upper) for e in effects]) / scales
+        scales, lo, hi = _scaled_bounds(effects)
         E = self._emp_matrix(terms)
         P = projector(None if E is None else E[rows])
         fun, unpack = self.residual_function(effects, P, rows)

@@ -41,7 +41,7 @@ from rvcalib.forward import ModelEvaluationError, grid_te, merge_case
 from rvcalib.results import FittedEffect, Unexplained
 from rvcalib.pinscan import PinScan
 from rvcalib.pairs import CHI2_95, CORRELATION_LIMIT
-from rvcalib.selection import member_target
+from rvcalib.selection import joint_linear_fit, member_target
 
 #: Smallest log-determinant gain for which a run is said to split a group (a factor 2 in det).
 MIN_LOG_DET_GAIN = math.log(2.0)
@@ -107,16 +107,14 @@ class Groups(PinScan):
         rc_cat = np.concatenate(rc_raw)
         Ec = self._emp_matrix(self.empirical, coarse=True)
         members = self.active_members()
-        blocks = [m.cols for m in members] + ([Ec] if Ec is not None else [])
+        # the final residual on the grid r_fin: linear at the state
+        blocks, col0, coef, r_fin = joint_linear_fit(members, rc_cat, Ec)
         X = np.column_stack(blocks)
-        col0 = np.cumsum([0] + [b.shape[1] for b in blocks])
         w = self.n / self.nc                      # samples per screening-grid point
         k_tot = X.shape[1]
         s2 = self.rss_full / max(1, self.n - k_tot)  # noise variance per sample, arcsec^2
         if s2 <= 0:
             return fitted, []
-        coef, *_ = np.linalg.lstsq(X, rc_cat, rcond=None)
-        r_fin = rc_cat - X @ coef                 # the final residual on the grid (linear at the state)
         rss_grid = float(r_fin @ r_fin)
         Q, R = np.linalg.qr(X)
         Rinv = np.linalg.pinv(R)

@@ -528,14 +528,10 @@ class JointSelection(Selection):
         kept = getattr(self, "_subset_state", None)
         if kept is not None and kept[0] == key:
             return kept[1]
-        got = self.predict_rows([self._pairs()], rows)[0]
-        if isinstance(got, ModelEvaluationError):
+        try:
+            r, _ = self.full_residual(self._pairs(), self.empirical, rows)
+        except ModelEvaluationError:
             return None
-        r = np.concatenate(self.y)[rows] - got
-        E = self._emp_matrix(self.empirical)
-        if E is not None:
-            coef, *_ = np.linalg.lstsq(E[rows], r, rcond=None)
-            r = r - E[rows] @ coef
         self._subset_state = (key, float(r @ r))
         return self._subset_state[1]
 

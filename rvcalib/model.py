@@ -268,11 +268,21 @@ class LoopModel:
     def _pairs(self, active: list[Active] | None = None) -> list[tuple[Effect, np.ndarray]]:
         return [(a.effect, a.p) for a in (self.active if active is None else active)]
 
-    def full_residual(self, active_pairs, terms: list[EmpiricalTerm]) -> tuple[np.ndarray, np.ndarray]:
-        """Concatenated residual after projecting out the empirical terms, and their coefficients."""
-        pred = self.predict(active_pairs)
-        r = np.concatenate([y - p for y, p in zip(self.y, pred)])
+    def full_residual(self, active_pairs, terms: list[EmpiricalTerm], rows: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """Concatenated residual after projecting out the empirical terms, and their coefficients (``rows``: at
+        those samples only, bool per sample, solved there by :meth:`predict_rows`)."""
+        if rows is None:
+            pred = self.predict(active_pairs)
+            r = np.concatenate([y - p for y, p in zip(self.y, pred)])
+        else:
+            got = self.predict_rows([active_pairs], rows)[0]
+            if isinstance(got, ModelEvaluationError):
+                raise got
+            r = np.concatenate(self.y)[rows] - got
         E = self._emp_matrix(terms)
+        if E is not None and rows is not None:
+            E = E[rows]
         if E is None:
             return r, np.zeros(0)
         coef, *_ = np.linalg.lstsq(E, r, rcond=None)
