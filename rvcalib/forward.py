@@ -53,9 +53,11 @@ from rvcalib.orders import period_deg
 CACHE_BYTES = 256 * 2 ** 20
 
 #: Budget of the default runner's warm starts, bytes (:class:`rvdyn.cache.StateStore`: the newest converged
-#: state of each run condition and angle set, ~80 kB for 360 angles under the physical law; least recently used
-#: first out).
-WARM_BYTES = 32 * 2 ** 20
+#: state of each run condition and angle set, ~80 kB for 360 angles under the physical law, and the state of each
+#: converged case, for a case asked for again; least recently used first out). 128 MB (32 until stop 39: on
+#: realistic seed 8 a round of the checks before the stop pushed the state of the model state it started from out,
+#: and the Jacobian differenced there afterwards started from another state, see rvdyn.runner).
+WARM_BYTES = 128 * 2 ** 20
 
 #: Run conditions of one model state solved together in one runner group (one worker task), in their order in the
 #: batch: two and two, an odd last one with the two before it (3 conditions: one group; 5: two and three), so that a
@@ -95,10 +97,11 @@ def use_runner(runner: Runner | None) -> Runner | None:
 
 def cache_stats() -> dict[str, float]:
     """Of the forward runner: unique solves (``solves``), results taken from its caches (``hits``),
-    solver seconds (``seconds``) and bytes held in memory (``bytes``)."""
+    solver seconds (``seconds``), bytes held in memory (``bytes``) and the cases asked for again whose warm
+    state was no longer kept (``states_lost``, :attr:`rvdyn.runner.Runner.states_lost`)."""
     r = forward_runner()
     return {"solves": r.computed, "hits": r.reused, "seconds": r.counters()["solve_seconds_total"],
-            "bytes": r.memory.bytes}
+            "bytes": r.memory.bytes, "states_lost": r.states_lost}
 
 
 def clear_cache() -> None:

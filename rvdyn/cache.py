@@ -292,6 +292,12 @@ class StateStore:
         while self.bytes > self.max_bytes:
             self.bytes -= self._d.popitem(last=False)[1].nbytes
 
+    def discard(self, key: str) -> None:
+        """Forget the state kept under ``key`` (nothing if none)."""
+        old = self._d.pop(key, None)
+        if old is not None:
+            self.bytes -= old.nbytes
+
     def clear(self) -> None:
         """Forget every state."""
         self._d.clear()

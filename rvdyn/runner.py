@@ -36,7 +36,9 @@ neighbourhood (:meth:`rvdyn.cache.Job.neighbour_key`: the same design, load, dir
 :class:`rvdyn.cache.StateStore` and starts the next solve of that neighbourhood from it (``x_init`` of :func:`rvdyn.te.run_te`);
 results equal the cold solves' within the solver tolerance. The states never enter the result caches. A converged
 case taken from a cache becomes its neighbourhood's newest state again (its state kept by job key, ``job_states``),
-so the solves after it start from the case asked for last. Sensitivity solves (``max_outer=1``, see
+so the solves after it start from the case asked for last; when its state is no longer kept (beyond the budget, or
+solved by another process) the neighbourhood is left without a state (counted in ``states_lost``), so that the
+solves after it converge rather than start from another case. Sensitivity solves (``max_outer=1``, see
 :func:`rvdyn.te.run_te`) have keys of their own and leave no state behind.
 
 Executors (:mod:`rvdyn.executors`) run the same worker function, :func:`solve_job`, on JSON-ready job payloads
@@ -403,6 +405,7 @@ class Runner:
         self.progress = progress
         self.solve_fn = solve_fn
         self.computed = self.reused = self.failed = 0
+        self.states_lost = 0       # converged cases asked for again whose warm state was no longer kept
         self.solve_seconds: list[float] = []
         self.wall_seconds = 0.0
         self.worker_seconds = 0.0
@@ -499,12 +502,20 @@ class Runner:
         if self.states.max_bytes > 0:
             # a converged case asked for again (taken from a cache) is its neighbourhood's newest state once more: the
             # solves after it start from the case last asked for (e.g. a Jacobian's columns from the state at which
-            # they are taken, even when other solves of that run condition came in between)
+            # they are taken, even when other solves of that run condition came in between). When its state is no
+            # longer kept (beyond the budget, or solved by another process) the neighbourhood's newest state is
+            # another case's, and sensitivity solves from there would give their differences against that case,
+            # not against this one: the neighbourhood is left without a state, so the solves after it converge
+            # (realistic seed 8, stop 39: the final state's interval Jacobian, differenced after a round of trials
+            # had pushed its state out, came out of rank one, every interval tens of um wide)
             for k in unique:
                 if k in results and unique[k].max_outer is None:
-                    st = self.job_states.peek(k)
+                    st = self.job_states.get(k)
                     if st is not None:
                         self.states.put(unique[k].neighbour_key(), st)
+                    else:
+                        self.states.discard(unique[k].neighbour_key())
+                        self.states_lost += 1
         tasks = self._tasks(todo, keys, group, len(jobs))
         payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
                     for t in tasks]

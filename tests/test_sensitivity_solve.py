@@ -99,3 +99,28 @@ def test_a_case_taken_from_the_cache_is_its_neighbourhood_s_newest_state_again()
     again = run([a], "a again")
     assert again[0]["cached"] and run.computed == 2
     assert np.array_equal(run.states.peek(near), run.job_states.peek(ra[0]["key"]))
+
+
+def test_a_case_asked_for_again_without_its_kept_state_leaves_no_start_for_the_sensitivity_solves():
+    """The sensitivity solves after a converged case asked for again start from that case's state. When its state
+    is no longer kept (the budget holds one state here, and another case of the same run condition was solved
+    since), the neighbourhood keeps no state, so the sensitivity solves converge instead of moving one
+    linearisation from the other case (which gives their differences against it: far off the column)."""
+    a, b, a2 = (Case.from_dict(_case(e, "physical", 10.0, 1)) for e in (5.0, 15.0, 5.05))
+    conv = Runner(steps=STEPS)([a2], "a2 converged")[0]["te_arcsec"]
+    ref = Runner(steps=STEPS, warm_bytes=2 ** 24, memory_bytes=2 ** 24)
+    ra = ref([a], "a")[0]["te_arcsec"]
+    one = ref.states.peek(ref.jobs([a])[0].neighbour_key()).nbytes
+    run = Runner(steps=STEPS, warm_bytes=one + one // 2, memory_bytes=2 ** 24)   # one state per store
+    run([a], "a")
+    run([b], "b")
+    near = run.jobs([a])[0].neighbour_key()
+    assert run.job_states.peek(run.jobs([a])[0].key()) is None                  # a's state pushed out by b's
+    assert run([a], "a again")[0]["cached"] and run.states_lost == 1
+    assert near not in run.states
+    sens = run([a2], "sensitivity", max_outer=1)[0]["te_arcsec"]
+    np.testing.assert_allclose(sens, conv, atol=2 * TOL_ARCSEC)
+    # (against b's state, one linearisation: the failure this guards against, off by more than the change itself)
+    ref([b], "b")
+    wrong = ref([a2], "sensitivity from b", max_outer=1)[0]["te_arcsec"]
+    assert np.linalg.norm(wrong - conv) > np.linalg.norm(conv - ra)
