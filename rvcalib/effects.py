@@ -382,6 +382,14 @@ def build_library(dataset: MeasuredDataset | None = None, design: Design | None 
     return Library(out, notes)
 
 
+def param_scales(effects: list[Effect]) -> np.ndarray:
+    """Each parameter's scale (its effect's :attr:`Effect.scale`), effect by effect in order: the units of the
+    scaled parameter vectors of the fits and Jacobians (empty for no effects)."""
+    if not effects:
+        return np.zeros(0)
+    return np.concatenate([np.full(e.n_params, e.scale, dtype=float) for e in effects])
+
+
 def trial_points(effect: Effect) -> list[np.ndarray]:
     """Parameter values at which the screening solves the model for an effect's signature."""
     s = effect.scale

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from scipy import stats
 
-from rvcalib.effects import Effect
+from rvcalib.effects import Effect, param_scales
 from rvcalib.forward import ModelEvaluationError
 from rvcalib.joint import JOINT_BIC_MARGIN
 from rvcalib.replace import ReplacementRefit
@@ -158,7 +158,7 @@ class PairCheck(ReplacementRefit):
             if refits[c.name] is None:
                 continue
             p_new, rss_new, J1 = refits[c.name]
-            scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects + [c]])
+            scales = param_scales(effects + [c])
             s2 = rss_new / max(1, self.n - J1.shape[1] - n_emp)
             jc = list(range(J1.shape[1] - c.n_params, J1.shape[1]))
             test = split_test(J1, scales, p_new, list(range(idx[i], idx[i + 1])), jc, s2, effects[i].polar,

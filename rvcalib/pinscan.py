@@ -62,6 +62,7 @@ import math
 import numpy as np
 
 from rvcalib.dropswap import DropSwap
+from rvcalib.effects import param_scales
 from rvcalib.forward import ModelEvaluationError
 from rvcalib.joint import JOINT_BIC_MARGIN, SUBSET_ROWS_PER_REV
 from rvcalib.lsq import bic, bic_backward, ftest, projector
@@ -190,7 +191,7 @@ class PinScan(DropSwap):
             if J is None or known is None or not bool(np.all(known)):
                 x, _, J = self.state_jacobian(effects, params, f0=r)
             else:
-                scales = np.concatenate([np.full(e.n_params, e.scale) for e in effects])
+                scales = param_scales(effects)
                 x = np.concatenate(params) / scales
         except ModelEvaluationError:
             return None
