@@ -382,6 +382,8 @@ class Calibrator(Groups):
         the model, or None."""
         if not self.joint:
             return None
+        if not self.over_budget():
+            self.polish_once("the state before the checks before the stop")
         sw_i = self._instances_before_stop(it)
         if sw_i:
             return "instance refit", ", ".join(f"{n} in place of {o}" for o, n in sw_i)
@@ -474,11 +476,8 @@ class Calibrator(Groups):
 
     # ------------------------------------------------------------------ wrap up
     def _finish(self, r0, before: Diagnostics, iterations: list[dict], t_start: float) -> CalibrationResult:
-        gain = self.polish_state()
-        if gain > 0.0:
-            msg = (f"final state refitted from its sizes with a fresh Jacobian: RMS "
-                   f"{math.sqrt((self.rss_full + gain) / self.n):.5g} -> {math.sqrt(self.rss_full / self.n):.5g} arcsec")
-            self.log(msg)
+        msg = self.polish_once("final state")
+        if msg:
             iterations.append({"iteration": len(iterations) + 1, "decision": msg})
         fitted = self.intervals()
         fitted, final_groups = self.final_state_groups(fitted)

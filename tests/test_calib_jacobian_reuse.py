@@ -162,3 +162,27 @@ def test_a_candidate_column_at_zero_from_the_state_residual(model):
         assert model.calls == 1
         np.testing.assert_array_equal(r_given, r_solved)
         np.testing.assert_array_equal(col_given, col_solved)
+
+
+def test_polish_once_polishes_a_state_once_and_again_after_it_changed(model):
+    """polish_once (before the checks before the stop, and at the final state): the first call at a state short
+    of its minimum refits it and says so; a second call at the same state and residual solves nothing; once
+    the state has moved (its residual changed) it is polished again."""
+    from rvcalib.results import Active
+
+    best, _, _ = model.fit(["e0", "e1", "e2", "e3"], [0.0, 0.0, 0.0, 0.0])
+    model.active = [Active(model.effects[k], np.array([v + 0.2]), 1) for k, v in zip(("e0", "e1", "e2", "e3"), best)]
+    model.empirical = []
+    model.refresh_state()
+    said: list[str] = []
+    model.log = said.append
+    msg = model.polish_once("the state")
+    assert msg is not None and msg.startswith("the state refitted from its sizes with a fresh Jacobian")
+    assert said == [msg]
+    np.testing.assert_allclose([float(a.p[0]) for a in model.active], best, atol=1e-3)
+    model.calls = 0
+    assert model.polish_once("the state") is None
+    assert model.calls == 0 and said == [msg]
+    model.active[0].p = model.active[0].p + 0.3       # the state moved (as a kept trial moves it)
+    model.refresh_state()
+    assert model.polish_once("the state") is not None and model.calls > 0

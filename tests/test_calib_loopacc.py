@@ -165,20 +165,26 @@ def _harmonic_gate(av_found: bool, swaps: list, lookalike, dropswap, pinscan=Non
         ran.append("pinscan")
         return pinscan
 
+    def polish_once(where):
+        ran.append("polish")
+        return None
+
     c._instances_before_stop, c.lookalike_refit, c.restart_refit = instances, lookalike_refit, restart_refit
-    c.drop_swap_refit, c.pin_scan_refit = drop_swap_refit, pin_scan_refit
+    c.drop_swap_refit, c.pin_scan_refit, c.polish_once = drop_swap_refit, pin_scan_refit, polish_once
     return c, ran
 
 
 @pytest.mark.parametrize("av_found, instances, lookalike, dropswap, expect, checks", [
     (True, [], None, None, "added-variable test: joint: added pin_radius", ["added_variable", "joint_step"]),
     (False, [("pin_pitch[pin=0]", "pin_pitch[pin=20]")], None, None, "instance refit: pin_pitch[pin=20] in place of "
-     "pin_pitch[pin=0]", ["added_variable", "instances"]),
+     "pin_pitch[pin=0]", ["added_variable", "polish", "instances"]),
     (False, [], ("pin_radius", "pin_circle_diameter"), None, "look-alike refit: added pin_circle_diameter beside "
-     "pin_radius", ["added_variable", "instances", "restart", "lookalike"]),
+     "pin_radius", ["added_variable", "polish", "instances", "restart", "lookalike"]),
     (False, [], None, ("planet_eccentricity[crank=1]", "sun_eccentricity"), "drop-swap refit: sun_eccentricity in "
-     "place of planet_eccentricity[crank=1]", ["added_variable", "instances", "restart", "lookalike", "dropswap"]),
-    (False, [], None, None, None, ["added_variable", "instances", "restart", "lookalike", "dropswap", "pinscan"]),
+     "place of planet_eccentricity[crank=1]", ["added_variable", "polish", "instances", "restart", "lookalike",
+                                               "dropswap"]),
+    (False, [], None, None, None, ["added_variable", "polish", "instances", "restart", "lookalike", "dropswap",
+                                   "pinscan"]),
 ])
 def test_the_checks_before_the_stop_run_before_a_harmonic_enters(av_found, instances, lookalike, dropswap, expect,
                                                                  checks):
@@ -193,13 +199,13 @@ def test_the_checks_before_the_stop_run_before_a_harmonic_enters(av_found, insta
     c2, ran2 = _harmonic_gate(False, [], ("pin_radius", "pin_circle_diameter"), None)
     c2.max_terms = 1
     assert c2._physical_before_harmonic(7, {}, None, None, None, None, []) is None
-    assert ran2 == ["added_variable", "instances", "restart", "dropswap", "pinscan"]
+    assert ran2 == ["added_variable", "polish", "instances", "restart", "dropswap", "pinscan"]
     # the pin scan is the last check: its replacement or addition is taken when nothing before it changed the model
     for got, said in [(("pin_radius[pin=19]", "pin_pitch[pin=0]"), "pin scan: pin_pitch[pin=0] in place of "
                        "pin_radius[pin=19]"), (("", "pin_pitch[pin=0]"), "pin scan: added pin_pitch[pin=0]")]:
         c3, ran3 = _harmonic_gate(False, [], None, None, pinscan=got)
         assert c3._physical_before_harmonic(7, {}, None, None, None, None, []) == said
-        assert ran3 == ["added_variable", "instances", "restart", "lookalike", "dropswap", "pinscan"]
+        assert ran3 == ["added_variable", "polish", "instances", "restart", "lookalike", "dropswap", "pinscan"]
 
 
 def _elimination_case(cost: float):
