@@ -138,6 +138,11 @@ def test_a_disc_phase_with_a_constant_offset_becomes_the_other_disc_s_phase(tmp_
     assert cal.rss_full == rss
     assert any(s.startswith("offset refit: disc_phase[disc=0]") for s in said)  # tried, not kept
     assert any(s.startswith("offset refit: the unexplained constant offset dropped") for s in said)
+    # a trial that lost far is not refitted again at a state that has gained nothing since (a swap's memo)
+    said.clear()
+    assert cal.offset_instance_refit(3) is None
+    again = [s for s in said if s.startswith("offset refit: the unexplained constant offset dropped")]
+    assert again and all(": not refitted: it raised the BIC by" in s for s in again)
 
     # both discs' phases and the offset (equal phases of both discs turn the output as a whole): the model
     # without the offset fits as well with one parameter fewer
