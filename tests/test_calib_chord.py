@@ -96,3 +96,33 @@ def test_batched_differences_equal_the_serial_ones() -> None:
             fd_jac(f, x, lo, hi, h=0.01, central=True)
     Jo = fd_jac(batched, x, lo, hi, h=0.01, only=[1, 3])
     np.testing.assert_array_equal(Jo, fd_jac(plain, x, lo, hi, h=0.01)[:, [1, 3]])
+
+
+def test_a_fit_still_gaining_at_its_cap_goes_on_from_a_fresh_jacobian() -> None:
+    """chord_fit judged by the BIC (``bic_n``): a fit that reaches ``max_iter`` while its steps still lower the BIC
+    goes on from a Jacobian differenced there (once), not on rank-one updates alone: from a start near the
+    solution of a nonlinear problem it ends within 0.01 BIC units of the least-squares optimum after three
+    iterations (with the rank-one updates alone it ended 10.5 units away), and one iteration fewer still ends
+    within 7 units (757 without)."""
+    from scipy import optimize
+
+    from rvcalib.lsq import chord_fit
+
+    t = np.linspace(0.0, 1.0, 400)
+    truth = np.array([1.5, -0.8, 0.6, 1.2])
+
+    def model(x):
+        return np.exp(x[0] * t) * np.sin(3 * t + x[1]) + x[2] * t ** 2 + np.tanh(x[3] * (t - 0.5))
+
+    y = model(truth) + 0.01 * np.random.default_rng(3).standard_normal(t.size)
+
+    def fun(x):
+        return model(x) - y
+
+    x0 = truth + np.array([0.4, -0.3, 0.3, 0.5])
+    lo, hi = np.full(4, -10.0), np.full(4, 10.0)
+    best = optimize.least_squares(fun, x0, xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    rss_best = 2.0 * best.cost
+    for max_iter, within in ((3, 0.01), (2, 7.0)):
+        _, r, _, _ = chord_fit(fun, x0, lo, hi, max_iter=max_iter, bic_n=t.size)
+        assert t.size * np.log(float(r @ r) / rss_best) < within
