@@ -38,7 +38,7 @@ from __future__ import annotations
 import copy
 import json
 import math
-from collections import Counter
+from collections import Counter, OrderedDict
 from collections.abc import Sequence
 from typing import Any
 
@@ -118,16 +118,33 @@ def grid_angles_deg(steps: int, period: float) -> np.ndarray:
     return np.arange(steps) * (float(period) / steps)
 
 
-def _case(case_dict: dict[str, Any]) -> Case:
+#: validated cases by their JSON text (:func:`validated_case`), at most this many kept
+CASE_MEMO_SIZE = 4096
+case_memo: "OrderedDict[str, Case]" = OrderedDict()
+
+
+def validated_case(case_dict: dict[str, Any]) -> Case:
+    """The validated case of a case JSON (a :class:`ModelEvaluationError` when it is refused). The loop asks for
+    the same case many times (its period, its batch, the cache's key): a case validated before is taken from a
+    memo keyed by its JSON text (least recently used out first; a :class:`~rvcad.errors.Case` is frozen)."""
+    key = json.dumps(case_dict, sort_keys=True, default=str)
+    got = case_memo.get(key)
+    if got is not None:
+        case_memo.move_to_end(key)
+        return got
     try:
-        return Case.from_dict(case_dict)
+        got = Case.from_dict(case_dict)
     except ValueError as exc:
         raise ModelEvaluationError(str(exc)) from None
+    case_memo[key] = got
+    if len(case_memo) > CASE_MEMO_SIZE:
+        case_memo.popitem(last=False)
+    return got
 
 
 def case_period_deg(case_dict: dict[str, Any]) -> float:
     """Input angle of one output revolution of a case JSON's design, deg."""
-    return period_deg(_case(case_dict).design)
+    return period_deg(validated_case(case_dict).design)
 
 
 def grid_te(case_dict: dict[str, Any], steps: int, solver: str = "analytic") -> np.ndarray:
@@ -208,7 +225,7 @@ def te_at_many(case_dicts: Sequence[dict[str, Any]], input_deg: Sequence[np.ndar
     todo: list[tuple[int, Case, np.ndarray, np.ndarray, bool]] = []  # index, case, angles solved, inverse, reversed
     for i, (d, a) in enumerate(zip(case_dicts, input_deg)):
         try:
-            case = _case(d)
+            case = validated_case(d)
         except ModelEvaluationError as exc:
             out[i] = exc
             continue

@@ -124,6 +124,34 @@ def _pool_basis(pool: list[PoolMember], n: int) -> tuple[np.ndarray, np.ndarray,
     return Q, R, [np.arange(a, a + w) for a, w in zip(starts[:-1], widths)]
 
 
+def _subset_lstsq(R: np.ndarray, qt: np.ndarray, cols: list[np.ndarray | None],
+                  rcond_rows: float) -> list[tuple[np.ndarray, float] | None]:
+    """Least squares ``min |qt - R[:, c] x|`` for every column set ``c`` of ``cols`` (None: skipped), batched:
+    the sets of one width are solved together by one stacked singular value decomposition, with the rank
+    cut-off of :func:`numpy.linalg.lstsq` (singular values at most ``rcond`` times the largest count as zero;
+    ``rcond = max(rcond_rows, eps * width)``: the caller passes ``eps`` times the rows the columns stand for,
+    lstsq's default cut-off on them). Returns ``(x, |qt - R[:, c] x|^2)`` per set (x the minimum-norm
+    solution); the same minimiser and rank as lstsq, to rounding."""
+    out: list[tuple[np.ndarray, float] | None] = [None] * len(cols)
+    by_width: dict[int, list[int]] = {}
+    for j, c in enumerate(cols):
+        if c is not None:
+            by_width.setdefault(c.size, []).append(j)
+    eps = np.finfo(float).eps
+    for w, js in by_width.items():
+        A = R[:, np.stack([cols[j] for j in js])].transpose(1, 0, 2)        # (B, P, w)
+        U, sv, Vt = np.linalg.svd(A, full_matrices=False)
+        rcond = max(rcond_rows, eps * w)
+        keep = sv > rcond * sv[:, :1]
+        inv = np.where(keep, 1.0 / np.where(keep, sv, 1.0), 0.0)
+        x = np.einsum("bji,bj->bi", Vt, inv * np.einsum("bpj,p->bj", U, qt))
+        res = qt[None, :] - np.einsum("bpw,bw->bp", A, x)
+        rss = np.einsum("bp,bp->b", res, res)
+        for k, j in enumerate(js):
+            out[j] = (x[k], float(rss[k]))
+    return out
+
+
 def aic(rss: float, n: int, k: int) -> float:
     """Akaike information criterion of a Gaussian least-squares fit: ``n ln(rss/n) + 2 k``."""
     return n * math.log(max(rss, 1e-300) / n) + 2.0 * k
@@ -556,6 +584,7 @@ class JointSelection(Selection):
         # plus the part of t outside the span, |t - Q Q^T t|^2 (the same minimiser, singular values and rank; the
         # rank cut-off of lstsq's default on the nc rows is passed explicitly)
         Q, R, at = _pool_basis(pool, nc)
+        npar = [m.n_params for m in pool]
         eps = np.finfo(float).eps
         for nd in range(0, min(MAX_DROP, len(act)) + 1):
             for drop in itertools.combinations(act, nd):
@@ -564,21 +593,21 @@ class JointSelection(Selection):
                 out = t - Q @ qt
                 rss_out = float(out @ out)
                 keep = [i for i in act if i not in drop]
+                subsets = []
                 for na in range(0, min(MAX_ADD, len(new)) + 1):
                     if len(keep) + na > max_members:
                         break
-                    for add in itertools.combinations(new, na):
-                        S = tuple(keep) + add
-                        if S:
-                            cols = np.concatenate([at[i] for i in S])
-                            A = R[:, cols]
-                            coef, *_ = np.linalg.lstsq(A, qt, rcond=eps * max(nc, cols.size))
-                            res = qt - A @ coef
-                            rss = float(res @ res) + rss_out
-                        else:
-                            coef, rss = np.zeros(0), float(t @ t)
-                        k = sum(pool[i].n_params for i in S)
-                        fits.append(SubsetFit(S, tuple(drop), k, rss, bic(rss, nc, k), aic(rss, nc, k), coef))
+                    subsets += [tuple(keep) + add for add in itertools.combinations(new, na)]
+                solved = _subset_lstsq(R, qt, [np.concatenate([at[i] for i in S]) if S else None for S in subsets],
+                                       eps * nc)
+                for S, got in zip(subsets, solved):
+                    if S:
+                        coef, rss_in = got
+                        rss = rss_in + rss_out
+                    else:
+                        coef, rss = np.zeros(0), float(t @ t)
+                    k = sum(npar[i] for i in S)
+                    fits.append(SubsetFit(S, tuple(drop), k, rss, bic(rss, nc, k), aic(rss, nc, k), coef))
         return fits
 
     def _coef_of(self, pool: list[PoolMember], fit: SubsetFit) -> dict[int, np.ndarray]:
@@ -600,9 +629,10 @@ class JointSelection(Selection):
         # not hang on rounding
         lib_order = {e.name: k for k, e in enumerate(getattr(self, "lib", None) or [])}
         big = len(lib_order)
+        rank = [lib_order.get(m.name, big) for m in pool]
 
         def key(f: SubsetFit) -> tuple:
-            return (round(f.bic / BIC_TIE), tuple(sorted(lib_order.get(pool[i].name, big) for i in f.members)))
+            return (round(f.bic / BIC_TIE), tuple(sorted(rank[i] for i in f.members)))
 
         for f in sorted(fits, key=key):
             S = frozenset(f.members)
@@ -735,9 +765,11 @@ class JointSelection(Selection):
         nc = rc.size
         wb = model_weights(np.array([f.bic for f in fits]))
         wa = model_weights(np.array([f.aic for f in fits]))
-        incl = {pool[i].name: (float(sum(w for w, f in zip(wb, fits) if i in f.members)),
-                               float(sum(w for w, f in zip(wa, fits) if i in f.members)))
-                for i in range(len(pool))}
+        member = np.zeros((len(fits), len(pool)))          # subset x pool member: 1 where it holds it
+        for k, f in enumerate(fits):
+            member[k, list(f.members)] = 1.0
+        wb_in, wa_in = wb @ member, wa @ member
+        incl = {pool[i].name: (float(wb_in[i]), float(wa_in[i])) for i in range(len(pool))}
         order = np.argsort([f.bic for f in fits])
         bic_cur = next(f.bic for f in fits if f.members == current)
         jl["subsets"] = len(fits)

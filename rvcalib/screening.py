@@ -191,7 +191,8 @@ class Screening(LoopModel):
         s = src[j]
         ms = s[0].size
         roll = int(round(roll_deg / 360.0 * ms))
-        return np.concatenate([np.roll(s[self.cond_of[i]], roll) for i in range(len(self.runs))])
+        return np.concatenate([np.roll(s[self.cond_of[i]], roll) if roll else s[self.cond_of[i]]
+                               for i in range(len(self.runs))])
 
     def _options(self, e: Effect, meas_cols: np.ndarray | None) -> list[tuple[np.ndarray, bool, Callable]]:
         """Screening options of an effect: (columns, nonneg, coefficients -> parameters)."""

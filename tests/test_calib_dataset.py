@@ -221,3 +221,24 @@ def test_merge_case_and_library():
     assert math.isclose(opts["pin_circle_ovality_um"], 10.0) and math.isclose(opts["pin_circle_ovality_angle_deg"], 45.0)
     with pytest.raises(ValueError, match="not in the candidate library"):
         lib.by_name("nothing")
+
+
+def test_a_case_validated_once_is_taken_from_the_memo_and_a_refused_one_is_refused_every_time(monkeypatch):
+    """rvcalib.forward.validated_case keeps the validated cases by their JSON text: an equal case JSON (keys in any
+    order) gives the same Case, another value another Case, a refused case its ModelEvaluationError naming the
+    field on every call, and the memo holds at most CASE_MEMO_SIZE cases."""
+    from rvcalib import forward
+
+    monkeypatch.setattr(forward, "case_memo", type(forward.case_memo)())
+    monkeypatch.setattr(forward, "CASE_MEMO_SIZE", 3)
+    a = forward.validated_case({"errors": {"sun_eccentricity": 1.0}, "load_Nm": 10.0})
+    assert forward.validated_case({"load_Nm": 10.0, "errors": {"sun_eccentricity": 1.0}}) is a
+    b = forward.validated_case({"errors": {"sun_eccentricity": 2.0}, "load_Nm": 10.0})
+    assert b is not a and b.errors[0].value == 2.0 and a.errors[0].value == 1.0
+    for _ in range(2):
+        with pytest.raises(forward.ModelEvaluationError, match="sun_eccentricity"):
+            forward.validated_case({"errors": {"sun_eccentricity": "x"}})
+    for v in (3.0, 4.0, 5.0):
+        forward.validated_case({"errors": {"sun_eccentricity": v}})
+    assert len(forward.case_memo) == 3
+    assert forward.validated_case({"errors": {"sun_eccentricity": 1.0}, "load_Nm": 10.0}) is not a   # pushed out
