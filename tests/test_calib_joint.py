@@ -263,3 +263,38 @@ def test_a_member_whose_removal_rvdyn_cannot_evaluate_gets_its_local_part(tmp_pa
     said.clear()
     assert cal.siblings(cal.active[1], np.zeros_like(base)) == []
     assert any("the state without pin_radius[pin=0] cannot be evaluated" in s for s in said)
+
+
+def test_the_physical_subset_in_place_of_a_new_empirical_term_keeps_the_choices_physical_members():
+    """When the linear search picks a subset with a new empirical term (here C + a constant), the joint step also
+    refits the subset that keeps C and puts the best physical candidate in the constant's place (C + D: D is mostly
+    a constant), not only the best physical subset overall (A + B, which drops C)."""
+    from rvcalib.effects import Effect
+    from rvcalib.joint import JointSelection
+    from rvcalib.results import EmpiricalTerm, PoolMember
+
+    rng = np.random.default_rng(8)
+    nc = 300
+    c, d, e, f = rng.normal(size=(4, nc))
+    one = np.ones(nc)
+    rc = c + 3.0 * one + 0.05 * rng.normal(size=nc)     # the truth here: C and a constant
+    cols = {"A": c + 1.5 * one + 0.6 * e, "B": 1.5 * one - 0.6 * e + 0.5 * f,   # A + B: close, but drops C
+            "C": c, "D": 3.0 * one + 0.7 * d}            # D: mostly a constant (a disc phase whose discs fight)
+    eff = {k: Effect(k, k, "model", "u", "test effect") for k in "ABCD"}
+    sel = JointSelection.__new__(JointSelection)
+    sel.empirical, sel.thr = [], 1e-4
+    pool = [PoolMember(eff[k], cols[k][:, None], None, lambda v: np.asarray(v)) for k in "ABCD"]
+    pool.append(PoolMember(None, one[:, None], None, lambda v: np.asarray(v), None, None, EmpiricalTerm("offset")))
+    fits = sel.best_subsets(pool, rc, max_members=2)
+    by = {frozenset(pool[i].name for i in f.members): f for f in fits}
+    choice = by[frozenset({"C", "unexplained constant offset"})]
+    got = sel.physical_in_place(pool, fits, choice)
+    assert got is not None and {pool[i].name for i in got.members} == {"C", "D"}
+    pairs_with_c = [f for k, f in by.items() if "C" in k and len(k) == 2 and "unexplained constant offset" not in k]
+    assert got.bic == min(f.bic for f in pairs_with_c)
+    # the best physical pair overall does not hold C (the case the new subset is for)
+    best_pair = min((f for k, f in by.items() if len(k) == 2 and "unexplained constant offset" not in k),
+                    key=lambda f: f.bic)
+    assert "C" not in {pool[i].name for i in best_pair.members}
+    # a choice without a new empirical term has none
+    assert sel.physical_in_place(pool, fits, by[frozenset({"A", "B"})]) is None
