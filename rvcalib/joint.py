@@ -806,22 +806,22 @@ class JointSelection(Selection):
 
         # an empirical term enters only after the physical subset that would explain the same structure
         # was compared with it through the nonlinear model (the linear subset search favours an exact
-        # constant or harmonic over physical signatures linearised at a state that is still far off)
-        phys_alt = None
-        phys_swap = None
+        # constant or harmonic over physical signatures linearised at a state that is still far off); the physical
+        # subsets refitted beside it: the best physical subset and the choice with physical candidates in its new
+        # terms' place (each once)
+        physical: list[SubsetFit] = []
         if choice is not None and adds_empirical(choice):
-            phys_alt = self.choose_subset(pool, [f for f in fits if not adds_empirical(f)], nc, current)
-            phys_swap = self.physical_in_place(pool, fits, choice)
-            if phys_swap is not None and (phys_alt is None
-                                          or frozenset(phys_swap.members) == frozenset(phys_alt.members)):
-                phys_alt, phys_swap = phys_alt or phys_swap, None
-        if phys_alt is None and (choice is None or (frozenset(choice.members) == greedy and not choice.dropped) or
-                                 (g_fit is not None and g_fit.bic - choice.bic <= JOINT_BIC_MARGIN)):
+            for sub in (self.choose_subset(pool, [f for f in fits if not adds_empirical(f)], nc, current),
+                        self.physical_in_place(pool, fits, choice)):
+                if sub is not None and all(frozenset(sub.members) != frozenset(g.members) for g in physical):
+                    physical.append(sub)
+        if not physical and (choice is None or (frozenset(choice.members) == greedy and not choice.dropped) or
+                             (g_fit is not None and g_fit.bic - choice.bic <= JOINT_BIC_MARGIN)):
             jl["chosen"] = "greedy" if choice is not None else "none better than the model"
             return None
         p_cur = self._p_cur()
         tried = []
-        for f in [g for g in (phys_alt, phys_swap) if g is not None] + [choice]:
+        for f in physical + [choice]:
             if self.over_budget():
                 jl["stopped"] = "time budget"
                 break
@@ -844,10 +844,8 @@ class JointSelection(Selection):
         phys_ok = [t for t in okays if t[0] is not choice]
         if len(phys_ok) == 2:   # the better of the two physical subsets stands for the physical side
             okays = [min(phys_ok, key=lambda t: t[2])] + [t for t in okays if t[0] is choice]
-        if okays and okays[0][0] is phys_swap:
-            phys_alt = phys_swap
         pick = okays[0]
-        if phys_alt is not None and len(okays) == 2 and okays[0][0] is phys_alt:
+        if len(okays) == 2 and okays[0][0] is not choice:
             # the physical subset goes first when it explains (nearly) all that the empirical one does:
             # what is left of the empirical term's structure is screened again at the new state;
             # otherwise the empirical subset must beat it by more than EMPIRICAL_BIC_MARGIN
@@ -866,7 +864,7 @@ class JointSelection(Selection):
             + f" -> {'+'.join(pool[i].name for i in pick[0].members if not pool[i].in_model)}")
         choice, (params, rss1, phys, terms, coefs), dbic, F, pv, _ = pick
         if frozenset(choice.members) == greedy and not choice.dropped and not adds_empirical(choice) \
-                and phys_alt is None:
+                and not physical:
             jl["chosen"] = "greedy"
             return None
         added = [i for i in choice.members if not pool[i].in_model]
