@@ -13,6 +13,7 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -339,6 +340,11 @@ class Case:
 
     def key(self) -> str:
         """Content hash (sha256 hex, 16 chars) of everything that changes the physics (not the name)."""
+        return self._key
+
+    @cached_property
+    def _key(self) -> str:
+        # made once per (frozen) case: the solve cache asks for it on every job
         d = self.to_dict()
         d.pop("name")
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]

@@ -5,8 +5,11 @@ paper is a named field here and is listed in the README.
 """
 from __future__ import annotations
 
+import json
 import math
+from collections import OrderedDict
 from dataclasses import asdict, dataclass, fields, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -189,9 +192,15 @@ class Design:
         """Number of cycloid discs (2, eccentrics 180 deg apart)."""
         return 2
 
+    @cached_property
+    def _plain(self) -> dict[str, Any]:
+        """:func:`dataclasses.asdict` of this (frozen) design, made once: :meth:`to_dict`'s costly part, which the
+        calibration loop asks for thousands of times per run (cache keys, worker payloads)."""
+        return asdict(self)
+
     def to_dict(self) -> dict[str, Any]:
-        """Plain-dict form (JSON-ready)."""
-        d = asdict(self)
+        """Plain-dict form (JSON-ready; a new dict on every call)."""
+        d = dict(self._plain)
         d["crank_angles_deg"] = list(self.crank_angles_deg)
         return d
 
@@ -358,6 +367,11 @@ class Design:
         """
         if d is None:
             return cls().validate()
+        memo_key = _memo_key(d)
+        got = _DESIGN_MEMO.get(memo_key) if memo_key is not None else None
+        if got is not None and type(got) is cls:
+            _DESIGN_MEMO.move_to_end(memo_key)
+            return got
         names = [f.name for f in fields(cls)]
         d = as_mapping(d, "design", f"an object with keys from {names}", DesignError)
         for k in d:
@@ -382,7 +396,29 @@ class Design:
                 kw[f.name] = as_real(v, where, cls=DesignError)
             else:
                 kw[f.name] = v
-        return cls(**kw).validate()
+        design = cls(**kw).validate()
+        if memo_key is not None:
+            _DESIGN_MEMO[memo_key] = design
+            if len(_DESIGN_MEMO) > DESIGN_MEMO_SIZE:
+                _DESIGN_MEMO.popitem(last=False)
+        return design
+
+
+#: validated designs by the JSON text of the object they were read from (:meth:`Design.from_dict`; a design is
+#: frozen, so one instance serves every case that gives the same object), at most this many kept
+DESIGN_MEMO_SIZE = 64
+_DESIGN_MEMO: "OrderedDict[str, Design]" = OrderedDict()
+
+
+def _memo_key(d: Any) -> str | None:
+    """The memo key of a design object: its JSON text with sorted keys, or None (not a dict of JSON values:
+    validated every time, and refused where it is wrong)."""
+    if type(d) is not dict:
+        return None
+    try:
+        return json.dumps(d, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError):
+        return None
 
 
 #: Arrangements of the two tapered journal bearings of a crank (``Design.journal_bearing_arrangement``).

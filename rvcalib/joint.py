@@ -640,7 +640,7 @@ class JointSelection(Selection):
                       current: tuple[int, ...]) -> SubsetFit | None:
         """The subset of lowest BIC whose new members each pass the F test against the same subset
         without them; None if the present model (re-linearised) comes first."""
-        by_key = {(frozenset(f.members), f.dropped): f for f in fits}
+        by_key: dict[tuple, SubsetFit] = {}
         cur = frozenset(current)
         # twin instances give the same BIC up to float noise (1e-10): a tie within BIC_TIE goes to the
         # subset whose members come first in the library (default instances first), so the path does
@@ -648,15 +648,13 @@ class JointSelection(Selection):
         lib_order = {e.name: k for k, e in enumerate(getattr(self, "lib", None) or [])}
         big = len(lib_order)
         rank = [lib_order.get(m.name, big) for m in pool]
-
-        def key(f: SubsetFit) -> tuple:
-            return (round(f.bic / BIC_TIE), tuple(sorted(rank[i] for i in f.members)))
-
-        for f in sorted(fits, key=key):
+        for f in _tie_order(fits, rank):
             S = frozenset(f.members)
             if S == cur:
                 return None
             added = [i for i in f.members if not pool[i].in_model]
+            if added and not by_key:
+                by_key = {(frozenset(g.members), g.dropped): g for g in fits}
             ok = True
             for i in added:
                 g = by_key.get((S - {i}, f.dropped))
@@ -904,3 +902,21 @@ class JointSelection(Selection):
         # no backward elimination here: the subset search has just weighed dropping members at this
         # state (the next joint step does again), and the loop's final backward elimination checks all
         return True, msg
+
+
+def _tie_order(fits: list[SubsetFit], rank: list[int]):
+    """The fits in the order of ``(round(bic / BIC_TIE), sorted library ranks of their members)``, stable (equal keys
+    keep their order in ``fits``), made lazily: the BIC classes in ascending order (one stable argsort), each sorted by
+    the ranks when it is reached (the caller stops at the first fit it accepts, mostly in the first few classes)."""
+    if not fits:
+        return
+    prim = np.round(np.array([f.bic for f in fits], dtype=float) / BIC_TIE)
+    order = np.argsort(prim, kind="stable")
+    ps = prim[order]
+    starts = np.flatnonzero(np.r_[True, ps[1:] != ps[:-1]])
+    ends = np.r_[starts[1:], ps.size]
+    for a, b in zip(starts, ends):
+        group = [fits[j] for j in order[a:b]]
+        if len(group) > 1:
+            group.sort(key=lambda f: tuple(sorted(rank[i] for i in f.members)))
+        yield from group

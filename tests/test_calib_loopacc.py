@@ -35,6 +35,27 @@ def test_twin_instances_tie_goes_to_library_order():
         assert [pool[i].effect.name for i in choice.members] == ["cam_phase[crank=0,disc=1]"]
 
 
+def test_the_subsets_are_tried_in_the_order_of_their_bic_class_then_library_ranks():
+    """choose_subset walks the fits lazily (rvcalib.joint._tie_order): the same order as a full stable sort by
+    (round(bic / BIC_TIE), sorted library ranks of the members), on fits with ties, near-ties across a class
+    boundary and empty subsets."""
+    import random
+
+    from rvcalib.joint import BIC_TIE, _tie_order
+    from rvcalib.results import SubsetFit
+
+    rng = random.Random(1)
+    for _ in range(200):
+        fits = []
+        for _ in range(rng.randint(0, 60)):
+            mem = tuple(rng.sample(range(12), rng.randint(0, 4)))
+            b = rng.choice([rng.uniform(-50.0, 50.0), 3.0, 3.0 + 1e-8, -7.5e-5, 5e-5, 1.5e-4, -2.5e-4])
+            fits.append(SubsetFit(mem, (), len(mem), 1.0, b, 0.0, np.zeros(0)))
+        rank = [rng.randint(0, 20) for _ in range(12)]
+        full = sorted(fits, key=lambda f: (round(f.bic / BIC_TIE), tuple(sorted(rank[i] for i in f.members))))
+        assert [id(f) for f in _tie_order(fits, rank)] == [id(f) for f in full]
+
+
 @pytest.mark.parametrize("rss_p, dbic_p, rss_e, dbic_e, expect", [
     # the physical subset removes 98 % of what the constant's subset removes: physical first
     (26.4, -5252.0, 3.28, -8032.0, True),

@@ -180,6 +180,36 @@ def test_designs_of_issue_15_are_valid() -> None:
     assert d30.ratio == pytest.approx(1 + 36 * 30 / 12, abs=1e-9)
 
 
+def test_a_design_read_once_is_taken_from_the_memo_and_a_refused_one_is_refused_every_time(monkeypatch) -> None:
+    """Design.from_dict keeps the designs it validated by the JSON text of their object: an equal object (keys in
+    any order) gives the same frozen Design, another value another Design, a refused object its DesignError naming
+    the field on every call, and the memo holds at most DESIGN_MEMO_SIZE designs. to_dict gives a new dict each
+    time (the asdict is made once per design), and Case.key is the content hash either way."""
+    from rvcad import params
+
+    monkeypatch.setattr(params, "_DESIGN_MEMO", type(params._DESIGN_MEMO)())
+    monkeypatch.setattr(params, "DESIGN_MEMO_SIZE", 2)
+    a = Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.3})
+    assert Design.from_dict({"eccentricity_mm": 1.3, "z_sun": 12}) is a
+    b = Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.2})
+    assert b is not a and b.eccentricity_mm == 1.2 and a.eccentricity_mm == 1.3
+    for _ in range(2):
+        with pytest.raises(DesignError, match="design.eccentricity_mm"):
+            Design.from_dict({"eccentricity_mm": -1.0})
+    Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.1})
+    assert len(params._DESIGN_MEMO) == 2
+    assert Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.3}) is not a       # pushed out, validated again
+    d1, d2 = a.to_dict(), a.to_dict()
+    assert d1 == d2 and d1 is not d2 and d1["crank_angles_deg"] is not d2["crank_angles_deg"]
+    d1["z_sun"] = 99
+    d1["crank_angles_deg"].append(1.0)
+    assert a.to_dict() == d2 and Design.from_dict(d2) == a
+    c1 = Case.from_dict({"design": {"eccentricity_mm": 1.3}, "errors": {"cam_phase": 1.0}})
+    c2 = Case.from_dict({"design": {"eccentricity_mm": 1.2}, "errors": {"cam_phase": 1.0}})
+    assert c1.key() == c1.key() != c2.key()
+    assert c1.key() == Case.from_dict(c1.to_dict()).key()
+
+
 def test_undercut_radius_matches_the_profile_maths() -> None:
     d = Design()
     prof = CycloidProfile(d.pin_circle_radius_mm, d.eccentricity_mm, d.z_pins, d.pin_radius_mm)
