@@ -368,9 +368,9 @@ class Design:
         if d is None:
             return cls().validate()
         memo_key = _memo_key(d)
-        got = _DESIGN_MEMO.get(memo_key) if memo_key is not None else None
+        got = design_memo.get(memo_key) if memo_key is not None else None
         if got is not None and type(got) is cls:
-            _DESIGN_MEMO.move_to_end(memo_key)
+            design_memo.move_to_end(memo_key)
             return got
         names = [f.name for f in fields(cls)]
         d = as_mapping(d, "design", f"an object with keys from {names}", DesignError)
@@ -398,16 +398,16 @@ class Design:
                 kw[f.name] = v
         design = cls(**kw).validate()
         if memo_key is not None:
-            _DESIGN_MEMO[memo_key] = design
-            if len(_DESIGN_MEMO) > DESIGN_MEMO_SIZE:
-                _DESIGN_MEMO.popitem(last=False)
+            design_memo[memo_key] = design
+            if len(design_memo) > DESIGN_MEMO_SIZE:
+                design_memo.popitem(last=False)
         return design
 
 
 #: validated designs by the JSON text of the object they were read from (:meth:`Design.from_dict`; a design is
 #: frozen, so one instance serves every case that gives the same object), at most this many kept
 DESIGN_MEMO_SIZE = 64
-_DESIGN_MEMO: "OrderedDict[str, Design]" = OrderedDict()
+design_memo: "OrderedDict[str, Design]" = OrderedDict()
 
 
 def _memo_key(d: Any) -> str | None:

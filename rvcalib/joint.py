@@ -648,7 +648,7 @@ class JointSelection(Selection):
         lib_order = {e.name: k for k, e in enumerate(getattr(self, "lib", None) or [])}
         big = len(lib_order)
         rank = [lib_order.get(m.name, big) for m in pool]
-        for f in _tie_order(fits, rank):
+        for f in tie_order(fits, rank):
             S = frozenset(f.members)
             if S == cur:
                 return None
@@ -904,7 +904,7 @@ class JointSelection(Selection):
         return True, msg
 
 
-def _tie_order(fits: list[SubsetFit], rank: list[int]):
+def tie_order(fits: list[SubsetFit], rank: list[int]):
     """The fits in the order of ``(round(bic / BIC_TIE), sorted library ranks of their members)``, stable (equal keys
     keep their order in ``fits``), made lazily: the BIC classes in ascending order (one stable argsort), each sorted by
     the ranks when it is reached (the caller stops at the first fit it accepts, mostly in the first few classes)."""

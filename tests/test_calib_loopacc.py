@@ -36,12 +36,12 @@ def test_twin_instances_tie_goes_to_library_order():
 
 
 def test_the_subsets_are_tried_in_the_order_of_their_bic_class_then_library_ranks():
-    """choose_subset walks the fits lazily (rvcalib.joint._tie_order): the same order as a full stable sort by
+    """choose_subset walks the fits lazily (rvcalib.joint.tie_order): the same order as a full stable sort by
     (round(bic / BIC_TIE), sorted library ranks of the members), on fits with ties, near-ties across a class
     boundary and empty subsets."""
     import random
 
-    from rvcalib.joint import BIC_TIE, _tie_order
+    from rvcalib.joint import BIC_TIE, tie_order
     from rvcalib.results import SubsetFit
 
     rng = random.Random(1)
@@ -53,7 +53,7 @@ def test_the_subsets_are_tried_in_the_order_of_their_bic_class_then_library_rank
             fits.append(SubsetFit(mem, (), len(mem), 1.0, b, 0.0, np.zeros(0)))
         rank = [rng.randint(0, 20) for _ in range(12)]
         full = sorted(fits, key=lambda f: (round(f.bic / BIC_TIE), tuple(sorted(rank[i] for i in f.members))))
-        assert [id(f) for f in _tie_order(fits, rank)] == [id(f) for f in full]
+        assert [id(f) for f in tie_order(fits, rank)] == [id(f) for f in full]
 
 
 @pytest.mark.parametrize("rss_p, dbic_p, rss_e, dbic_e, expect", [

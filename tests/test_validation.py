@@ -187,7 +187,7 @@ def test_a_design_read_once_is_taken_from_the_memo_and_a_refused_one_is_refused_
     time (the asdict is made once per design), and Case.key is the content hash either way."""
     from rvcad import params
 
-    monkeypatch.setattr(params, "_DESIGN_MEMO", type(params._DESIGN_MEMO)())
+    monkeypatch.setattr(params, "design_memo", type(params.design_memo)())
     monkeypatch.setattr(params, "DESIGN_MEMO_SIZE", 2)
     a = Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.3})
     assert Design.from_dict({"eccentricity_mm": 1.3, "z_sun": 12}) is a
@@ -197,7 +197,7 @@ def test_a_design_read_once_is_taken_from_the_memo_and_a_refused_one_is_refused_
         with pytest.raises(DesignError, match="design.eccentricity_mm"):
             Design.from_dict({"eccentricity_mm": -1.0})
     Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.1})
-    assert len(params._DESIGN_MEMO) == 2
+    assert len(params.design_memo) == 2
     assert Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.3}) is not a       # pushed out, validated again
     d1, d2 = a.to_dict(), a.to_dict()
     assert d1 == d2 and d1 is not d2 and d1["crank_angles_deg"] is not d2["crank_angles_deg"]
