@@ -45,6 +45,7 @@ refits; it would not use the full model's nonlinearity either.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 import itertools
 import math
 import time
@@ -904,7 +905,7 @@ class JointSelection(Selection):
         return True, msg
 
 
-def tie_order(fits: list[SubsetFit], rank: list[int]):
+def tie_order(fits: list[SubsetFit], rank: list[int]) -> Iterator[SubsetFit]:
     """The fits in the order of ``(round(bic / BIC_TIE), sorted library ranks of their members)``, stable (equal keys
     keep their order in ``fits``), made lazily: the BIC classes in ascending order (one stable argsort), each sorted by
     the ranks when it is reached (the caller stops at the first fit it accepts, mostly in the first few classes)."""
