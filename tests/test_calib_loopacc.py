@@ -35,6 +35,32 @@ def test_twin_instances_tie_goes_to_library_order():
         assert [pool[i].effect.name for i in choice.members] == ["cam_phase[crank=0,disc=1]"]
 
 
+def test_an_empirical_subset_is_judged_against_the_least_noise_estimate_of_the_residuals_at_hand():
+    """Realistic seed 6 at iteration 1 (stop 41): the declared model's residual (RMS 30 arcsec, orders 39/40/80
+    in it) gave a second-difference noise estimate of 3.5-4.2 arcsec where the noise is 0.2, so an empirical
+    subset at RMS 3.05 passed for one that explains the data to the noise and won on the BIC margin alone over a
+    physical subset that removed 99.9 % as much. The refitted subset's residual, with that structure gone, gives
+    an estimate near the noise: the joint step takes the least (JointSelection._subset_noise2), and the physical
+    subset goes first."""
+    rng = np.random.default_rng(6)
+    m, n = 333, 1332
+    th = 2.0 * np.pi * np.arange(n) / m
+    white = 0.2 * rng.normal(size=n)
+    r_full = white + 30.0 * np.sqrt(2.0) * (0.6 * np.sin(39 * th) + 0.6 * np.sin(40 * th + 1.0) + 0.5 * np.sin(80 * th))
+    r_sub = white + 3.0 * np.sqrt(2.0) * np.sin(th)                   # smooth leftover structure
+    sel = JointSelection.__new__(JointSelection)
+    sel.split = lambda v: [v[k * m:(k + 1) * m] for k in range(n // m)]
+    sel.full_residual = lambda pairs, terms: (r_sub, np.zeros(0))
+    pool = [PoolMember(Effect("cam_phase[crank=0,disc=1]", "cam_phase", "table4", "um", "m"), np.zeros((n, 1)), None,
+                       lambda c: np.asarray(c))]
+    got = ([np.array([-128.0])], float(r_sub @ r_sub), [0], [], None)
+    inflated, least = sel._noise2(r_full), sel._subset_noise2(pool, got)
+    assert inflated > 1.0 ** 2 and 0.18 ** 2 < least < 0.22 ** 2
+    args = (30.0 ** 2 * n, 3.239 ** 2 * n, -5908.3, 3.051 ** 2 * n, -6067.5, n)
+    assert not physical_goes_first(*args, inflated, False)            # the empirical subset won on the margin
+    assert physical_goes_first(*args, min(inflated, least), False)      # the physical one, 99.9 % of its gain
+
+
 def test_the_subsets_are_tried_in_the_order_of_their_bic_class_then_library_ranks():
     """choose_subset walks the fits lazily (rvcalib.joint.tie_order): the same order as a full stable sort by
     (round(bic / BIC_TIE), sorted library ranks of the members), on fits with ties, near-ties across a class
