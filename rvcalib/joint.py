@@ -869,12 +869,13 @@ class JointSelection(Selection):
             # (physical_goes_first)
             harmonic = any(pool[i].term is not None and not pool[i].in_model and pool[i].term.kind == "harmonic"
                            for i in okays[1][0].members)
-            # (a harmonic goes by physical_first whatever the noise: the refits' residuals are not asked for then)
+            figures = (self.rss_full, okays[0][1][1], okays[0][2], okays[1][1][1], okays[1][2])
             noise2 = self._noise2(r_full)
-            if not harmonic:
+            # the noise level matters only where the BIC margin alone takes the empirical subset and the share rule
+            # would not: only then are the refitted subsets' residuals asked for (the least estimate)
+            if not physical_goes_first(*figures, self.n, noise2, harmonic) and physical_first(*figures):
                 noise2 = min([noise2] + [self._subset_noise2(pool, t[1]) for t in okays])
-            if not physical_goes_first(self.rss_full, okays[0][1][1], okays[0][2], okays[1][1][1], okays[1][2],
-                                       self.n, noise2, harmonic):
+            if not physical_goes_first(*figures, self.n, noise2, harmonic):
                 pick = okays[1]
         self.log("joint refits: " + "; ".join(
             f"{'+'.join(pool[i].name for i in t[0].members if not pool[i].in_model)} RMS "
