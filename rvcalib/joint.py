@@ -182,8 +182,8 @@ def physical_goes_first(rss_model: float, rss_phys: float, dbic_phys: float, rss
     """The joint step's choice between a physical subset and one with a new empirical term (both confirmed):
     :func:`physical_first` while the empirical subset leaves an RMS above :data:`EMPIRICAL_LEAVES_NOISE` times
     the noise (``noise2``, arcsec^2 per sample, over ``n`` samples; where the noise level decides, the joint step
-    passes the least estimate of the present residual's and the refitted subsets', :meth:`JointSelection._subset_noise2`)
-    and always when the new term is a harmonic
+    passes the least estimate of the present residual's and the refitted subsets',
+    :meth:`JointSelection._subset_noise2`) and always when the new term is a harmonic
     (the greedy step's rule too: physical signatures span several orders, so only a constant, e.g. an encoder
     zero offset beside a compliance, may win on the BIC margin alone; seed 1 serial: an order-79 harmonic at
     1.15x the noise took the slot of a physical subset that removed 95 % of its part); otherwise the empirical
