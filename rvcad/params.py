@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 from collections import OrderedDict
 from dataclasses import asdict, dataclass, fields, replace
 from functools import cached_property
@@ -368,10 +369,12 @@ class Design:
         if d is None:
             return cls().validate()
         memo_key = _memo_key(d)
-        got = design_memo.get(memo_key) if memo_key is not None else None
-        if got is not None and type(got) is cls:
-            design_memo.move_to_end(memo_key)
-            return got
+        if memo_key is not None:
+            with _MEMO_LOCK:
+                got = design_memo.get(memo_key)
+                if got is not None and type(got) is cls:
+                    design_memo.move_to_end(memo_key)
+                    return got
         names = [f.name for f in fields(cls)]
         d = as_mapping(d, "design", f"an object with keys from {names}", DesignError)
         for k in d:
@@ -398,9 +401,10 @@ class Design:
                 kw[f.name] = v
         design = cls(**kw).validate()
         if memo_key is not None:
-            design_memo[memo_key] = design
-            if len(design_memo) > DESIGN_MEMO_SIZE:
-                design_memo.popitem(last=False)
+            with _MEMO_LOCK:
+                design_memo[memo_key] = design
+                while len(design_memo) > DESIGN_MEMO_SIZE:
+                    design_memo.popitem(last=False)
         return design
 
 
@@ -408,6 +412,7 @@ class Design:
 #: frozen, so one instance serves every case that gives the same object), at most this many kept
 DESIGN_MEMO_SIZE = 64
 design_memo: "OrderedDict[str, Design]" = OrderedDict()
+_MEMO_LOCK = threading.Lock()   # the memo is shared by threads (a threaded Dask worker, a thread pool)
 
 
 def _memo_key(d: Any) -> str | None:
