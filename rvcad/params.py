@@ -7,13 +7,12 @@ from __future__ import annotations
 
 import json
 import math
-import threading
-from collections import OrderedDict
 from dataclasses import asdict, dataclass, fields, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+from rvcad.memo import LRUMemo
 from rvcad.profile import MAX_MODIFICATION
 from rvcad.validation import DesignError, as_int, as_mapping, as_real, read_json_file, reject
 
@@ -369,12 +368,9 @@ class Design:
         if d is None:
             return cls().validate()
         memo_key = _memo_key(d)
-        if memo_key is not None:
-            with _MEMO_LOCK:
-                got = design_memo.get(memo_key)
-                if got is not None and type(got) is cls:
-                    design_memo.move_to_end(memo_key)
-                    return got
+        got = design_memo.get(memo_key) if memo_key is not None else None
+        if got is not None and type(got) is cls:
+            return got
         names = [f.name for f in fields(cls)]
         d = as_mapping(d, "design", f"an object with keys from {names}", DesignError)
         for k in d:
@@ -401,18 +397,14 @@ class Design:
                 kw[f.name] = v
         design = cls(**kw).validate()
         if memo_key is not None:
-            with _MEMO_LOCK:
-                design_memo[memo_key] = design
-                while len(design_memo) > DESIGN_MEMO_SIZE:
-                    design_memo.popitem(last=False)
+            design_memo.put(memo_key, design)
         return design
 
 
 #: validated designs by the JSON text of the object they were read from (:meth:`Design.from_dict`; a design is
 #: frozen, so one instance serves every case that gives the same object), at most this many kept
 DESIGN_MEMO_SIZE = 64
-design_memo: "OrderedDict[str, Design]" = OrderedDict()
-_MEMO_LOCK = threading.Lock()   # the memo is shared by threads (a threaded Dask worker, a thread pool)
+design_memo = LRUMemo(DESIGN_MEMO_SIZE)
 
 
 def _memo_key(d: Any) -> str | None:

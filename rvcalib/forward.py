@@ -38,14 +38,14 @@ from __future__ import annotations
 import copy
 import json
 import math
-import threading
-from collections import Counter, OrderedDict
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from rvcad.errors import Case
+from rvcad.memo import LRUMemo
 from rvdyn.runner import Runner
 
 from rvcalib.orders import period_deg
@@ -121,8 +121,7 @@ def grid_angles_deg(steps: int, period: float) -> np.ndarray:
 
 #: validated cases by their JSON text (:func:`validated_case`), at most this many kept
 CASE_MEMO_SIZE = 4096
-case_memo: "OrderedDict[str, Case]" = OrderedDict()
-_CASE_MEMO_LOCK = threading.Lock()   # the memo is shared by threads
+case_memo = LRUMemo(CASE_MEMO_SIZE)
 
 
 def validated_case(case_dict: dict[str, Any]) -> Case:
@@ -130,19 +129,14 @@ def validated_case(case_dict: dict[str, Any]) -> Case:
     the same case many times (its period, its batch, the cache's key): a case validated before is taken from a
     memo keyed by its JSON text (least recently used out first; a :class:`~rvcad.errors.Case` is frozen)."""
     key = json.dumps(case_dict, sort_keys=True, default=str)
-    with _CASE_MEMO_LOCK:
-        got = case_memo.get(key)
-        if got is not None:
-            case_memo.move_to_end(key)
-            return got
+    got = case_memo.get(key)
+    if got is not None:
+        return got
     try:
         got = Case.from_dict(case_dict)
     except ValueError as exc:
         raise ModelEvaluationError(str(exc)) from None
-    with _CASE_MEMO_LOCK:
-        case_memo[key] = got
-        while len(case_memo) > CASE_MEMO_SIZE:
-            case_memo.popitem(last=False)
+    case_memo.put(key, got)
     return got
 
 

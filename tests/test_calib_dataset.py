@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from rvcad.memo import LRUMemo
 from rvcalib.cli import main
 from rvcad.params import Design
 from rvcalib.dataset import noise_estimate, read_dataset
@@ -229,8 +230,7 @@ def test_a_case_validated_once_is_taken_from_the_memo_and_a_refused_one_is_refus
     field on every call, and the memo holds at most CASE_MEMO_SIZE cases."""
     from rvcalib import forward
 
-    monkeypatch.setattr(forward, "case_memo", type(forward.case_memo)())
-    monkeypatch.setattr(forward, "CASE_MEMO_SIZE", 3)
+    monkeypatch.setattr(forward, "case_memo", LRUMemo(3))
     a = forward.validated_case({"errors": {"sun_eccentricity": 1.0}, "load_Nm": 10.0})
     assert forward.validated_case({"load_Nm": 10.0, "errors": {"sun_eccentricity": 1.0}}) is a
     b = forward.validated_case({"errors": {"sun_eccentricity": 2.0}, "load_Nm": 10.0})

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from rvcad.memo import LRUMemo
 from rvcad.errors import Case, load_case
 from rvcad.params import FIELD_RANGES, Design, load_design
 from rvcad.profile import CycloidProfile
@@ -187,8 +188,7 @@ def test_a_design_read_once_is_taken_from_the_memo_and_a_refused_one_is_refused_
     time (the asdict is made once per design), and Case.key is the content hash either way."""
     from rvcad import params
 
-    monkeypatch.setattr(params, "design_memo", type(params.design_memo)())
-    monkeypatch.setattr(params, "DESIGN_MEMO_SIZE", 2)
+    monkeypatch.setattr(params, "design_memo", LRUMemo(2))
     a = Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.3})
     assert Design.from_dict({"eccentricity_mm": 1.3, "z_sun": 12}) is a
     b = Design.from_dict({"z_sun": 12, "eccentricity_mm": 1.2})
@@ -208,6 +208,32 @@ def test_a_design_read_once_is_taken_from_the_memo_and_a_refused_one_is_refused_
     c2 = Case.from_dict({"design": {"eccentricity_mm": 1.2}, "errors": {"cam_phase": 1.0}})
     assert c1.key() == c1.key() != c2.key()
     assert c1.key() == Case.from_dict(c1.to_dict()).key()
+
+
+def test_the_memo_is_shared_by_threads_without_error(monkeypatch) -> None:
+    """rvcad.memo.LRUMemo holds a lock: 8 threads reading 7 designs through a memo of 3 (evicting all the time) get
+    each its own design and no error."""
+    import threading
+
+    from rvcad import params
+
+    monkeypatch.setattr(params, "design_memo", LRUMemo(3))
+    errors: list[str] = []
+
+    def work(k: int) -> None:
+        try:
+            for i in range(200):
+                e = 1.0 + 0.01 * ((i + k) % 7)
+                assert Design.from_dict({"eccentricity_mm": e}).eccentricity_mm == e
+        except Exception as exc:  # noqa: BLE001 - collected and asserted below
+            errors.append(repr(exc))
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == [] and len(params.design_memo) == 3
 
 
 def test_undercut_radius_matches_the_profile_maths() -> None:
