@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rvcad import validation as v
+from rvcalib.causes import datasheet_of
 from rvcalib.dataset import read_dataset
 
 
@@ -123,11 +124,14 @@ def summary(res, paths: dict) -> str:
                 alt += f"; declared {e.declared_value:.5g}, implied total {e.implied_total:.5g} {e.unit}"
             bnd = f" (at the {e.at_bound} bound of its range: a one-sided limit)" if e.at_bound else ""
             lines.append(f"  {e.name} = {e.value:.5g} {e.unit}{ang}, 95 % [{e.ci_low:.5g}, {e.ci_high:.5g}]{bnd}{alt}")
+            lines += [f"    the same TE as {q['parameter']} = {q['value']:+.5g} {q['unit']} [{q['ci_low']:.5g}, "
+                      f"{q['ci_high']:.5g}]" for q in e.equivalents]
     if res.unexplained:
         lines.append("unexplained (outside the library):")
         for u in res.unexplained:
             ph = f", phase {u.phase_deg:.1f} deg" if u.phase_deg is not None else ""
             lines.append(f"  {u.label}: {abs(u.amplitude_arcsec):.4g} arcsec{ph}")
+            lines += [f"    or {q['parameter']} = {q['value']:+.5g} {q['unit']}" for q in u.equivalents]
     for g in res.groups:
         mem = ", ".join(f"{m['name']} {m['value']:.4g} {m['unit']}" for m in g["members"][:4])
         lines.append(f"group ({g['kind']}): {mem}")
@@ -135,6 +139,16 @@ def summary(res, paths: dict) -> str:
         if rec.get("run"):
             lines.append(f"recommended run to split {', '.join(rec['members'][:3])}: load {rec['run']['load_Nm']:g} N m, "
                          f"direction {rec['run']['direction']:+d}")
+    ds = res.datasheet
+    if ds.get("calibrated"):
+        m, c = ds["model"], ds["calibrated"]
+        ci = ds.get("rigidity_ci")
+        lines.append(f"datasheet at {c['rated_torque_Nm']:g} N m rated (rvdyn stiffness): torsional rigidity "
+                     f"{m['torsional_rigidity_Nm_per_arcmin']:.4g} (declared) -> {c['torsional_rigidity_Nm_per_arcmin']:.4g}"
+                     + (f" [{ci[0]:.4g}, {ci[1]:.4g}]" if ci else "") + " N m/arcmin calibrated; lost motion "
+                     f"{m['lost_motion_arcmin']:.3g} -> {c['lost_motion_arcmin']:.3g} arcmin")
+    elif ds.get("error"):
+        lines.append(f"datasheet: not computed ({ds['error']})")
     if res.stopped_by and not res.stopped_by.startswith("nothing"):
         lines.append(f"stopped: {res.stopped_by}")
     lines.append("runs (RMS before -> after, arcsec):")
@@ -173,6 +187,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             if runner is not None:
                 forward.use_runner(prev)
                 runner.close()
+        try:
+            res.datasheet = datasheet_of(res, forward.forward_runner().law)
+        except (ValueError, ArithmeticError) as exc:   # a design the sweep cannot take: said, not fatal
+            res.datasheet = {"error": v.one_line(exc)}
         paths = write_report(res, args.out)
     except ValueError as exc:
         print(f"rv-calibrate: error: {v.one_line(exc)}", file=sys.stderr)

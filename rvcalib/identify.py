@@ -58,6 +58,7 @@ from rvcalib.lsq import bic, ftest, projector
 from rvcalib.residual import Diagnostics, diagnose, structured_noise
 from rvcalib.results import (Active, CalibrationResult, Candidate, EmpiricalTerm, FittedEffect, HarmonicCandidate,
                              Unexplained, Validated)
+from rvcalib.causes import attach_equivalents, reducer_case
 from rvcalib.groups import Groups
 
 __all__ = ["Calibrator", "calibrate", "CalibrationResult", "FittedEffect", "Unexplained", "EmpiricalTerm",
@@ -502,6 +503,7 @@ class Calibrator(Groups):
             itn, frac = emp_iter.get(t, (0, float("nan")))
             unexplained.append(Unexplained(t.label, t.kind, t.order, amp, phase, itn, frac, t.note, t.factor, t.unit,
                                            self._per_run_size(t, r_phys), self._unexplained_candidates(t)))
+        attach_equivalents(fitted, unexplained, self.ds.design)
         after = diagnose(self.ds, r_all)
         after_phys = diagnose(self.ds, r_phys)
         noise = structured_noise(self.ds, r_all)
@@ -535,10 +537,13 @@ class Calibrator(Groups):
             verdict += " Stopped early: " + self.stopped_by + "."
         groups = final_groups + self.identifiability_groups(fitted, unexplained)
         recommended = self.recommend_runs(groups)
+        physical = [(e, p) for e, p in pairs if e.family != "measurement"]
         return CalibrationResult(self.ds, fitted, unexplained, before, after, after_phys, r0, r_all, iterations,
                                  status, verdict, noise, self.steps, time.perf_counter() - t_start,
                                  list(self.ds.notes) + self.notes, dict(cache_stats(), fits=self.fit_stats),
-                                 stopped_by=self.stopped_by, groups=groups, recommended_runs=recommended)
+                                 stopped_by=self.stopped_by, groups=groups, recommended_runs=recommended,
+                                 declared_case=reducer_case(self._case(0, [])),
+                                 calibrated_case=reducer_case(self._case(0, physical)))
 
 
 def calibrate(dataset: MeasuredDataset, steps: int | None = None, alpha: float = 0.01, max_terms: int = 6,

@@ -170,6 +170,10 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
         L.append("")
         for e in result.effects:
             L.append(f"- `{e.name}`: {e.meaning}")
+            for q in e.equivalents:
+                L.append(f"  - the same TE as `{q['parameter']}` = {q['value']:+.5g} {q['unit']} [{q['ci_low']:.5g}, "
+                         f"{q['ci_high']:.5g}] (design value implied: {q['implied_design_value']:.5g} {q['unit']}): "
+                         f"{q['meaning']}; the data cannot tell the two apart")
         L.append("")
         L.append("Values of two-component effects are magnitudes; their direction is the angle. The interval is "
                  "the Jacobian interval of the joint nonlinear fit (t quantile), widened for lag-1 residual "
@@ -185,8 +189,10 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
         L.append("| term | order | amplitude (arcsec) | phase (deg) | explained | what it can be |")
         L.append("|---|---|---|---|---|---|")
         for u in result.unexplained:
+            what = (u.note or "-") + "".join(f"; or `{q['parameter']}` = {q['value']:+.5g} {q['unit']} ({q['meaning']})"
+                                             for q in u.equivalents)
             L.append(f"| {u.label} | {u.order} | {abs(u.amplitude_arcsec):.4g} | {_fmt(u.phase_deg)} | "
-                     f"{u.explained_fraction:.3f} | {u.note or '-'} |")
+                     f"{u.explained_fraction:.3f} | {what} |")
         L.append("")
         L.append("These are labelled empirical terms (``A cos(k theta_out + phase)``, common to all runs): no physical "
                  "or measurement candidate explained this part of the residual better than a pure harmonic, so it "
@@ -198,6 +204,28 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
         L.append("The final residual is not white: dominant orders per run: " + "; ".join(
             f"run {r.run}: " + ", ".join(f"{k} ({a:.3g})" for k, a in r.dominant) for r in result.after.runs))
     L.append("")
+    dsh = result.datasheet
+    if dsh.get("calibrated") or dsh.get("error"):
+        L.append("## Datasheet as calibrated")
+        L.append("")
+        if dsh.get("error"):
+            L.append(f"Not computed: {dsh['error']}.")
+        else:
+            m, c = dsh["model"], dsh["calibrated"]
+            ci = dsh.get("rigidity_ci")
+            L.append(f"`rvdyn stiffness` of the reducer as declared and as calibrated (`calibrated_case` in the JSON: "
+                     f"every physical effect found), rated torque {c['rated_torque_Nm']:g} N m:")
+            L.append("")
+            L.append("| figure | declared | calibrated |")
+            L.append("|---|---|---|")
+            for k, lab in (("torsional_rigidity_Nm_per_arcmin", "torsional rigidity (N m/arcmin)"),
+                           ("lost_motion_arcmin", "lost motion (arcmin)"), ("backlash_arcmin", "backlash (arcmin)"),
+                           ("hysteresis_loss_arcmin", "hysteresis loss (arcmin)")):
+                extra = f" [{ci[0]:.4g}, {ci[1]:.4g}]" if ci and k.startswith("torsional") else ""
+                L.append(f"| {lab} | {m[k]:.4g} | {c[k]:.4g}{extra} |")
+            L.append("")
+            L.append(f"{dsh['note']}.")
+        L.append("")
     L.append("## Identifiability groups and recommended runs")
     L.append("")
     if result.stopped_by and not result.stopped_by.startswith("nothing"):

@@ -303,6 +303,10 @@ class FittedEffect:
         does not depend on it (a pin out of contact at any larger size): the interval then runs from the
         bound to the end of the profiled confidence region, a one-sided limit (``value`` is the bound, not a
         measured size). None otherwise.
+    equivalents : list of dict
+        Physical parameters that give the same TE, which the data cannot tell from this effect
+        (:func:`rvcalib.causes.effect_equivalents`: a profile modification for the all-pins radius and pin circle
+        diameter): ``{parameter, value, ci_low, ci_high, unit, implied_design_value, meaning}``.
     """
 
     name: str
@@ -326,6 +330,7 @@ class FittedEffect:
     implied_total: float | None = None
     selection: dict = field(default_factory=dict)
     at_bound: str | None = None
+    equivalents: list[dict] = field(default_factory=list)
 
     def size_text(self) -> str:
         """The size for a verdict: ``name = value unit``, or the one-sided limit of a size at a bound of its range
@@ -348,7 +353,7 @@ class FittedEffect:
              "params": self.params, "iteration": self.iteration, "explained_fraction": self.explained_fraction,
              "F": self.F, "p_value": self.p_value, "delta_bic": self.delta_bic, "alternatives": self.alternatives,
              "declared_value": self.declared_value, "implied_total": self.implied_total,
-             "selection": self.selection, "at_bound": self.at_bound}
+             "selection": self.selection, "at_bound": self.at_bound, "equivalents": self.equivalents}
         if self.angle_deg is not None:
             d["angle_deg"] = self.angle_deg
         return d
@@ -370,16 +375,19 @@ class Unexplained:
     unit: str = "arcsec"
     per_run: list[dict] = field(default_factory=list)
     candidates: list[dict] = field(default_factory=list)
+    equivalents: list[dict] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         """JSON-ready form. ``amplitude_arcsec`` is the coefficient (per N m for a load-proportional
         term, see ``unit``); ``per_run`` the size of the same order fitted to each run's residual after
         the physical effects (its load and direction dependence); ``candidates`` the library effects
-        that could produce it, each with the size it would need and the RMS it would leave."""
+        that could produce it, each with the size it would need and the RMS it would leave; ``equivalents`` the
+        design parameters that give the same TE (:func:`rvcalib.causes.offset_equivalents`: a constant offset as a
+        profile rotation)."""
         return {"label": self.label, "kind": self.kind, "order": self.order, "factor": self.factor,
                 "unit": self.unit, "amplitude_arcsec": self.amplitude_arcsec, "phase_deg": self.phase_deg,
                 "iteration": self.iteration, "explained_fraction": self.explained_fraction, "note": self.note,
-                "per_run": self.per_run, "candidates": self.candidates}
+                "per_run": self.per_run, "candidates": self.candidates, "equivalents": self.equivalents}
 
 
 @dataclass
@@ -420,6 +428,14 @@ class CalibrationResult:
     recommended_runs : list of dict
         Extra runs that would split each group, chosen by a D-optimal criterion on the members'
         sensitivities.
+    declared_case, calibrated_case : dict
+        The reducer as the dataset declares it (its design and the first run's declared errors) and as calibrated
+        (plus every physical effect found: Table 4 errors and model options), as case JSON without load and
+        direction (:func:`rvcalib.causes.reducer_case`); measurement effects are not the reducer's.
+    datasheet : dict
+        The datasheet figures of the declared and of the calibrated reducer
+        (:func:`rvcalib.causes.calibrated_datasheet`; the CLI fills it, ``calibrate`` leaves it empty: it costs
+        two stiffness sweeps).
     """
 
     dataset: MeasuredDataset
@@ -441,6 +457,9 @@ class CalibrationResult:
     stopped_by: str = ""
     groups: list[dict] = field(default_factory=list)
     recommended_runs: list[dict] = field(default_factory=list)
+    declared_case: dict = field(default_factory=dict)
+    calibrated_case: dict = field(default_factory=dict)
+    datasheet: dict = field(default_factory=dict)
 
     @property
     def rms_before(self) -> float:
@@ -475,4 +494,5 @@ class CalibrationResult:
                 "dependence_before": self.before.dependence, "dependence_after": self.after.dependence,
                 "stopped_by": self.stopped_by, "groups": self.groups, "recommended_runs": self.recommended_runs,
                 "runs": runs, "iterations": self.iterations, "notes": self.notes, "steps": self.steps,
-                "seconds": self.seconds, "solver": self.solver_stats}
+                "seconds": self.seconds, "solver": self.solver_stats, "declared_case": self.declared_case,
+                "calibrated_case": self.calibrated_case, "datasheet": self.datasheet}

@@ -35,6 +35,7 @@ from rvdyn.options import MODEL_OPTIONS
 
 from rvcad.params import Design
 
+from rvcalib.causes import EQUIVALENTS
 from rvcalib.effects import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM
 from rvcalib.forward import merge_case, te_at
 from rvcalib.orders import check_periodic, period_deg
@@ -83,6 +84,11 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
         if key == "pin_circle_ovality_um":
             d["angle_deg"] = float(model.get("pin_circle_ovality_angle_deg", 0.0))
         out.append(d)
+    for key, v in (hidden.get("design") or {}).items():   # a design the dataset does not declare
+        for q in EQUIVALENTS:
+            if q.parameter == key:
+                out.append({"name": q.effect, "key": q.effect, "value": float(v) / q.factor,
+                            "unit": ERROR_TYPES[q.effect].unit, "cause": f"design.{key}", "cause_value": float(v)})
     meas = hidden.get("measurement") or {}
     for which in ("output", "input"):
         eps = float(meas.get(f"{which}_encoder_eccentricity_um", 0.0))
@@ -115,7 +121,10 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         The truth the dataset does not declare: ``"errors"`` (case JSON errors, any instance),
         ``"model"`` (rvdyn model options), ``"measurement"`` (``output_encoder_eccentricity_um``,
         ``output_encoder_phase_deg``, ``input_encoder_eccentricity_um``, ``input_encoder_phase_deg``,
-        ``output_encoder_scale_ppm``: the output reading is ``theta_out (1 + s)``)
+        ``output_encoder_scale_ppm``: the output reading is ``theta_out (1 + s)``),
+        ``"design"`` (design fields of the reducer as built that the dataset's design does not hold, e.g. an
+        undeclared profile modification ``{"profile_equidistant_mm": 0.004}``; expected as the library effect that
+        gives the same TE, :mod:`rvcalib.causes`)
         and ``"harmonics"`` (list of ``{"order", "amplitude_arcsec", "phase_deg", "per_Nm"}``, outside
         the library; with ``"per_Nm": true`` the amplitude is per N m of the run's load).
     noise_arcsec : float
@@ -153,8 +162,8 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     """
     hidden = dict(hidden or {})
     for k in hidden:
-        if k not in ("errors", "model", "measurement", "harmonics"):
-            raise ValueError(f"hidden key {k!r} is unknown; allowed: errors, model, measurement, harmonics")
+        if k not in ("errors", "model", "measurement", "harmonics", "design"):
+            raise ValueError(f"hidden key {k!r} is unknown; allowed: errors, model, measurement, harmonics, design")
     meas = dict(hidden.get("measurement") or {})
     for k in meas:
         if k not in MEASUREMENT_KEYS:
@@ -168,6 +177,7 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     out.mkdir(parents=True, exist_ok=True)
     des = Design.from_dict(design)
     check_periodic(des)
+    built = Design.from_dict(dict(des.to_dict(), **dict(hidden.get("design") or {})))   # the reducer as built
     ratio = float(des.ratio)
     N = int(samples_per_rev)
     if N < 8:
@@ -186,8 +196,8 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         load = float(r.get("load_Nm", 20.0))
         decl = dict(r.get("declared") or {})
         base: dict[str, Any] = {"errors": dict(decl), "load_Nm": load, "direction": d}
-        if design:
-            base["design"] = des.to_dict()
+        if design or hidden.get("design"):
+            base["design"] = built.to_dict()
         if "temperature_C" in r:
             base["model"] = {"temperature_C": float(r["temperature_C"])}
         errs = []

@@ -42,7 +42,8 @@ class Solution:
         ``cam_bearings``, ``journal_bearings``, ``crank_bending``, ``crank_torsion`` (the supports inside
         the equilibrium, rvdyn.support_eq), ``pin_seats`` (the pins in their housing grooves, in series with
         the pin-disc contacts inside the equilibrium) and ``carrier`` (the end plate turning against the
-        output flange through the pillars, inside the equilibrium); empty in the rigid limit and
+        output flange through the pillars, inside the equilibrium), ``torsional_compliance`` (the lumped
+        ``model.torsional_compliance_arcsec_per_Nm`` times the torque, when it is set); empty in the rigid limit and
         with the spring model of floating discs (impact law or rigid supports with a cam-bearing clearance),
         and when the solver's ``want_parts`` is False (:func:`rvdyn.te.run_te`: the TE alone).
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
@@ -145,6 +146,8 @@ class ResultsMixin:
                     parts.update(self._chain_parts(th, x, dx, law))
                     cam_F = self.chain_cam_forces(th, x, law)
                     self._raw_last = None
+                if self.compliance_rad_per_Nmm > 0.0:   # the lumped compliance (model option) is a part too
+                    parts["torsional_compliance"] = np.full(th.size, T * self.compliance_rad_per_Nmm)
         nan = law.rigid
         pressure = np.full(th.size, np.nan)
         if not nan:

@@ -40,6 +40,13 @@ def test_ratio81_dataset_names_the_pin_circle_error(ratio81, capsys):
     assert d["ratio"] == pytest.approx(81.0) and d["reducer"]["z_sun"] == 18
     assert [e["name"] for e in d["effects"]] == ["pin_circle_diameter"]
     assert d["effects"][0]["value"] == pytest.approx(8.0, rel=0.10)
+    # its physical twin on this design: the disc's shift modification, -v/2000 mm (rvcalib.causes)
+    (q,) = d["effects"][0]["equivalents"]
+    assert q["parameter"] == "design.profile_shift_mm" and q["value"] == pytest.approx(-d["effects"][0]["value"] / 2000)
+    # the datasheet of the ratio-81 reducer as declared and as calibrated (the larger pin circle opens a play)
+    dsh = d["datasheet"]
+    assert dsh["calibrated"]["backlash_arcmin"] > dsh["model"]["backlash_arcmin"] + 0.1
+    assert d["calibrated_case"]["design"]["z_sun"] == 18 and d["calibrated_case"]["errors"]["pin_circle_diameter"]
     assert d["unexplained"] == []
     assert d["rms_before_arcsec"] > 5 * d["rms_after_arcsec"]
     assert d["rms_after_arcsec"] == pytest.approx(ans["noise_te_arcsec"], rel=0.2)

@@ -153,6 +153,11 @@ def test_encoder_zero_offset_is_not_disguised_as_physics(workdir):
     assert abs(res.effects[0].value - 0.3) <= 0.03
     assert len(res.unexplained) == 1 and res.unexplained[0].kind == "offset"
     assert abs(res.unexplained[0].amplitude_arcsec - 30.0) < 0.5 and "encoders" in res.unexplained[0].note
+    # one of its causes the TE cannot tell from the encoders' zero: both discs' profiles turned by
+    # -30 (Zc + 1 + Z1/Z2)/(3600 Zc) deg = -0.00862 deg (rvcalib.causes)
+    (q,) = res.unexplained[0].equivalents
+    assert q["parameter"] == "design.profile_rotation_deg"
+    assert q["value"] == pytest.approx(-res.unexplained[0].amplitude_arcsec * (40 + 1 / 3) / (3600 * 39), rel=1e-12)
     assert res.rms_before / res.rms_after >= 5.0
     assert abs(res.rms_after / ans["noise_te_arcsec"] - 1.0) <= 0.2
 

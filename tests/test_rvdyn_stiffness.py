@@ -27,6 +27,8 @@ def sweeps():
                                                        "bearing_friction_coefficient": 0.005}}), law=law, points=21),
         "clearance": hysteresis(Case.from_dict({"errors": {"pin_radius": -5.0}, "model": no_fric}), law=law,
                                 points=21),
+        "compliance": hysteresis(Case.from_dict({"model": dict(no_fric, torsional_compliance_arcsec_per_Nm=0.25)}),
+                                 law=law, points=21),
     }
 
 
@@ -47,6 +49,20 @@ def test_figures_and_budget_are_the_curve(sweeps) -> None:
     b = 0.97 * 167
     expect = 0.5 * (b / (th[167.0] - th[0.03 * 167]) + b / (th[-0.03 * 167] - th[-167.0]))
     assert g.figures["torsional_rigidity_Nm_per_arcmin"] == pytest.approx(expect, rel=1e-9)
+
+
+def test_a_lumped_compliance_is_a_budget_part_and_adds_in_series_to_the_secant(sweeps) -> None:
+    """``model.torsional_compliance_arcsec_per_Nm`` C: its wind-up C T_rated is a part of the budget (the parts
+    still add up to the wind-up), and without friction the b/a secant meets the series law
+    ``1/k = 1/k_0 + C/60`` exactly (C adds C b to the span a); rvcalib.causes reads a compliance found so."""
+    c, f0 = sweeps["compliance"].figures, sweeps["frictionless"].figures
+    assert c["budget"]["torsional_compliance"] == pytest.approx(0.25 * DEFAULT_RATED_NM, rel=1e-12)
+    assert "torsional_compliance" not in f0["budget"]
+    el = sweeps["compliance"].elastic
+    at_rated = el.loc[np.isclose(el["torque_Nm"], DEFAULT_RATED_NM), "torsion_arcmin"].to_numpy()[0] * 60
+    assert c["budget_total_arcsec"] == pytest.approx(at_rated, rel=1e-4)
+    k0 = f0["torsional_rigidity_Nm_per_arcmin"]
+    assert c["torsional_rigidity_Nm_per_arcmin"] == pytest.approx(1.0 / (1.0 / k0 + 0.25 / 60.0), rel=1e-9)
 
 
 def test_no_friction_no_loop_and_lost_motion_is_the_3_percent_span(sweeps) -> None:
