@@ -39,7 +39,7 @@ from rvdyn.runner import Runner  # noqa: E402
 
 #: modules whose methods are loop stages (the innermost on the stack names the stage)
 STAGE_MODULES = ("rvcalib/screening.py", "rvcalib/fitting.py", "rvcalib/selection.py", "rvcalib/joint.py",
-                 "rvcalib/groups.py", "rvcalib/identify.py", "rvcalib/replace.py")
+                 "rvcalib/swaps.py", "rvcalib/groups.py", "rvcalib/identify.py", "rvcalib/replace.py")
 
 
 def stage_of_stack() -> str:

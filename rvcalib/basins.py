@@ -37,10 +37,10 @@ import math
 import numpy as np
 
 from rvcalib.forward import ModelEvaluationError
-from rvcalib.joint import JOINT_BIC_MARGIN
 from rvcalib.pairs import CHI2_95, PairCheck
 from rvcalib.replace import LOOKALIKE_PAIR_CORRELATION
 from rvcalib.results import FittedEffect
+from rvcalib.subsets import JOINT_BIC_MARGIN
 
 
 def collinear_sets(parts: list[np.ndarray | None], limit: float = LOOKALIKE_PAIR_CORRELATION) -> list[list[int]]:

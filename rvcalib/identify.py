@@ -326,7 +326,7 @@ class Calibrator(Groups):
             r_full = self.refresh_state()
             entered = {a.effect.name for a in self.active} - names_before
             if self.joint and entered and not self.over_budget():
-                # the instance of a family (which pin) is chosen by the refit too (rvcalib.joint.sibling_refit)
+                # the instance of a family (which pin) is chosen by the refit too (rvcalib.swaps.SwapTrials.sibling_refit)
                 rc_new = np.concatenate(self.coarse_residual())
                 swapped = self.sibling_refit(entered, rc_new)
                 if swapped:

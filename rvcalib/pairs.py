@@ -17,9 +17,9 @@ from scipy import stats
 
 from rvcalib.effects import Effect, param_scales
 from rvcalib.forward import ModelEvaluationError
-from rvcalib.joint import JOINT_BIC_MARGIN
 from rvcalib.replace import ReplacementRefit
 from rvcalib.results import FittedEffect
+from rvcalib.subsets import JOINT_BIC_MARGIN
 
 #: Joint-fit correlation above which two effects are reported as one group.
 CORRELATION_LIMIT = 0.95

@@ -64,10 +64,11 @@ import numpy as np
 from rvcalib.dropswap import DropSwap
 from rvcalib.effects import param_scales
 from rvcalib.forward import ModelEvaluationError
-from rvcalib.joint import JOINT_BIC_MARGIN, SUBSET_ROWS_PER_REV
 from rvcalib.lsq import bic, bic_backward, ftest, projector
 from rvcalib.residual import structured_noise
 from rvcalib.results import Active
+from rvcalib.subsets import JOINT_BIC_MARGIN
+from rvcalib.swaps import SUBSET_ROWS_PER_REV
 
 #: The pin-wise error types whose every pin is solved at the state. A pin's radius and its radial position
 #: (``pin_circle_diameter[pin=k]``, twice the radial shift) nearly coincide on the data (a radius smaller by d
@@ -83,7 +84,7 @@ PIN_SCAN_STEP = 0.5
 #: the scan ranks, it does not decide (the refits are solved at every reading), and the instances' columns vary
 #: on the scale of a pin pitch. The cost of the scan falls as 1/k (k = 3 on the 5-run benchmark's 360 readings per
 #: revolution and on the realistic draws' 333). The swap trials' first refits use the same subset
-#: (:data:`rvcalib.joint.SUBSET_ROWS_PER_REV`).
+#: (:data:`rvcalib.swaps.SUBSET_ROWS_PER_REV`).
 PIN_SCAN_ROWS_PER_REV = SUBSET_ROWS_PER_REV
 
 

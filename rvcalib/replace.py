@@ -13,10 +13,11 @@ import numpy as np
 
 from rvcalib.effects import Effect
 from rvcalib.forward import ModelEvaluationError
-from rvcalib.joint import JOINT_BIC_MARGIN, JointSelection
+from rvcalib.joint import JointSelection
 from rvcalib.lsq import bic, ftest, projector
 from rvcalib.results import Active, Candidate
 from rvcalib.selection import joint_linear_fit, linear_removal_costs, member_target
+from rvcalib.subsets import JOINT_BIC_MARGIN
 
 #: Members refitted through rvdyn with another family's candidate in their place before the loop stops
 #: at the term limit (see :meth:`ReplacementRefit.replacement_refit`): the members whose best replacement

@@ -16,7 +16,7 @@ import pytest
 
 from rvcalib.dropswap import DROP_SWAP_MEMBERS, DropSwap
 from rvcalib.effects import Effect
-from rvcalib.joint import JOINT_BIC_MARGIN
+from rvcalib.subsets import JOINT_BIC_MARGIN
 from rvcalib.lsq import bic
 from rvcalib.results import Active, Candidate, PoolMember
 

@@ -27,7 +27,7 @@ import pytest
 from rvcalib.dataset import read_dataset
 from rvcalib.effects import Library, build_library
 from rvcalib.identify import Calibrator
-from rvcalib.joint import aic, model_weights
+from rvcalib.subsets import aic, model_weights
 from rvcalib.lsq import bic
 from rvcalib.simulate import simulate_dataset
 

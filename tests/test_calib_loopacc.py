@@ -8,9 +8,10 @@ import pytest
 
 from rvcalib.effects import Effect
 from rvcalib.groups import Groups
-from rvcalib.joint import (EMPIRICAL_BIC_MARGIN, EMPIRICAL_LEAVES_NOISE, PHYSICAL_SHARE, JointSelection,
-                           physical_first, physical_goes_first)
+from rvcalib.joint import JointSelection
 from rvcalib.results import Active, FittedEffect, PoolMember
+from rvcalib.subsets import (EMPIRICAL_BIC_MARGIN, EMPIRICAL_LEAVES_NOISE, PHYSICAL_SHARE, physical_first,
+                             physical_goes_first)
 
 
 def test_twin_instances_tie_goes_to_library_order():
@@ -67,7 +68,7 @@ def test_the_subsets_are_tried_in_the_order_of_their_bic_class_then_library_rank
     boundary and empty subsets."""
     import random
 
-    from rvcalib.joint import BIC_TIE, tie_order
+    from rvcalib.subsets import BIC_TIE, tie_order
     from rvcalib.results import SubsetFit
 
     rng = random.Random(1)

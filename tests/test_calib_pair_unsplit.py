@@ -347,7 +347,7 @@ def test_a_look_alike_fit_as_good_by_the_bic_is_averaged_with_the_state():
     lowers the BIC by less than the margin, so it is not added; x's size with z beside it (near its truth, 1) lies
     outside x's interval alone. x is named at the mean of the two fits weighted by exp(-dBIC/2), its interval
     covering both, and the fit is a group of kind model_average with both sizes and z's."""
-    from rvcalib.joint import JOINT_BIC_MARGIN
+    from rvcalib.subsets import JOINT_BIC_MARGIN
     from rvcalib.lsq import bic
 
     loop = _tie_case(0.045)

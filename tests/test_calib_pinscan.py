@@ -138,7 +138,7 @@ def test_the_swap_with_the_missing_error_types_is_adopted_by_the_bic(monkeypatch
     measurement ones are not added), the elimination keeping A, P and C, the refit lowering the BIC."""
     import rvcalib.pinscan as ps
     from rvcalib.effects import Effect
-    from rvcalib.joint import JOINT_BIC_MARGIN
+    from rvcalib.subsets import JOINT_BIC_MARGIN
     from rvcalib.lsq import bic
     from rvcalib.results import Active, Candidate, EmpiricalTerm
 

@@ -13,7 +13,8 @@ import math
 import numpy as np
 
 from rvcalib.effects import Effect
-from rvcalib.joint import JOINT_BIC_MARGIN, REPEAT_HOPELESS, SUBSET_HOPELESS
+from rvcalib.subsets import JOINT_BIC_MARGIN
+from rvcalib.swaps import REPEAT_HOPELESS, SUBSET_HOPELESS
 from rvcalib.lsq import bic
 from rvcalib.replace import TWIN_REFITS, ReplacementRefit
 from rvcalib.results import Active, PoolMember
