@@ -183,14 +183,21 @@ def calibrated_datasheet(declared: dict[str, Any], calibrated: dict[str, Any],
                     "compliance found is the sum of what every part in series lacks (the TE cannot say which part)"}
 
 
-def attach_equivalents(fitted: list, unexplained: list, design: Design) -> None:
-    """Fill ``equivalents`` of the found effects (:class:`rvcalib.results.FittedEffect`) and of an unexplained
-    constant offset common to every run (:class:`rvcalib.results.Unexplained`), in place."""
+def attach_equivalents(fitted: list, unexplained: list, design: Design, groups: list[dict] | None = None) -> None:
+    """Fill ``equivalents`` of the found effects (:class:`rvcalib.results.FittedEffect`), of an unexplained
+    constant offset common to every run (:class:`rvcalib.results.Unexplained`) and of the identifiability groups'
+    members (their ``value``; an effect not named has no interval), in place."""
     for e in fitted:
         e.equivalents = effect_equivalents(e.name, e.value, e.ci_low, e.ci_high, design)
     for u in unexplained:
         if u.kind == "offset" and u.factor == "common":
             u.equivalents = offset_equivalents(u.amplitude_arcsec, design)
+    for g in groups or []:
+        for m in g.get("members", []):
+            v = m.get("value")
+            q = effect_equivalents(m.get("name", ""), v, v, v, design) if isinstance(v, (int, float)) else []
+            if q:
+                m["equivalents"] = q
 
 
 def datasheet_of(result, law: Any = None) -> dict[str, Any]:

@@ -133,7 +133,9 @@ def summary(res, paths: dict) -> str:
             lines.append(f"  {u.label}: {abs(u.amplitude_arcsec):.4g} arcsec{ph}")
             lines += [f"    or {q['parameter']} = {q['value']:+.5g} {q['unit']}" for q in u.equivalents]
     for g in res.groups:
-        mem = ", ".join(f"{m['name']} {m['value']:.4g} {m['unit']}" for m in g["members"][:4])
+        mem = ", ".join(f"{m['name']} {m['value']:.4g} {m['unit']}"
+                        + "".join(f" (= {q['parameter']} {q['value']:+.4g} {q['unit']})" for q in m.get("equivalents", []))
+                        for m in g["members"][:4])
         lines.append(f"group ({g['kind']}): {mem}")
     for rec in res.recommended_runs:
         if rec.get("run"):

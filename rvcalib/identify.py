@@ -503,7 +503,6 @@ class Calibrator(Groups):
             itn, frac = emp_iter.get(t, (0, float("nan")))
             unexplained.append(Unexplained(t.label, t.kind, t.order, amp, phase, itn, frac, t.note, t.factor, t.unit,
                                            self._per_run_size(t, r_phys), self._unexplained_candidates(t)))
-        attach_equivalents(fitted, unexplained, self.ds.design)
         after = diagnose(self.ds, r_all)
         after_phys = diagnose(self.ds, r_phys)
         noise = structured_noise(self.ds, r_all)
@@ -536,6 +535,7 @@ class Calibrator(Groups):
         if not self.stopped_by.startswith("nothing"):
             verdict += " Stopped early: " + self.stopped_by + "."
         groups = final_groups + self.identifiability_groups(fitted, unexplained)
+        attach_equivalents(fitted, unexplained, self.ds.design, groups)
         recommended = self.recommend_runs(groups)
         physical = [(e, p) for e, p in pairs if e.family != "measurement"]
         return CalibrationResult(self.ds, fitted, unexplained, before, after, after_phys, r0, r_all, iterations,

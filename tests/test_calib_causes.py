@@ -9,7 +9,7 @@ import pytest
 
 from rvcad.errors import Case
 from rvcad.params import Design
-from rvcalib.causes import EQUIVALENTS, datasheet_of, effect_equivalents, rotation_per_offset_deg
+from rvcalib.causes import EQUIVALENTS, attach_equivalents, datasheet_of, effect_equivalents, rotation_per_offset_deg
 from rvcalib.cli import summary
 from rvcalib.dataset import read_dataset
 from rvcalib.identify import calibrate
@@ -51,6 +51,19 @@ def test_a_profile_modification_gives_the_te_of_the_library_effect_it_is_reporte
     base = Design.from_dict({parameter: 0.01})
     assert effect_equivalents(q.effect, size, size, size, base)[0]["implied_design_value"] == pytest.approx(0.01 + value)
     assert effect_equivalents("pin_radius[pin=3]", size, size, size, Design()) == []     # one pin is no modification
+
+
+def test_a_group_member_with_a_physical_twin_carries_it():
+    """A group the data cannot split (measured: the play of a 4 um equidistant modification and an output friction
+    torque of 24 N m, each beside its compliance, at 10 and 30 N m both ways under the impact law; the loop names
+    neither and recommends a run at load 0): the pin radius member carries its modification, the friction none."""
+    groups = [{"kind": "unsplit", "members": [{"name": "friction_torque_Nm", "value": 23.9, "unit": "N m"},
+                                              {"name": "pin_radius", "value": -4.0, "unit": "um"}]}]
+    attach_equivalents([], [], Design(), groups)
+    fr, pr = groups[0]["members"]
+    assert "equivalents" not in fr
+    (q,) = pr["equivalents"]
+    assert q["parameter"] == "design.profile_equidistant_mm" and q["value"] == pytest.approx(0.004, rel=1e-12)
 
 
 @pytest.mark.parametrize("design", [{}, {"z_sun": 18, "z_planet": 36}])
