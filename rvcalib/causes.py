@@ -37,9 +37,17 @@ compliance adds ``C b`` to the span ``a``; tests/test_rvdyn_stiffness.py), an ap
 default friction coefficients (0.2 arcsec/(N m) on the default design: 70.23 swept against 70.65 from the series
 law).
 
-Not here: a friction coefficient as the cause of ``friction_torque_Nm``. rvdyn's Coulomb friction acts in the
-stiffness sweep (micro-slips with the input locked); the TE under rotation has no friction from the
-coefficients, so there is no forward model that maps a coefficient to the TE and none is claimed.
+**A compliance as friction.** Under rotation the Coulomb friction of the pins and the crank bearings is proportional
+to the load (``rvdyn.friction``: ``T_f = (mu_p kappa_p + mu_b kappa_b) T``, to 1 % from 5 to 167 N m) and resists
+both directions as the load does, so in TE data it is a compliance of ``(mu_p kappa_p + mu_b kappa_b) w``
+arcsec/(N m) (``w`` the reducer's wind-up per N m): a compliance ``C`` found is also, as far as the TE can tell, a
+pin friction coefficient ``C/(kappa_p w)`` or a bearing friction coefficient ``C/(kappa_b w)`` (each alone) beside
+the model's defaults (0.05 and 0.0025). The reading is computed on the reducer as declared at the loaded runs' mean
+load; it is a reading, not a TE input (rvdyn's TE has no friction from the coefficients). A hysteresis test
+(``rvdyn stiffness``, input locked) splits them: friction opens the loop, a compliance tilts it.
+
+Not here: a friction coefficient as the cause of ``friction_torque_Nm``, a torque that does not grow with the load
+(seals, grease churning): Coulomb friction at the pins and bearings grows with it.
 """
 from __future__ import annotations
 
@@ -183,12 +191,38 @@ def calibrated_datasheet(declared: dict[str, Any], calibrated: dict[str, Any],
                     "compliance found is the sum of what every part in series lacks (the TE cannot say which part)"}
 
 
-def attach_equivalents(fitted: list, unexplained: list, design: Design, groups: list[dict] | None = None) -> None:
+def compliance_equivalents(value: float, ci_low: float, ci_high: float, arms) -> list[dict]:
+    """A compliance found (arcsec/(N m)) read as Coulomb friction of the pins or of the crank bearings, each alone
+    (``arms``: :class:`rvdyn.friction.FrictionArms` of the reducer at the runs' load; module docstring)."""
+    out = []
+    for which, key, default in (("pins", "pin_friction_coefficient", 0.05),
+                                ("bearings", "bearing_friction_coefficient", 0.0025)):
+        if (which == "bearings" and arms.bearings is None) or arms.windup_arcsec_per_Nm <= 0:
+            continue
+        per = arms.compliance_per_coefficient(which)
+        q = _mapped(value, max(ci_low, 0.0), ci_high, 1.0 / per, default, key, "-",
+                    f"Coulomb friction of the {which} (the other's at 0), proportional to the load under rotation "
+                    f"(kappa {arms.pins if which == 'pins' else arms.bearings:.4g}, wind-up "
+                    f"{arms.windup_arcsec_per_Nm:.4g} arcsec/(N m) at {arms.load_Nm:.4g} N m): in the TE a compliance of "
+                    f"{per:.4g} arcsec/(N m) per unit coefficient; the model's default is {default:g}; a hysteresis "
+                    "test (input locked) tells friction (an open loop) from a compliance (a tilt)")
+        q["parameter"] = f"model.{key}"
+        q.pop("implied_design_value")
+        q["default"] = default
+        out.append(q)
+    return out
+
+
+def attach_equivalents(fitted: list, unexplained: list, design: Design, groups: list[dict] | None = None,
+                       friction=None) -> None:
     """Fill ``equivalents`` of the found effects (:class:`rvcalib.results.FittedEffect`), of an unexplained
     constant offset common to every run (:class:`rvcalib.results.Unexplained`) and of the identifiability groups'
-    members (their ``value``; an effect not named has no interval), in place."""
+    members (their ``value``; an effect not named has no interval), in place. ``friction``: the
+    :class:`rvdyn.friction.FrictionArms` of the reducer at the runs' load, for a compliance found (None: not read)."""
     for e in fitted:
         e.equivalents = effect_equivalents(e.name, e.value, e.ci_low, e.ci_high, design)
+        if e.key == "torsional_compliance_arcsec_per_Nm" and friction is not None:
+            e.equivalents += compliance_equivalents(e.value, e.ci_low, e.ci_high, friction)
     for u in unexplained:
         if u.kind == "offset" and u.factor == "common":
             u.equivalents = offset_equivalents(u.amplitude_arcsec, design)

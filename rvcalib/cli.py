@@ -124,8 +124,13 @@ def summary(res, paths: dict) -> str:
                 alt += f"; declared {e.declared_value:.5g}, implied total {e.implied_total:.5g} {e.unit}"
             bnd = f" (at the {e.at_bound} bound of its range: a one-sided limit)" if e.at_bound else ""
             lines.append(f"  {e.name} = {e.value:.5g} {e.unit}{ang}, 95 % [{e.ci_low:.5g}, {e.ci_high:.5g}]{bnd}{alt}")
-            lines += [f"    the same TE as {q['parameter']} = {q['value']:+.5g} {q['unit']} [{q['ci_low']:.5g}, "
-                      f"{q['ci_high']:.5g}]" for q in e.equivalents]
+            for q in e.equivalents:
+                if "default" in q:      # a compliance read as friction (a coefficient, no unit)
+                    lines.append(f"    or, as Coulomb friction, {q['parameter']} = {q['value']:.4g} [{q['ci_low']:.4g}, "
+                                 f"{q['ci_high']:.4g}] (the model's default {q['default']:g})")
+                else:
+                    lines.append(f"    the same TE as {q['parameter']} = {q['value']:+.5g} {q['unit']} [{q['ci_low']:.5g}, "
+                                 f"{q['ci_high']:.5g}]")
     if res.unexplained:
         lines.append("unexplained (outside the library):")
         for u in res.unexplained:

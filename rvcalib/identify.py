@@ -52,8 +52,11 @@ from typing import Any, Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from rvcad.errors import Case
+from rvdyn.friction import friction_arms
+
 from rvcalib.dataset import MeasuredDataset
-from rvcalib.forward import ModelEvaluationError, cache_stats
+from rvcalib.forward import ModelEvaluationError, cache_stats, forward_runner
 from rvcalib.lsq import bic, ftest, projector
 from rvcalib.residual import Diagnostics, diagnose, structured_noise
 from rvcalib.results import (Active, CalibrationResult, Candidate, EmpiricalTerm, FittedEffect, HarmonicCandidate,
@@ -476,6 +479,19 @@ class Calibrator(Groups):
         return sw
 
     # ------------------------------------------------------------------ wrap up
+    def _friction_arms(self, fitted: list[FittedEffect]):
+        """rvdyn's Coulomb friction arms of the reducer as declared at the loaded runs' mean load, when a compliance
+        was found (rvcalib.causes reads it as friction too); None otherwise, or when rvdyn cannot solve it."""
+        loads = [r.load_Nm for r in self.runs if r.load_Nm > 0]
+        if not loads or not any(e.key == "torsional_compliance_arcsec_per_Nm" for e in fitted):
+            return None
+        try:
+            return friction_arms(Case.from_dict(reducer_case(self._case(0, []))), float(np.mean(loads)),
+                                 law=forward_runner().law)
+        except ValueError as exc:
+            self.notes.append(f"the compliance is not read as friction: {exc}")
+            return None
+
     def _finish(self, r0, before: Diagnostics, iterations: list[dict], t_start: float) -> CalibrationResult:
         msg = self.polish_once("final state")
         if msg:
@@ -535,7 +551,7 @@ class Calibrator(Groups):
         if not self.stopped_by.startswith("nothing"):
             verdict += " Stopped early: " + self.stopped_by + "."
         groups = final_groups + self.identifiability_groups(fitted, unexplained)
-        attach_equivalents(fitted, unexplained, self.ds.design, groups)
+        attach_equivalents(fitted, unexplained, self.ds.design, groups, self._friction_arms(fitted))
         recommended = self.recommend_runs(groups)
         physical = [(e, p) for e, p in pairs if e.family != "measurement"]
         return CalibrationResult(self.ds, fitted, unexplained, before, after, after_phys, r0, r_all, iterations,

@@ -171,9 +171,10 @@ def markdown(result: CalibrationResult, figures: list[str]) -> str:
         for e in result.effects:
             L.append(f"- `{e.name}`: {e.meaning}")
             for q in e.equivalents:
+                implied = (f" (design value implied: {q['implied_design_value']:.5g} {q['unit']})"
+                           if "implied_design_value" in q else "")
                 L.append(f"  - the same TE as `{q['parameter']}` = {q['value']:+.5g} {q['unit']} [{q['ci_low']:.5g}, "
-                         f"{q['ci_high']:.5g}] (design value implied: {q['implied_design_value']:.5g} {q['unit']}): "
-                         f"{q['meaning']}; the data cannot tell the two apart")
+                         f"{q['ci_high']:.5g}]{implied}: {q['meaning']}; the data cannot tell the two apart")
         L.append("")
         L.append("Values of two-component effects are magnitudes; their direction is the angle. The interval is "
                  "the Jacobian interval of the joint nonlinear fit (t quantile), widened for lag-1 residual "

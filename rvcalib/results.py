@@ -306,7 +306,9 @@ class FittedEffect:
     equivalents : list of dict
         Physical parameters that give the same TE, which the data cannot tell from this effect
         (:func:`rvcalib.causes.effect_equivalents`: a profile modification for the all-pins radius and pin circle
-        diameter): ``{parameter, value, ci_low, ci_high, unit, implied_design_value, meaning}``.
+        diameter, ``implied_design_value`` the design's value with it; :func:`rvcalib.causes.compliance_equivalents`:
+        a compliance as Coulomb friction of the pins or bearings): ``{parameter, value, ci_low, ci_high, unit,
+        meaning}``.
     """
 
     name: str

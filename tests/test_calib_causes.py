@@ -109,6 +109,15 @@ def test_an_undeclared_profile_modification_is_named_with_the_pin_error_it_equal
     assert q["parameter"] == "design.profile_equidistant_mm"
     assert q["ci_low"] <= 0.004 <= q["ci_high"] and q["value"] == pytest.approx(-pr.value * 1e-3)
     assert abs(by["torsional_compliance_arcsec_per_Nm"].value - 0.3) <= 0.03
+    # the compliance read as Coulomb friction (rvdyn.friction, the reducer as declared at the loaded runs' 16.7 N m)
+    comp = by["torsional_compliance_arcsec_per_Nm"]
+    assert [q["parameter"] for q in comp.equivalents] == ["model.pin_friction_coefficient",
+                                                          "model.bearing_friction_coefficient"]
+    for q in comp.equivalents:
+        assert 0 < q["ci_low"] < q["value"] < q["ci_high"]
+    mu_p, mu_b = (q["value"] for q in comp.equivalents)
+    # mu_p / mu_b = kappa_b / kappa_p: 22.0/1.09 = 20 under the physical law, 16.6 under the session's impact law
+    assert 10.0 < mu_p / mu_b < 30.0
     assert abs(res.rms_after / ans["noise_te_arcsec"] - 1.0) <= 0.2
 
 
@@ -140,6 +149,7 @@ def test_the_report_gives_the_equivalent_and_the_datasheet_as_calibrated(modifie
     assert "## Datasheet as calibrated" in text and "`design.profile_equidistant_mm`" in text
     out = summary(res, paths)
     assert "the same TE as design.profile_equidistant_mm" in out and "torsional rigidity" in out
+    assert "or, as Coulomb friction, model.pin_friction_coefficient" in out
     js = res.to_dict()
     assert js["effects"][0]["equivalents"] or js["effects"][1]["equivalents"]
     assert js["datasheet"]["calibrated"]["torsional_rigidity_Nm_per_arcmin"] == k1
