@@ -55,13 +55,13 @@ from threadpoolctl import threadpool_limits
 from rvcad.errors import Case
 from rvdyn.friction import friction_arms
 
+from rvcalib.causes import attach_equivalents, reducer_case
 from rvcalib.dataset import MeasuredDataset
 from rvcalib.forward import ModelEvaluationError, cache_stats, forward_runner
 from rvcalib.lsq import bic, ftest, projector
 from rvcalib.residual import Diagnostics, diagnose, structured_noise
 from rvcalib.results import (Active, CalibrationResult, Candidate, EmpiricalTerm, FittedEffect, HarmonicCandidate,
                              Unexplained, Validated)
-from rvcalib.causes import attach_equivalents, reducer_case
 from rvcalib.groups import Groups
 
 __all__ = ["Calibrator", "calibrate", "CalibrationResult", "FittedEffect", "Unexplained", "EmpiricalTerm",

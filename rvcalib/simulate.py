@@ -174,14 +174,17 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         raise ValueError("runs must list at least one run")
     rng = np.random.default_rng(seed)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     des = Design.from_dict(design)
     check_periodic(des)
     built = Design.from_dict(dict(des.to_dict(), **dict(hidden.get("design") or {})))   # the reducer as built
+    if built.ratio != des.ratio:
+        raise ValueError(f"hidden.design changes the ratio from {des.ratio:g} to {built.ratio:g}; allowed: fields of "
+                         "the reducer as built that keep the declared design's ratio (e.g. a profile modification)")
     ratio = float(des.ratio)
     N = int(samples_per_rev)
     if N < 8:
         raise ValueError(f"samples_per_rev {samples_per_rev} must be >= 8")
+    out.mkdir(parents=True, exist_ok=True)
     step = period_deg(des) / N
     tr = dict(transient or {})
     tr_runs = tr.get("runs", "all")

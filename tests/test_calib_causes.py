@@ -121,6 +121,15 @@ def test_an_undeclared_profile_modification_is_named_with_the_pin_error_it_equal
     assert abs(res.rms_after / ans["noise_te_arcsec"] - 1.0) <= 0.2
 
 
+def test_an_undeclared_design_must_keep_the_ratio(tmp_path):
+    runs = [{"run": "a", "load_Nm": 10.0, "direction": 1}]
+    with pytest.raises(ValueError, match="hidden.design changes the ratio from 121 to 81"):
+        simulate_dataset(tmp_path / "ds", runs, {"design": {"z_sun": 18}})
+    with pytest.raises(ValueError, match="profile_equidistant_mm"):
+        simulate_dataset(tmp_path / "ds", runs, {"design": {"profile_equidistant_mm": 5.0}})
+    assert not (tmp_path / "ds").exists()
+
+
 def pr_value(res) -> float:
     return next(e.value for e in res.effects if e.name == "pin_radius")
 
