@@ -57,6 +57,8 @@ from typing import Any
 
 from rvcad.errors import Case
 from rvcad.params import Design
+from rvdyn.friction import FrictionArms
+from rvdyn.options import MODEL_OPTIONS
 
 
 @dataclass(frozen=True)
@@ -191,12 +193,12 @@ def calibrated_datasheet(declared: dict[str, Any], calibrated: dict[str, Any],
                     "compliance found is the sum of what every part in series lacks (the TE cannot say which part)"}
 
 
-def compliance_equivalents(value: float, ci_low: float, ci_high: float, arms) -> list[dict]:
+def compliance_equivalents(value: float, ci_low: float, ci_high: float, arms: FrictionArms) -> list[dict]:
     """A compliance found (arcsec/(N m)) read as Coulomb friction of the pins or of the crank bearings, each alone
     (``arms``: :class:`rvdyn.friction.FrictionArms` of the reducer at the runs' load; module docstring)."""
     out = []
-    for which, key, default in (("pins", "pin_friction_coefficient", 0.05),
-                                ("bearings", "bearing_friction_coefficient", 0.0025)):
+    for which, key in (("pins", "pin_friction_coefficient"), ("bearings", "bearing_friction_coefficient")):
+        default = MODEL_OPTIONS[key].default
         if (which == "bearings" and arms.bearings is None) or arms.windup_arcsec_per_Nm <= 0:
             continue
         per = arms.compliance_per_coefficient(which)
@@ -214,7 +216,7 @@ def compliance_equivalents(value: float, ci_low: float, ci_high: float, arms) ->
 
 
 def attach_equivalents(fitted: list, unexplained: list, design: Design, groups: list[dict] | None = None,
-                       friction=None) -> None:
+                       friction: FrictionArms | None = None) -> None:
     """Fill ``equivalents`` of the found effects (:class:`rvcalib.results.FittedEffect`), of an unexplained
     constant offset common to every run (:class:`rvcalib.results.Unexplained`) and of the identifiability groups'
     members (their ``value``; an effect not named has no interval), in place. ``friction``: the
