@@ -39,6 +39,7 @@ import numpy as np
 from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvdyn.bearings import Supports
+from rvdyn import housing
 from rvdyn.contacts import ContactLaw
 from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver
 from rvdyn.te import make_contacts
@@ -103,7 +104,7 @@ def friction_arms(case: Case, load_Nm: float = 20.0, law: ContactLaw | None = No
     sol = s.solve(th, direction=1, load_Nm=load_Nm)
     hc = np.mean(g.pin_centers, axis=0)
     cen, _ = g.disc_poses(sol.theta_out, sol.psi)                                  # (N, nd, 2)
-    W = hc + d.z_pins / (d.z_pins - d.z_disc) * (cen - hc)                         # pitch points (N, nd, 2)
+    W = housing.pitch_points(hc, cen, d.z_pins, d.z_disc)                         # (N, nd, 2)
     dist = np.linalg.norm(g.pin_centers[None, None] - W[:, :, None], axis=-1) - d.pin_radius_mm   # (N, nd, Zp)
     T = load_Nm * 1e3
     pins = float(np.mean((sol.pin_force_N * dist).sum(axis=(1, 2)))) / T

@@ -124,6 +124,13 @@ def housing_compliance(d: Design, pin_angles: np.ndarray, n_max: int | None = No
     return ring_compliance(pin_angles, 1.0, EI, R, housing_foundation_modulus(d), nm)
 
 
+def pitch_points(housing_centre: np.ndarray, disc_centres: np.ndarray, z_pins: int, z_disc: int) -> np.ndarray:
+    """The discs' pitch points (mm, the shape of ``disc_centres``): on the line from the housing's centre through each
+    disc's centre at ``Zp/(Zp - Zc)`` times their distance. Every contact normal of the conjugate profile passes
+    through it, and it is the disc's point at rest relative to the housing (rvdyn.friction)."""
+    return housing_centre + z_pins / (z_pins - z_disc) * (disc_centres - housing_centre)
+
+
 def pin_force_vectors(pins: np.ndarray, housing_centre: np.ndarray, disc_centres: np.ndarray,
                       forces: np.ndarray, z_pins: int, z_disc: int) -> np.ndarray:
     """Forces (Zp, 2), N, of the discs on the housing through the pins (fixed frame): pin i of disc k pushes the
@@ -133,7 +140,7 @@ def pin_force_vectors(pins: np.ndarray, housing_centre: np.ndarray, disc_centres
     housing's centre through the disc's centre at ``Zp/(Zp - Zc)`` times their distance."""
     out = np.zeros_like(pins, dtype=float)
     for k in range(forces.shape[0]):
-        P = housing_centre + z_pins / (z_pins - z_disc) * (disc_centres[k] - housing_centre)
+        P = pitch_points(housing_centre, disc_centres[k], z_pins, z_disc)
         u = pins - P
         u = u / np.linalg.norm(u, axis=1)[:, None]
         out += forces[k][:, None] * u
