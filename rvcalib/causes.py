@@ -236,11 +236,12 @@ def attach_equivalents(fitted: list, unexplained: list, design: Design, groups: 
                 m["equivalents"] = q
 
 
-def datasheet_of(result, law: Any = None) -> dict[str, Any]:
+def datasheet_of(result, law: Any = None, rated_Nm: float | None = None) -> dict[str, Any]:
     """:func:`calibrated_datasheet` of a :class:`rvcalib.results.CalibrationResult` whose loop found a physical
-    effect (a Table 4 error or a model option; empty otherwise: the sweep would repeat the declared reducer's)."""
+    effect (a Table 4 error or a model option; empty otherwise: the sweep would repeat the declared reducer's);
+    ``rated_Nm`` the sweep's rated torque (default rvdyn's, 167 N m)."""
     if not any(e.family in ("table4", "model") for e in result.effects):
         return {}
     comp = next(((e.value, e.ci_low, e.ci_high) for e in result.effects
                  if e.key == "torsional_compliance_arcsec_per_Nm"), None)
-    return calibrated_datasheet(result.declared_case, result.calibrated_case, comp, law)
+    return calibrated_datasheet(result.declared_case, result.calibrated_case, comp, law, rated_Nm)

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rvcad import validation as v
+from rvcad.errors import MAX_LOAD_NM
 from rvcalib.causes import datasheet_of
 from rvcalib.dataset import read_dataset
 
@@ -58,6 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "process; the result is the same bit for bit whatever the workers)")
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="case cache folder kept for later runs (default: none; solves are kept in memory for this run)")
+    p.add_argument("--rated-Nm", dest="rated_Nm", type=float, default=None, metavar="T",
+                   help="rated output torque of the datasheet as calibrated, N m (default 167, the RV-20E class of "
+                        "the paper's reducer; give your reducer's)")
     p.add_argument("--verbose", action="store_true", help="progress messages on stderr")
     return p
 
@@ -101,6 +105,8 @@ def check_options(args: argparse.Namespace) -> None:
     if args.time_budget is not None:
         v.option_real(args.time_budget, "--time-budget", 0.0, 86400.0, lo_open=True)
     v.option_int(args.workers, "--workers", 1, v.MAX_WORKERS, why="local processes of about 160 MB each")
+    if args.rated_Nm is not None:
+        v.option_real(args.rated_Nm, "--rated-Nm", 0.0, MAX_LOAD_NM, lo_open=True, unit="N m")
     if args.cache is not None:
         v.output_dir(args.cache, "--cache")
     v.output_dir(args.out)
@@ -195,7 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 forward.use_runner(prev)
                 runner.close()
         try:
-            res.datasheet = datasheet_of(res, forward.forward_runner().law)
+            res.datasheet = datasheet_of(res, forward.forward_runner().law, args.rated_Nm)
         except (ValueError, ArithmeticError) as exc:   # a design the sweep cannot take: said, not fatal
             res.datasheet = {"error": v.one_line(exc)}
         paths = write_report(res, args.out)

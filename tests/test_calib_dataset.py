@@ -166,7 +166,8 @@ def test_cli_bad_input_exit_2(tmp_path, capsys):
     ok = write(tmp_path / "ok", *good(tmp_path))
     (tmp_path / "a-file").write_text("x")
     for opt, bad in (("--steps", "0"), ("--steps", "2000000"), ("--screen-points", "120"), ("--max-terms", "0"),
-                     ("--workers", "0"), ("--cache", str(tmp_path / "a-file"))):
+                     ("--workers", "0"), ("--cache", str(tmp_path / "a-file")), ("--rated-Nm", "0"),
+                     ("--rated-Nm", "nan")):
         assert main([str(ok), "--out", str(tmp_path / "out"), opt, bad]) == 2
         err = capsys.readouterr().err.strip()
         assert opt.lstrip("-").replace("-", "_") in err.replace("-", "_") and len(err.splitlines()) == 1

@@ -35,7 +35,7 @@ def test_ratio81_dataset_names_the_pin_circle_error(ratio81, capsys):
     assert (root / "ds" / "design.json").is_file() and ans["ratio"] == pytest.approx(81.0)
     ds = read_dataset(root / "ds")
     assert ds.ratio == pytest.approx(81.0) and ds.design_source.startswith("design.json")
-    assert main([str(root / "ds"), "--out", str(root / "out"), "--json", "--workers", "1"]) == 0
+    assert main([str(root / "ds"), "--out", str(root / "out"), "--json", "--workers", "1", "--rated-Nm", "120"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["ratio"] == pytest.approx(81.0) and d["reducer"]["z_sun"] == 18
     assert [e["name"] for e in d["effects"]] == ["pin_circle_diameter"]
@@ -45,6 +45,7 @@ def test_ratio81_dataset_names_the_pin_circle_error(ratio81, capsys):
     assert q["parameter"] == "design.profile_shift_mm" and q["value"] == pytest.approx(-d["effects"][0]["value"] / 2000)
     # the datasheet of the ratio-81 reducer as declared and as calibrated (the larger pin circle opens a play)
     dsh = d["datasheet"]
+    assert dsh["model"]["rated_torque_Nm"] == dsh["calibrated"]["rated_torque_Nm"] == 120.0     # --rated-Nm
     assert dsh["calibrated"]["backlash_arcmin"] > dsh["model"]["backlash_arcmin"] + 0.1
     assert d["calibrated_case"]["design"]["z_sun"] == 18 and d["calibrated_case"]["errors"]["pin_circle_diameter"]
     assert d["unexplained"] == []
