@@ -102,12 +102,16 @@ def rotation_per_offset_deg(design: Design) -> float:
     return -(design.z_disc + 1.0 + design.z_sun / design.z_planet) / (3600.0 * design.z_disc)
 
 
-def _mapped(value: float, lo: float, hi: float, factor: float, base: float, parameter: str, unit: str,
+def _mapped(value: float, lo: float, hi: float, factor: float, base: float | None, parameter: str, unit: str,
             meaning: str) -> dict[str, Any]:
+    """``parameter = factor * value`` with its interval; ``base`` the declared value it adds to (None: a reading, not a
+    design field)."""
     a, b = sorted((factor * lo, factor * hi))
     v = factor * value
-    return {"parameter": f"design.{parameter}", "value": v, "ci_low": a, "ci_high": b, "unit": unit,
-            "implied_design_value": base + v, "meaning": meaning}
+    out = {"parameter": parameter, "value": v, "ci_low": a, "ci_high": b, "unit": unit, "meaning": meaning}
+    if base is not None:
+        out["implied_design_value"] = base + v
+    return out
 
 
 def effect_equivalents(name: str, value: float, ci_low: float, ci_high: float, design: Design) -> list[dict]:
@@ -125,8 +129,8 @@ def effect_equivalents(name: str, value: float, ci_low: float, ci_high: float, d
     out = []
     for q in EQUIVALENTS:
         if q.effect == name:
-            out.append(_mapped(value, ci_low, ci_high, q.factor, float(getattr(design, q.parameter)), q.parameter,
-                               q.unit, q.meaning))
+            out.append(_mapped(value, ci_low, ci_high, q.factor, float(getattr(design, q.parameter)),
+                               f"design.{q.parameter}", q.unit, q.meaning))
     return out
 
 
@@ -135,7 +139,7 @@ def offset_equivalents(amplitude_arcsec: float, design: Design) -> list[dict]:
     discs: one of its possible causes, which the TE cannot tell from an encoder zero offset."""
     f = rotation_per_offset_deg(design)
     return [_mapped(amplitude_arcsec, amplitude_arcsec, amplitude_arcsec, f, design.profile_rotation_deg,
-                    "profile_rotation_deg", "deg",
+                    "design.profile_rotation_deg", "deg",
                     "rotation modification of both discs' profile relative to the crank holes (a uniform TE shift); "
                     "an encoder zero offset or a turned pin housing give the same TE")]
 
@@ -202,14 +206,12 @@ def compliance_equivalents(value: float, ci_low: float, ci_high: float, arms: Fr
         if (which == "bearings" and arms.bearings is None) or arms.windup_arcsec_per_Nm <= 0:
             continue
         per = arms.compliance_per_coefficient(which)
-        q = _mapped(value, max(ci_low, 0.0), ci_high, 1.0 / per, default, key, "-",
+        q = _mapped(value, max(ci_low, 0.0), ci_high, 1.0 / per, None, f"model.{key}", "-",
                     f"Coulomb friction of the {which} (the other's at 0), proportional to the load under rotation "
                     f"(kappa {arms.pins if which == 'pins' else arms.bearings:.4g}, wind-up "
                     f"{arms.windup_arcsec_per_Nm:.4g} arcsec/(N m) at {arms.load_Nm:.4g} N m): in the TE a compliance of "
                     f"{per:.4g} arcsec/(N m) per unit coefficient; the model's default is {default:g}; a hysteresis "
                     "test (input locked) tells friction (an open loop) from a compliance (a tilt)")
-        q["parameter"] = f"model.{key}"
-        q.pop("implied_design_value")
         q["default"] = default
         out.append(q)
     return out

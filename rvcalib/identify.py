@@ -479,14 +479,15 @@ class Calibrator(Groups):
         return sw
 
     # ------------------------------------------------------------------ wrap up
-    def _friction_arms(self, fitted: list[FittedEffect]):
-        """rvdyn's Coulomb friction arms of the reducer as declared at the loaded runs' mean load, when a compliance
-        was found (rvcalib.causes reads it as friction too); None otherwise, or when rvdyn cannot solve it."""
+    def _friction_arms(self, fitted: list[FittedEffect], declared: dict):
+        """rvdyn's Coulomb friction arms of the reducer as declared (``declared``, case JSON) at the loaded runs' mean
+        load, when a compliance was found (rvcalib.causes reads it as friction too); None otherwise, or when rvdyn
+        cannot solve it."""
         loads = [r.load_Nm for r in self.runs if r.load_Nm > 0]
         if not loads or not any(e.key == "torsional_compliance_arcsec_per_Nm" for e in fitted):
             return None
         try:
-            return friction_arms(Case.from_dict(reducer_case(self._case(0, []))), float(np.mean(loads)),
+            return friction_arms(Case.from_dict(declared), float(np.mean(loads)),
                                  law=forward_runner().law)
         except ValueError as exc:
             self.notes.append(f"the compliance is not read as friction: {exc}")
@@ -551,14 +552,15 @@ class Calibrator(Groups):
         if not self.stopped_by.startswith("nothing"):
             verdict += " Stopped early: " + self.stopped_by + "."
         groups = final_groups + self.identifiability_groups(fitted, unexplained)
-        attach_equivalents(fitted, unexplained, self.ds.design, groups, self._friction_arms(fitted))
+        declared = reducer_case(self._case(0, []))
+        attach_equivalents(fitted, unexplained, self.ds.design, groups, self._friction_arms(fitted, declared))
         recommended = self.recommend_runs(groups)
         physical = [(e, p) for e, p in pairs if e.family != "measurement"]
         return CalibrationResult(self.ds, fitted, unexplained, before, after, after_phys, r0, r_all, iterations,
                                  status, verdict, noise, self.steps, time.perf_counter() - t_start,
                                  list(self.ds.notes) + self.notes, dict(cache_stats(), fits=self.fit_stats),
                                  stopped_by=self.stopped_by, groups=groups, recommended_runs=recommended,
-                                 declared_case=reducer_case(self._case(0, [])),
+                                 declared_case=declared,
                                  calibrated_case=reducer_case(self._case(0, physical)))
 
 

@@ -387,6 +387,14 @@ class Supports:
         RA = Q.sum(axis=2) - RB
         return np.stack([RA, RB], axis=2)
 
+    def friction_arms(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Friction moment per unit coefficient (N mm) of each cam bearing (N, nd, nc) and each crank's two journals
+        together (N, nc) under the cam forces B (N, nd, nc, 2): ``|F| r`` at the roller pitch radius (SKF's constant
+        coefficient; the stiffness sweep and rvdyn.friction multiply them by their relative turn rates)."""
+        cam = np.linalg.norm(B, axis=-1) * self.cam_r
+        journal = np.linalg.norm(self.journal_forces(B), axis=-1).sum(axis=2) * self.journal_r
+        return cam, journal
+
     def bending_deflections(self, B: np.ndarray) -> np.ndarray:
         """Crankshaft deflection at the cam planes (N, nc, nd, 2), mm, under the cam loads: the stepped
         Timoshenko beam of ``sections`` (:func:`stepped_beam_influence`), or without sections the uniform Euler

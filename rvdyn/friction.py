@@ -111,12 +111,9 @@ def friction_arms(case: Case, load_Nm: float = 20.0, law: ContactLaw | None = No
     bearings = None
     if sol.cam_force_N is not None:
         sup = s.supports if s.supports is not None else Supports.from_design(d)
-        B = sol.cam_force_N                                                       # (N, nd, nc, 2)
-        jf = sup.journal_forces(B)                                                # (N, nc, 2 journals, 2)
+        cam, journal = sup.friction_arms(sol.cam_force_N)                         # (N, nd, nc), (N, nc)
         rel = (d.ratio - 1.0) * d.z_sun / d.z_planet
-        arm = (np.linalg.norm(B, axis=-1).sum(axis=(1, 2)) * sup.cam_r
-               + np.linalg.norm(jf, axis=-1).sum(axis=(1, 2)) * sup.journal_r)
-        bearings = float(rel * np.mean(arm)) / T
+        bearings = float(rel * np.mean(cam.sum(axis=(1, 2)) + journal.sum(axis=1))) / T
     te = [float(np.mean(s.solve(th, direction=1, load_Nm=f * load_Nm).te_rad)) * ARCSEC_PER_RAD
           for f in (1.0 - SLOPE_STEP, 1.0 + SLOPE_STEP)]
     w = -(te[1] - te[0]) / (2.0 * SLOPE_STEP * load_Nm)

@@ -332,10 +332,8 @@ def _friction_torque(s: QuasiStaticSolver, g: ReducerGeometry, rows, theta: np.n
             continue
         tf[i] += mu_p * float((sol.pin_force_N[0] * slip[i]).sum())
         if sol.cam_force_N is not None:
-            B = sol.cam_force_N[0]                                               # (nd, nc, 2)
-            tf[i] += mu_b * float((np.linalg.norm(B, axis=-1) * sup.cam_r * rel_cam[i]).sum())
-            jf = sup.journal_forces(B[None])[0]                                  # (nc, 2 journals, 2)
-            tf[i] += mu_b * float((np.linalg.norm(jf, axis=-1).sum(axis=1) * sup.journal_r * rel_journal[i]).sum())
+            cam, journal = sup.friction_arms(sol.cam_force_N[:1])                # (1, nd, nc), (1, nc)
+            tf[i] += mu_b * float((cam[0] * rel_cam[i]).sum() + (journal[0] * rel_journal[i]).sum())
     return tf
 
 
