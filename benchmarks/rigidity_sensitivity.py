@@ -18,7 +18,7 @@ from scipy.optimize import brentq
 
 from rvcad.errors import Case
 from rvcad.validation import InputError
-from rvdyn.sensitivity import ASSUMED_SIZES, rigidity, rigidity_elasticities, size_value, with_size
+from rvdyn.sensitivity import rigidity, rigidity_elasticities, size_value, with_size
 
 
 def _k(case: Case, size: str, value: float) -> tuple[float | None, str]:
