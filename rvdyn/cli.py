@@ -85,6 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--solver", choices=SOLVERS, default="analytic")
     st.add_argument("--input-deg", dest="input_deg", type=float, default=0.0, help="locked input angle, deg")
     st.add_argument("--points", type=int, default=41, help="points per sweep branch (default 41)")
+    st.add_argument("--sensitivity", action="store_true",
+                    help="also the elasticity d ln(rigidity) / d ln(size) of each size the paper does not give "
+                         "(rvdyn.sensitivity.ASSUMED_SIZES; two more sweeps per size, about 12 s)")
     st.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
 
     return p
@@ -161,6 +164,13 @@ def _stiffness(args: argparse.Namespace) -> int:
         f["csv"] = str(write_curve(res, args.out))
     if args.plot:
         f["png"] = str(res.plot(args.plot))
+    if args.sensitivity:
+        from rvdyn.sensitivity import rigidity_elasticities
+
+        tab = rigidity_elasticities(case, rated_Nm=args.rated_Nm, law=law, solver=args.solver,
+                                    theta_in_deg=args.input_deg)
+        f["sensitivity"] = [{"size": r.size, "value": r.value, "elasticity": _finite(r.elasticity), "note": r.note}
+                            for r in tab.itertuples()]
     if args.json:
         print(json.dumps({"case": case.name, **f}))
         return 0
@@ -178,8 +188,13 @@ def _stiffness(args: argparse.Namespace) -> int:
     print(f"  backlash           {f['backlash_arcmin']:.4f} arcmin")
     print(f"  hysteresis loss    {f['hysteresis_loss_arcmin']:.4f} arcmin")
     print(f"  compliance budget at rated torque (arcsec, total {f['budget_total_arcsec']:.2f}):")
-    for k, v in sorted(f["budget"].items(), key=lambda kv: -kv[1]):
-        print(f"    {k:18s} {v:8.3f}  ({100 * v / max(f['budget_total_arcsec'], 1e-300):5.1f} %)")
+    for part, arcsec in sorted(f["budget"].items(), key=lambda kv: -kv[1]):
+        print(f"    {part:18s} {arcsec:8.3f}  ({100 * arcsec / max(f['budget_total_arcsec'], 1e-300):5.1f} %)")
+    if "sensitivity" in f:
+        print("  rigidity's elasticity to each assumed size (d ln k / d ln s: +1 % size -> about E % rigidity):")
+        for r in sorted(f["sensitivity"], key=lambda r: -abs(r["elasticity"] or 0.0)):
+            e = "nan" if r["elasticity"] is None else f"{r['elasticity']:+.3f}"
+            print(f"    {r['size']:44s} {r['value']:8.4g}  {e:>7s}" + (f"  {r['note']}" if r["note"] else ""))
     for k in ("csv", "png"):
         if k in f:
             print(f"  wrote {f[k]}")

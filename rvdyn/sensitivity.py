@@ -22,6 +22,8 @@ import pandas as pd
 
 from rvcad.errors import Case
 from rvcad.params import Design
+from rvcad.validation import InputError
+from rvdyn.contacts import ContactLaw
 from rvdyn.stiffness import hysteresis
 
 #: The default design's sizes that are this implementation's assumptions and act on the torque path
@@ -80,14 +82,26 @@ def with_size(case: Case, size: str, value: float | int) -> Case:
     return Case.from_dict(d)
 
 
-def rigidity(case: Case, rated_Nm: float | None = None) -> float:
-    """Torsional rigidity b/a (N m/arcmin) of the maker's sweep of a case (:func:`rvdyn.stiffness.hysteresis`;
-    the figure does not depend on the curve's sampling, so the sweep is sampled at its minimum)."""
-    return float(hysteresis(case, rated_Nm=rated_Nm, points=5).figures["torsional_rigidity_Nm_per_arcmin"])
+def rigidity(case: Case, rated_Nm: float | None = None, law: ContactLaw | None = None, solver: str = "analytic",
+             theta_in_deg: float = 0.0) -> float:
+    """Torsional rigidity b/a (N m/arcmin) of the maker's sweep of a case (:func:`rvdyn.stiffness.hysteresis`,
+    same arguments; the figure does not depend on the curve's sampling, so the sweep is sampled at its minimum)."""
+    res = hysteresis(case, rated_Nm=rated_Nm, theta_in_deg=theta_in_deg, solver=solver, law=law, points=5)
+    return float(res.figures["torsional_rigidity_Nm_per_arcmin"])
+
+
+def _try(case: Case, size: str, value: float | int, sweep: dict[str, Any]) -> tuple[float | None, str]:
+    """The rigidity at one value of a size, or None and the validation's message when no valid case has it."""
+    try:
+        c = with_size(case, size, value)
+    except InputError as exc:
+        return None, str(exc)
+    return rigidity(c, **sweep), ""
 
 
 def rigidity_elasticities(case: Case | None = None, sizes: tuple[str, ...] = ASSUMED_SIZES, rel_step: float = 0.05,
-                          rated_Nm: float | None = None) -> pd.DataFrame:
+                          rated_Nm: float | None = None, law: ContactLaw | None = None, solver: str = "analytic",
+                          theta_in_deg: float = 0.0) -> pd.DataFrame:
     """Elasticity of the torsional rigidity to each size.
 
     Parameters
@@ -98,19 +112,22 @@ def rigidity_elasticities(case: Case | None = None, sizes: tuple[str, ...] = ASS
         Dotted names ``design.FIELD`` or ``model.OPTION`` (default :data:`ASSUMED_SIZES`).
     rel_step : float
         Relative step h of a real size, 0 < h <= 0.5 (an integer size steps by 1).
-    rated_Nm : float or None
-        Rated torque of the sweep, N m (default: rvdyn's, 167 N m).
+    rated_Nm, law, solver, theta_in_deg
+        Of the sweep, as :func:`rvdyn.stiffness.hysteresis` (default: 167 N m, the case's law, analytic, 0 deg).
 
     Returns
     -------
     DataFrame
         One row per size: ``size``, ``value``, ``low``, ``high`` (the two values evaluated),
-        ``rigidity_low``, ``rigidity_high`` (N m/arcmin), ``elasticity`` (``ln(k+/k-)/ln(s+/s-)``, 1).
-        A size whose step leaves the valid designs raises the validation's error, naming the field.
+        ``rigidity_low``, ``rigidity_high`` (N m/arcmin), ``elasticity`` (``ln(k+/k-)/ln(s+/s-)``, 1) and
+        ``note``. Where one step leaves the valid designs (the validation refuses the case) the difference is
+        one-sided, from the size's own value, and the note says why; where both do, the elasticity is NaN.
     """
     case = Case.from_dict({}) if case is None else case
     if isinstance(rel_step, bool) or not isinstance(rel_step, (int, float)) or not 0.0 < rel_step <= 0.5:
         raise ValueError(f"rel_step {rel_step!r} is not allowed; allowed: a number in (0, 0.5]")
+    sweep = {"rated_Nm": rated_Nm, "law": law, "solver": solver, "theta_in_deg": theta_in_deg}
+    base: float | None = None
     rows = []
     for size in sizes:
         v = size_value(case, size)
@@ -118,10 +135,21 @@ def rigidity_elasticities(case: Case | None = None, sizes: tuple[str, ...] = ASS
             lo, hi = v - 1, v + 1
         else:
             lo, hi = v * (1.0 - rel_step), v * (1.0 + rel_step)
-        if not (lo > 0 and hi > 0):
-            raise ValueError(f"size {size!r} = {v!r}: the elasticity needs a size > 0 (steps {lo!r}, {hi!r})")
-        k_lo = rigidity(with_size(case, size, lo), rated_Nm)
-        k_hi = rigidity(with_size(case, size, hi), rated_Nm)
+        if not v > 0:
+            raise ValueError(f"size {size!r} = {v!r}: the elasticity needs a size > 0")
+        k_lo, why_lo = _try(case, size, lo, sweep) if lo > 0 else (None, f"{size} {lo!r} is not > 0")
+        k_hi, why_hi = _try(case, size, hi, sweep)
+        note = ""
+        if k_lo is None or k_hi is None:
+            if base is None:
+                base = rigidity(case, **sweep)
+            if k_lo is None and k_hi is None:
+                note = f"both steps invalid: {why_lo}; {why_hi}"
+            elif k_lo is None:
+                lo, k_lo, note = v, base, f"one-sided (the step down is invalid: {why_lo})"
+            else:
+                hi, k_hi, note = v, base, f"one-sided (the step up is invalid: {why_hi})"
+        e = math.nan if k_lo is None or k_hi is None else math.log(k_hi / k_lo) / math.log(hi / lo)
         rows.append({"size": size, "value": v, "low": lo, "high": hi, "rigidity_low": k_lo, "rigidity_high": k_hi,
-                     "elasticity": math.log(k_hi / k_lo) / math.log(hi / lo)})
+                     "elasticity": e, "note": note})
     return pd.DataFrame(rows)

@@ -1,12 +1,14 @@
 """rvdyn.sensitivity: the elasticity of the torsional rigidity to the sizes the paper does not give."""
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
 
 from rvcad.errors import Case
 from rvcad.validation import DesignError
+from rvdyn.cli import main as rvdyn_main
 from rvdyn.sensitivity import ASSUMED_SIZES, rigidity, rigidity_elasticities, size_value, with_size
 
 NO_FRICTION = {"pin_friction_coefficient": 0.0, "bearing_friction_coefficient": 0.0}
@@ -76,9 +78,40 @@ def test_a_bad_step_is_refused_naming_it(step) -> None:
         rigidity_elasticities(sizes=("design.disc_width_mm",), rel_step=step)
 
 
-def test_a_named_option_is_not_a_size_and_an_invalid_step_names_the_field() -> None:
+def test_a_named_option_is_not_a_size() -> None:
     case = Case.from_dict({"model": {"contact": "physical"}})
     with pytest.raises(ValueError, match=r"size 'model.contact' = 'physical' is a named option, not a size"):
         rigidity_elasticities(case, sizes=("model.contact",))
-    with pytest.raises(DesignError, match=r"design.crank_journal_radius_mm 7.0 mm does not pass through the cam"):
-        rigidity_elasticities(sizes=("design.cam_radius_mm",), rel_step=0.25)
+
+
+def test_a_step_out_of_the_valid_designs_makes_a_one_sided_difference_and_says_why() -> None:
+    """A cam 25 % smaller no longer lets the 7 mm journal pass (the validation refuses it): the elasticity is taken
+    from the size's own value up, and the note quotes the validation; a three-roller bearing cannot lose one."""
+    row = rigidity_elasticities(sizes=("design.cam_radius_mm",), rel_step=0.25).iloc[0]
+    k0 = rigidity(Case.from_dict({}))
+    assert row["low"] == 9.0 and row["rigidity_low"] == k0 and row["high"] == pytest.approx(11.25, rel=1e-12)
+    assert row["elasticity"] == pytest.approx(math.log(row["rigidity_high"] / k0) / math.log(1.25), rel=1e-12)
+    assert row["elasticity"] > 0.3
+    assert "one-sided (the step down is invalid: design.crank_journal_radius_mm 7.0 mm does not pass" in row["note"]
+    three = Case.from_dict({"design": {"cam_bearing_rollers": 3}})
+    row = rigidity_elasticities(three, sizes=("design.cam_bearing_rollers",)).iloc[0]
+    assert (row["low"], row["high"]) == (3, 4) and row["elasticity"] > 0
+    assert "design.cam_bearing_rollers 2 is out of range" in row["note"]
+    with pytest.raises(DesignError, match=r"does not pass through the cam .*allowed: < cam_radius_mm - eccentricity_mm"):
+        with_size(Case.from_dict({}), "design.cam_radius_mm", 6.0)
+
+
+def test_rvdyn_stiffness_sensitivity_json_passes_the_contact_law_on(capsys) -> None:
+    """``rvdyn stiffness --sensitivity --json``: one entry per assumed size. With ``--contact impact`` the paper's
+    law holds every support rigid, so the bearings' sizes do not move the rigidity (0 to 1e-9) and the module moves
+    it only through the mesh (0.067, against 1.89 under the physical law, whose bearings sit on the crank circle):
+    the sweeps use the command's law, not the case's default."""
+    assert rvdyn_main(["stiffness", "--contact", "impact", "--sensitivity", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    rows = {r["size"]: r for r in out["sensitivity"]}
+    assert list(rows) == list(ASSUMED_SIZES)
+    for s in ("design.cam_bearing_rollers", "design.journal_bearing_roller_length_mm",
+              "design.carrier_pillar_radius_mm"):
+        assert abs(rows[s]["elasticity"]) < 1e-9, s
+    assert 0.03 < rows["design.module_mm"]["elasticity"] < 0.5     # the mesh stiffness only (physical law: 1.89)
+    assert out["contact"] == "impact"
