@@ -17,16 +17,7 @@ import time
 from scipy.optimize import brentq
 
 from rvcad.errors import Case
-from rvcad.validation import InputError
-from rvdyn.sensitivity import rigidity, rigidity_elasticities, size_value, with_size
-
-
-def _k(case: Case, size: str, value: float) -> tuple[float | None, str]:
-    """Rigidity at one value of the size, or None and the validation's message."""
-    try:
-        return rigidity(with_size(case, size, value)), ""
-    except (InputError, ValueError) as exc:
-        return None, str(exc)
+from rvdyn.sensitivity import rigidity, rigidity_at, rigidity_elasticities, size_value, with_size
 
 
 def _edge(case: Case, size: str, ok: float, bad: float, why: str) -> str:
@@ -34,7 +25,7 @@ def _edge(case: Case, size: str, ok: float, bad: float, why: str) -> str:
     k_ok = rigidity(with_size(case, size, ok))
     for _ in range(10):
         mid = 0.5 * (ok + bad)
-        k, msg = _k(case, size, mid)
+        k, msg = rigidity_at(case, size, mid)
         if k is None:
             bad, why = mid, msg
         else:
@@ -53,7 +44,7 @@ def size_alone(case: Case, size: str, elasticity: float, target: float) -> str:
             n = n - 1 if down else n + 1
             if n < 1 or n > 4 * v:
                 return f"none (at {last_ok}: {last_k:.1f})"
-            k, why = _k(case, size, n)
+            k, why = rigidity_at(case, size, n)
             if k is None:
                 return f"none: valid designs end at {last_ok} ({last_k:.1f}): {why}"
             if k <= target:
@@ -63,7 +54,7 @@ def size_alone(case: Case, size: str, elasticity: float, target: float) -> str:
     for _ in range(12):
         factor = factor * 0.8 if down else factor * 1.25
         s = v * factor
-        k, why = _k(case, size, s)
+        k, why = rigidity_at(case, size, s)
         if k is None:
             return _edge(case, size, last_ok, s, why)
         if k <= target:

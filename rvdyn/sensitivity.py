@@ -24,6 +24,7 @@ from rvcad.errors import Case
 from rvcad.params import Design
 from rvcad.validation import InputError
 from rvdyn.contacts import ContactLaw
+from rvdyn.results import InterferenceError
 from rvdyn.stiffness import hysteresis
 
 #: The default design's sizes that are this implementation's assumptions and act on the torque path
@@ -90,13 +91,14 @@ def rigidity(case: Case, rated_Nm: float | None = None, law: ContactLaw | None =
     return float(res.figures["torsional_rigidity_Nm_per_arcmin"])
 
 
-def _try(case: Case, size: str, value: float | int, sweep: dict[str, Any]) -> tuple[float | None, str]:
-    """The rigidity at one value of a size, or None and the validation's message when no valid case has it."""
+def rigidity_at(case: Case, size: str, value: float | int, **sweep: Any) -> tuple[float | None, str]:
+    """The rigidity (N m/arcmin) of the case with one size set to ``value``, and ``""``; or None and why, when the
+    validation refuses that case or the contact law cannot resolve its interference under the rated torque
+    (:class:`rvdyn.results.InterferenceError`). ``sweep``: :func:`rigidity`'s keywords."""
     try:
-        c = with_size(case, size, value)
-    except InputError as exc:
+        return rigidity(with_size(case, size, value), **sweep), ""
+    except (InputError, InterferenceError) as exc:
         return None, str(exc)
-    return rigidity(c, **sweep), ""
 
 
 def rigidity_elasticities(case: Case | None = None, sizes: tuple[str, ...] = ASSUMED_SIZES, rel_step: float = 0.05,
@@ -120,8 +122,9 @@ def rigidity_elasticities(case: Case | None = None, sizes: tuple[str, ...] = ASS
     DataFrame
         One row per size: ``size``, ``value``, ``low``, ``high`` (the two values evaluated),
         ``rigidity_low``, ``rigidity_high`` (N m/arcmin), ``elasticity`` (``ln(k+/k-)/ln(s+/s-)``, 1) and
-        ``note``. Where one step leaves the valid designs (the validation refuses the case) the difference is
-        one-sided, from the size's own value, and the note says why; where both do, the elasticity is NaN.
+        ``note``. Where one step leaves the valid designs (the validation refuses the case, or its interference is more than the law resolves) the difference is
+        one-sided, from the size's own value, and the note says why (:func:`rigidity_at`); where both do, the
+        elasticity is NaN.
     """
     case = Case.from_dict({}) if case is None else case
     if isinstance(rel_step, bool) or not isinstance(rel_step, (int, float)) or not 0.0 < rel_step <= 0.5:
@@ -137,8 +140,8 @@ def rigidity_elasticities(case: Case | None = None, sizes: tuple[str, ...] = ASS
             lo, hi = v * (1.0 - rel_step), v * (1.0 + rel_step)
         if not v > 0:
             raise ValueError(f"size {size!r} = {v!r}: the elasticity needs a size > 0")
-        k_lo, why_lo = _try(case, size, lo, sweep) if lo > 0 else (None, f"{size} {lo!r} is not > 0")
-        k_hi, why_hi = _try(case, size, hi, sweep)
+        k_lo, why_lo = rigidity_at(case, size, lo, **sweep) if lo > 0 else (None, f"{size} {lo!r} is not > 0")
+        k_hi, why_hi = rigidity_at(case, size, hi, **sweep)
         note = ""
         if k_lo is None or k_hi is None:
             if base is None:

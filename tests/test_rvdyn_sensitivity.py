@@ -9,7 +9,7 @@ import pytest
 from rvcad.errors import Case
 from rvcad.validation import DesignError
 from rvdyn.cli import main as rvdyn_main
-from rvdyn.sensitivity import ASSUMED_SIZES, rigidity, rigidity_elasticities, size_value, with_size
+from rvdyn.sensitivity import ASSUMED_SIZES, rigidity, rigidity_at, rigidity_elasticities, size_value, with_size
 
 NO_FRICTION = {"pin_friction_coefficient": 0.0, "bearing_friction_coefficient": 0.0}
 
@@ -97,6 +97,9 @@ def test_a_step_out_of_the_valid_designs_makes_a_one_sided_difference_and_says_w
     row = rigidity_elasticities(three, sizes=("design.cam_bearing_rollers",)).iloc[0]
     assert (row["low"], row["high"]) == (3, 4) and row["elasticity"] > 0
     assert "design.cam_bearing_rollers 2 is out of range" in row["note"]
+    k, why = rigidity_at(Case.from_dict({}), "design.crank_journal_radius_mm", 2.5)    # a 5 mm crank at 167 N m
+    assert k is None and why.startswith("interference of ") and "cannot be resolved at the physical contact law" in why
+    assert rigidity_at(Case.from_dict({}), "design.crank_journal_radius_mm", 7.0) == (k0, "")
     with pytest.raises(DesignError, match=r"does not pass through the cam .*allowed: < cam_radius_mm - eccentricity_mm"):
         with_size(Case.from_dict({}), "design.cam_radius_mm", 6.0)
 
