@@ -20,9 +20,8 @@ from rvcad.errors import Case
 from rvdyn.sensitivity import rigidity, rigidity_at, rigidity_elasticities, size_value, with_size
 
 
-def _edge(case: Case, size: str, ok: float, bad: float, why: str) -> str:
-    """Where the valid designs end between a valid and an invalid value (bisection), and why."""
-    k_ok = rigidity(with_size(case, size, ok))
+def _edge(case: Case, size: str, ok: float, k_ok: float, bad: float, why: str) -> str:
+    """Where the valid designs end between a valid value (rigidity k_ok) and an invalid one (bisection), and why."""
     for _ in range(10):
         mid = 0.5 * (ok + bad)
         k, msg = rigidity_at(case, size, mid)
@@ -33,11 +32,12 @@ def _edge(case: Case, size: str, ok: float, bad: float, why: str) -> str:
     return f"none: valid designs end at {ok:.4g} ({k_ok:.1f}): {why}"
 
 
-def size_alone(case: Case, size: str, elasticity: float, target: float) -> str:
-    """The value of one size that gives the target rigidity (the others at their defaults), or why none does."""
+def size_alone(case: Case, k0: float, size: str, elasticity: float, target: float) -> str:
+    """The value of one size that gives the target rigidity (the others at their defaults; k0: the case's own
+    rigidity), or why none does."""
     v = size_value(case, size)
     down = elasticity > 0                       # the direction of the size that lowers the rigidity
-    last_ok, last_k = v, rigidity(case)
+    last_ok, last_k = v, k0
     if isinstance(v, int):
         n = v
         while True:
@@ -56,7 +56,7 @@ def size_alone(case: Case, size: str, elasticity: float, target: float) -> str:
         s = v * factor
         k, why = rigidity_at(case, size, s)
         if k is None:
-            return _edge(case, size, last_ok, s, why)
+            return _edge(case, size, last_ok, last_k, s, why)
         if k <= target:
             root = brentq(lambda x: math.log(rigidity(with_size(case, size, x)) / target), last_ok, s, xtol=1e-4 * v)
             return f"{root:.4g} ({root / v:.2f}x)"
@@ -78,7 +78,7 @@ def main() -> None:
           f"(ln ratio {math.log(a.target / k0):+.3f}); elasticities in {t1 - t0:.1f} s")
     print(f"{'size':44s} {'value':>8s} {'elasticity':>10s}  value alone for the target")
     for r in tab.itertuples():
-        alone = size_alone(case, r.size, r.elasticity, a.target) if abs(r.elasticity) > 0.02 else "(|E| <= 0.02)"
+        alone = size_alone(case, k0, r.size, r.elasticity, a.target) if abs(r.elasticity) > 0.02 else "(|E| <= 0.02)"
         print(f"{r.size:44s} {r.value:8.4g} {r.elasticity:10.3f}  {alone}")
     print(f"total {time.perf_counter() - t0:.1f} s")
 
