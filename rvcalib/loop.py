@@ -1,0 +1,223 @@
+"""The closed loop: measured TE -> residual -> the effects the model lacks -> the updated model.
+
+One estimator over the whole library at once (:mod:`rvcalib.sparse`), iterated with re-linearisation of the
+reducer model through rvdyn (:mod:`rvcalib.reducer_model`); the method is written up in docs/calibration.md.
+
+1. The measured TE of every reading, ``y``; the rig's zero of each test is an unknown constant (a nuisance,
+   projected out of everything, estimated at the end and reported as such).
+2. The library (:mod:`rvcalib.library`) for the dataset's reducer and readings.
+3. At the current state ``theta`` of the solved candidates (start: nothing but what the runs declare), the model
+   TE ``f(theta)`` and its Jacobian ``J``; the reading-error and empirical columns ``R`` are exact and fixed.
+4. The linearised data ``z = y - f(theta) + J theta``, ``z = [J R] b + e``: the sparse estimator's posterior
+   over ``b`` (every candidate at once; the prior scale of each is its tolerance class).
+5. The new state is the posterior mean of the solved parameters; the reducer model is solved there. A step that
+   the model does not follow (its residual worse than the current state's) is halved until it is.
+6. Repeat from 3 until no solved parameter moves more than ``step_tolerance`` posterior standard deviations (or
+   ``max_linearisations``); the last linearisation's posterior is the answer: named effects (credible sets of one
+   physical candidate), groups the data cannot split, unexplained structure (sets of empirical terms) and the
+   intervals, each read from the posterior.
+"""
+from __future__ import annotations
+
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
+from typing import Callable
+
+import numpy as np
+
+from rvdyn.solver import law_from_model
+
+from rvcalib.library import Library, build_library
+from rvcalib.readings import nuisance_columns, ramp_shown, reading_columns
+from rvcalib.reducer_model import ReducerModel
+from rvcalib.result import CalibrationResult, assemble
+from rvcalib.settings import CalibrationSettings
+from rvcalib.refine import refine
+from rvcalib.sparse import Features, credible_sets, fit_sparse
+
+
+def resolved_order(dataset) -> int:
+    """The highest harmonic order of the output angle every run's readings resolve (below half the readings per
+    revolution of the sparsest run)."""
+    per_rev = min(r.n / max(r.revolutions, 1e-9) for r in dataset.runs)
+    return max(1, int(math.floor(per_rev / 2.0)) - 1)
+
+
+class Projector:
+    """Removes each test's constant: the projection onto the complement of the tests' indicator columns."""
+
+    def __init__(self, N: np.ndarray) -> None:
+        self.N = N
+        self.counts = N.sum(axis=0)
+
+    def __call__(self, v: np.ndarray) -> np.ndarray:
+        means = (self.N.T @ v) / (self.counts[:, None] if v.ndim == 2 else self.counts)
+        return v - self.N @ means
+
+    def constants(self, r: np.ndarray) -> np.ndarray:
+        """Each test's constant fitted to ``r``."""
+        return (self.N.T @ r) / self.counts
+
+
+def _scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.ndarray, readings: list) -> tuple:
+    """Prior scales of the solved and the reading parameters, with the two taken from the model's response: the
+    compliance's (the model's own compliance at the runs: the TE per N m of friction torque, which is load) and
+    the empirical terms' (the median RMS TE of a tolerance-class Table 4 effect)."""
+    ts = np.array([c.prior_scale for c in model.candidates for _ in range(c.n_params)])
+    tr = np.array([c.prior_scale for c in readings for _ in range(c.n_params)])
+    names = [c.name for c in model.candidates for _ in range(c.n_params)]
+    if "friction_torque_Nm" in names and "torsional_compliance_arcsec_per_Nm" in names:
+        own = float(np.median(np.abs(J[:, names.index("friction_torque_Nm")])))
+        if own > 0:
+            ts[names.index("torsional_compliance_arcsec_per_Nm")] = own
+    t4 = [i for i, c in enumerate(c for c in model.candidates for _ in range(c.n_params)) if c.family == "table4"]
+    typical = float(np.median(np.sqrt(np.mean((J[:, t4] * ts[t4]) ** 2, axis=0)))) if t4 else 1.0
+    emp = [i for i, c in enumerate(c for c in readings for _ in range(c.n_params)) if c.family == "empirical"]
+    tr[emp] = typical if typical > 0 else 1.0
+    return ts, tr
+
+
+def _next_linearisation(fit, F: Features, n: int, ts: np.ndarray, share: float = 0.99,
+                        most: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """The spread and the columns to renew for the next statistical linearisation.
+
+    Spread: a parameter's posterior standard deviation given that it is an effect where its inclusion probability
+    is at least one half (at least 5 % of its prior scale), else its prior scale (what it would be, were it the
+    effect). Renewed: the parameters of the features that hold the first ``share`` of a supported effect's
+    inclusion probability (at most ``most`` per effect): the ones the posterior may still choose."""
+    spread = ts.copy()
+    renew = np.zeros(n, dtype=bool)
+    for e in fit.effects:
+        if e.prior_variance <= 0:
+            continue
+        order = np.argsort(-e.alpha, kind="stable")
+        k = min(int(np.searchsorted(np.cumsum(e.alpha[order]), share)) + 1, most)
+        for f in order[:k]:
+            a, b = F.starts[f], F.starts[f + 1]
+            if b > n:
+                continue
+            renew[a:b] = True
+            if e.alpha[f] >= 0.5:
+                sd = np.sqrt(np.maximum(np.diag(e.cov_of(F, f)), 0.0))
+                spread[a:b] = np.maximum(sd, 0.05) * ts[a:b]
+    return spread, renew
+
+
+def _active(fit, F: Features, n: int, settings, fixed: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The parameters the posterior has chosen (the fixed features, and the features of pure credible sets with
+    inclusion probability at least one half), split into solved and reading parameters, and every parameter's prior
+    standard deviation (sqrt(V_l) in scaled units: the prior variance of the effect that chose it)."""
+    sd = np.ones(F.X.shape[1])
+    on = np.zeros(F.X.shape[1], dtype=bool)
+    for f in fixed:
+        on[F.starts[f]:F.starts[f + 1]] = True
+    for cs in credible_sets(F, fit, settings.sparse()):
+        if cs.effect < len(fixed):
+            continue
+        if not cs.pure(settings.sparse()):
+            continue
+        e = fit.effects[cs.effect]
+        for f in cs.features:
+            if e.alpha[f] >= 0.5:
+                a, b = F.starts[f], F.starts[f + 1]
+                on[a:b] = True
+                sd[a:b] = math.sqrt(e.prior_variance)
+    idx = np.nonzero(on)[0]
+    return idx[idx < n], idx[idx >= n] - n, sd
+
+
+class _Problem:
+    """What one calibration holds: data, library, model, columns, projection."""
+
+    def __init__(self, dataset, settings: CalibrationSettings, model=None) -> None:
+        self.dataset, self.settings = dataset, settings
+        self.y = np.concatenate([r.te_arcsec for r in dataset.runs])
+        self.ramps, self.ramp_lines = ramp_shown(dataset)
+        self.max_order = settings.max_order or resolved_order(dataset)
+        self.library = build_library(dataset, self.max_order, settings.families, self.ramps)
+        self.solved = ([c for c in self.library if c.solved and c.dense] +
+                       [c for c in self.library if c.solved and not c.dense])
+        self.readings = [c for c in self.library if not c.solved]
+        law = None if settings.contact is None else law_from_model({"contact": settings.contact})
+        self.model = model if model is not None else ReducerModel(dataset, self.solved, law, settings.workers)
+        self.R = (np.column_stack([reading_columns(c, dataset) for c in self.readings]) if self.readings
+                  else np.zeros((self.y.size, 0)))
+        Nc, self.tests = nuisance_columns(dataset)
+        self.proj = Projector(Nc)
+        # features: the dense candidates together as one (always in the model), then one per candidate
+        dense = [c for c in self.solved if c.dense]
+        self.feature_cands = ([dense] if dense else []) + [[c] for c in self.solved + self.readings if not c.dense]
+        self.fixed = (0,) if dense else ()
+        self.starts = np.r_[0, np.cumsum([sum(c.n_params for c in fc) for fc in self.feature_cands])]
+        w = Library(self.solved + self.readings).prior_weights(settings.empirical_weight)
+        self.prior = np.r_[[1.0] if dense else [], w[len(dense):]]
+
+    def features(self, J: np.ndarray, scales) -> Features:
+        ts, tr = scales
+        return Features(self.proj(np.column_stack([J * ts, self.R * tr])), self.starts, self.prior)
+
+
+def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callable[[str], None] | None = None,
+              model=None) -> CalibrationResult:
+    """Calibrate the reducer model of a measured dataset.
+
+    Parameters
+    ----------
+    dataset : MeasuredDataset
+    settings : CalibrationSettings or None
+        Defaults when None.
+    log : callable or None
+        Receives a line per step of progress.
+    model : object or None
+        The forward model (default :class:`rvcalib.reducer_model.ReducerModel` of the dataset); tests may give a
+        stand-in with the same ``candidates``, ``n_params``, ``te``, ``jacobian``, ``case_dict`` and ``groups``.
+
+    Returns
+    -------
+    CalibrationResult
+    """
+    settings = (settings or CalibrationSettings()).validate()
+    log = log or (lambda s: None)
+    t0 = time.perf_counter()
+    pb = _Problem(dataset, settings, model)
+    m, y, proj, R = pb.model, pb.y, pb.proj, pb.R
+    theta = np.zeros(m.n_params)
+    te = m.te(theta)
+    rms_before = float(np.sqrt(np.mean(proj(y - te) ** 2)))
+    log(f"library: {len(pb.library)} candidates ({m.n_params} solved parameters, {R.shape[1]} reading columns); "
+        f"residual RMS {rms_before:.4g} arcsec")
+    pool_cm = ProcessPoolExecutor(settings.workers) if settings.workers > 1 else nullcontext()
+    fit = F = scales = spread = renew = None
+    active_prev: tuple = ()
+    stopped = "max_linearisations"
+    with pool_cm as pool:
+        for it in range(1, settings.max_linearisations + 1):
+            J = m.jacobian(theta, spread, renew, pool)
+            scales = scales or _scales(pb.library, m, J, R, pb.readings)
+            ts, tr = scales
+            F = pb.features(J, scales)
+            z = proj(y - te + J @ theta)
+            fit = fit_sparse(F, z, settings.sparse(), init=fit.effects if fit is not None else None, fixed=pb.fixed)
+            sigma = math.sqrt(fit.sigma2)
+            a_s, a_r, sd = _active(fit, F, m.n_params, settings, pb.fixed)
+            start = fit.coef[:m.n_params] * ts
+            b_r = fit.coef[m.n_params:] * tr
+            spread, renew = _next_linearisation(fit, F, m.n_params, ts)
+            new, b_r, te_new, _ = refine(m, y, proj, R, start, b_r, a_s, a_r, sd * np.concatenate(scales), sigma,
+                                         spread=spread, pool=pool, log=log)
+            moved = float(np.sqrt(np.mean(proj(te_new - te) ** 2)))
+            log(f"linearisation {it}: {fit.n_supported} effects supported, {a_s.size + a_r.size} parameters chosen, "
+                f"sigma {sigma:.4g} arcsec, the model TE moved {moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")
+            theta, te = new, te_new
+            key = (tuple(a_s), tuple(a_r))
+            if key == active_prev and moved <= settings.step_tolerance * sigma:
+                stopped = "converged"
+                break
+            active_prev = key
+            renew = renew | (m.column_kinds() != "pin")
+    return assemble(dataset, pb, F, fit, scales, theta, te, settings,
+                    {"rms_before": rms_before, "stopped_by": stopped, "ramp_lines": pb.ramp_lines, "b_r": b_r,
+                     "seconds": time.perf_counter() - t0, "linearisations": it, "max_order": pb.max_order,
+                     "solves": getattr(m, "solves", 0)})

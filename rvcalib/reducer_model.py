@@ -1,0 +1,370 @@
+"""The forward model of the loop: the reducer's TE at every reading for a state of the physical candidates, and
+its Jacobian.
+
+A *state* is a value of every parameter of the candidates rvdyn solves (:attr:`rvcalib.library.Candidate.solved`:
+Table 4 instances, pin-ring form modes, model options), added to what each run declares. The runs that declare
+the same errors form one case; its conditions (load, direction, readings) are solved together by
+:func:`rvdyn.te.run_te_many` (analytic contacts, the case's contact law: rvdyn's default, the physical law, unless
+the settings say otherwise), exactly at every reading's input angle (modulo one output revolution: the TE repeats
+every revolution). The converged states of the last solve start the next one (a warm start: the same equilibrium
+within the solver tolerance).
+
+The Jacobian's columns are the TE change per unit parameter at the current state, by the kind of response:
+
+* smooth parameters (the eccentricities, phases and holes of Table 4, the model options without a kink): the
+  derivative, from ``jacobian_fn`` (default :func:`sensitivity_jacobian`: one-sided differences, each solved by one
+  linearisation of the equilibrium from the current state, rvdyn's sensitivity solve);
+* a single pin's pitch, radius or radial position: the TE of a zero-backlash ring responds to one pin with a kink
+  (a pin pushed into the loaded flank takes load, one pulled away lifts off), so the column is the central secant
+  over the parameter's current spread (statistical linearisation: the best straight line over the values the
+  parameter may have), each end a sensitivity solve;
+* kinked parameters of every pin or bearing (:attr:`rvcalib.library.Candidate.kink`): the same secant, each end
+  solved to convergence;
+* the pin ring's form modes: the same combination of the single pins' columns as of their errors (superposition).
+
+Where the state is symmetric under a turn of one pin pitch (no error that is not: no single-pin error, pin
+circle offset, sun eccentricity or form mode, declared or estimated), pin k's response at input angle ``a`` is pin
+0's at ``a - k N 360 / Zp`` (the carrier, cranks and discs repeat every pin pitch of output; N the ratio): the
+single pins' columns are then pin 0's secant solved on a uniform grid of :data:`TEMPLATE_PER_PIN` points per pin
+pitch and interpolated (periodic cubic spline) at the shifted readings (:meth:`ReducerModel.pin_templates`; 3 %
+from the pin's own secant in the physical law, where the stage I mesh is not quite periodic in a pin pitch).
+
+Columns are split over ``workers`` processes in contiguous blocks (the same numbers whatever the number of
+workers).
+"""
+from __future__ import annotations
+
+import json
+import math
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from rvcad.errors import Case
+from rvdyn.contacts import ContactLaw
+from rvdyn.te import run_te_many
+
+from rvcalib.library import CaseDelta
+
+
+#: Grid points per pin pitch of output of the pin templates.
+TEMPLATE_PER_PIN = 36
+
+#: Errors that break the symmetry of a turn by one pin pitch (fixed to the housing or the input shaft).
+ASYMMETRIC_KEYS = ("sun_eccentricity", "pin_circle_offset", "pin_pitch")
+
+
+class ModelEvaluationError(ValueError):
+    """The reducer model cannot be evaluated at this state (an interference the contact law cannot hold, no
+    convergence)."""
+
+
+def _solve(case_dict: dict, loads: list, angles: list, law: ContactLaw | None, x_init: list | None = None,
+           max_outer: int | None = None) -> tuple[list, list]:
+    """TE (arcsec) per condition and the converged states; ModelEvaluationError naming the failure."""
+    case = Case.from_dict(case_dict)
+    res = run_te_many(case, "analytic", loads=loads, theta_in_deg=angles, law=law, errors="return",
+                      x_init=x_init, max_outer=max_outer)
+    for r, (L, d) in zip(res, loads):
+        if isinstance(r, Exception):
+            raise ModelEvaluationError(f"the model cannot be solved at load {L:g} N m, direction {d:+d}: {r}")
+    return [r.table["te_arcsec"].to_numpy() for r in res], [r.state for r in res]
+
+
+def sensitivity_jacobian(case_dict: dict, deltas: list, loads: list, angles: list, states: list,
+                         law: ContactLaw | None, steps: list) -> np.ndarray:
+    """Columns d TE / d t of ``case (+) t delta`` by one-sided differences of step ``steps[j]``, each perturbed case
+    solved by one linearisation from ``states`` (rvdyn's sensitivity solve, ``max_outer=1``); rows = the
+    conditions' readings stacked."""
+    base, _ = _solve(case_dict, loads, angles, law, x_init=states, max_outer=1)
+    base = np.concatenate(base)
+    cols = []
+    for delta, h in zip(deltas, steps):
+        acc = CaseDelta()
+        _add_scaled(acc, delta, h)
+        te, _ = _solve(acc.to_dict(case_dict), loads, angles, law, x_init=states, max_outer=1)
+        cols.append((np.concatenate(te) - base) / h)
+    return np.column_stack(cols) if cols else np.zeros((base.size, 0))
+
+
+def _add_scaled(acc: CaseDelta, delta: dict, h: float) -> None:
+    """Add ``h`` times a case delta (``Candidate.deltas`` form) to a case under construction."""
+    for key, v in (delta.get("errors") or {}).items():
+        for obj in (v if isinstance(v, list) and v and isinstance(v[0], dict) else [v]):
+            if isinstance(obj, dict):
+                acc.items.append((key, {**obj, "value": h * float(obj["value"])}))
+            else:
+                acc.pinwise[key] = acc.pinwise.get(key, 0.0) + h * np.asarray(obj, dtype=float)
+    for k, v in (delta.get("model") or {}).items():
+        acc.model[k] = acc.model.get(k, 0.0) + h * float(v)
+
+
+def secant_columns(case_dict: dict, deltas: list, lo: list, hi: list, loads: list, angles: list, states: list,
+                   law: ContactLaw | None, max_outer: int | None) -> np.ndarray:
+    """Columns (TE(case (+) hi_j delta_j) - TE(case (+) lo_j delta_j)) / (hi_j - lo_j), each end solved from
+    ``states`` (``max_outer`` 1: a sensitivity solve; None: to convergence)."""
+    cols = []
+    base = None
+    for delta, a, b in zip(deltas, lo, hi):
+        ends = []
+        for h in (a, b):
+            if h == 0.0:                          # the current state itself
+                if base is None:
+                    base = np.concatenate(_solve(case_dict, loads, angles, law, x_init=states,
+                                                 max_outer=max_outer)[0])
+                ends.append(base)
+                continue
+            acc = CaseDelta()
+            _add_scaled(acc, delta, h)
+            te, _ = _solve(acc.to_dict(case_dict), loads, angles, law, x_init=states, max_outer=max_outer)
+            ends.append(np.concatenate(te))
+        cols.append((ends[1] - ends[0]) / (b - a))
+    return np.column_stack(cols)
+
+
+def _task(args) -> np.ndarray:
+    kind, fn_or_outer, case_dict, deltas, p1, p2, loads, angles, states, law = args
+    if kind == "derivative":
+        return fn_or_outer(case_dict, deltas, loads, angles, states, law, p1)
+    return secant_columns(case_dict, deltas, p1, p2, loads, angles, states, law, fn_or_outer)
+
+
+@dataclass
+class CaseGroup:
+    """The runs that declare the same errors: one case, solved under each run's load and direction."""
+
+    base: dict
+    runs: list                     # indices into dataset.runs
+    loads: list                    # (load_Nm, direction) per run
+    angles: list                   # input angles (deg, modulo one output revolution) per run
+    states: list | None = None
+
+
+@dataclass
+class ReducerModel:
+    """The reducer's TE at the readings for a state of the solved candidates.
+
+    Parameters
+    ----------
+    dataset : MeasuredDataset
+    candidates : list of Candidate
+        The solved candidates, in the order of the state's parameters.
+    law : ContactLaw or None
+        The contact law (None: each case's, rvdyn's default).
+    workers : int
+        Processes for the Jacobian's columns (1: this process).
+    jacobian_fn : callable or None
+        ``fn(case_dict, deltas, loads, angles, states, law, steps) -> (n, m)``; default :func:`sensitivity_jacobian`.
+    """
+
+    dataset: object
+    candidates: list
+    law: ContactLaw | None = None
+    workers: int = 1
+    jacobian_fn: object = None
+    groups: list = field(default_factory=list)
+    solves: int = 0
+
+    def __post_init__(self) -> None:
+        if self.jacobian_fn is None:
+            self.jacobian_fn = sensitivity_jacobian
+        period = self.dataset.period_deg
+        by_key: dict[str, CaseGroup] = {}
+        for i, r in enumerate(self.dataset.runs):
+            base = {k: v for k, v in r.case_dict().items() if k not in ("name", "load_Nm", "direction")}
+            key = json.dumps(base, sort_keys=True)
+            g = by_key.setdefault(key, CaseGroup(base, [], [], []))
+            g.runs.append(i)
+            g.loads.append((float(r.load_Nm), int(r.direction)))
+            g.angles.append(np.mod(r.input_deg, period))
+        self.groups = list(by_key.values())
+        self.offsets = np.cumsum([0] + [r.n for r in self.dataset.runs])
+        self.deltas = [d for c in self.candidates for d in c.deltas()]
+        self.n_params = len(self.deltas)
+        self._lower = np.array([c.lower for c in self.candidates for _ in range(c.n_params)])
+        self._upper = np.array([c.upper for c in self.candidates for _ in range(c.n_params)])
+        self._pin_index = {}
+        self._owner = [c for c in self.candidates for _ in range(c.n_params)]
+        pos = 0
+        for c in self.candidates:
+            inst = dict(c.instance)
+            if c.family == "table4" and "pin" in inst:
+                self._pin_index.setdefault((c.key, inst["pin"]), []).append(pos)
+            pos += c.n_params
+        self._J = None
+
+    def case_dict(self, group: CaseGroup, theta: np.ndarray) -> dict:
+        """The case of a group of runs at state ``theta`` (bounded parameters clipped to their bounds)."""
+        acc = CaseDelta()
+        pos = 0
+        for c in self.candidates:
+            p = np.clip(theta[pos:pos + c.n_params], c.lower, c.upper)
+            c.add_to(acc, p)
+            pos += c.n_params
+        return acc.to_dict(group.base)
+
+    def _place(self, g: CaseGroup, blocks: list, out: np.ndarray) -> None:
+        for i, b in zip(g.runs, blocks):
+            out[self.offsets[i]:self.offsets[i + 1]] = b
+
+    def te(self, theta: np.ndarray) -> np.ndarray:
+        """Model TE (arcsec) at every reading, stacked over the runs; keeps the converged states."""
+        out = np.empty(self.offsets[-1])
+        for g in self.groups:
+            te, states = _solve(self.case_dict(g, theta), g.loads, g.angles, self.law, x_init=g.states)
+            self.solves += 1
+            g.states = states
+            self._place(g, te, out)
+        return out
+
+    def steps(self) -> np.ndarray:
+        """Difference steps of the derivative columns: a tenth of each parameter's prior scale."""
+        return np.array([0.1 * c.prior_scale for c in self.candidates for _ in range(c.n_params)])
+
+    def column_kinds(self) -> np.ndarray:
+        """Per parameter: ``derivative``, ``pin`` (single-pin secant), ``kink`` (converged secant) or ``form``."""
+        out = []
+        for c in self.candidates:
+            kind = ("form" if c.pattern is not None and self._pin_index else
+                    "pin" if any(k == "pin" for k, _ in c.instance) else "kink" if c.kink else "derivative")
+            out += [kind] * c.n_params
+        return np.array(out)
+
+    def jacobian(self, theta: np.ndarray, spread: np.ndarray | None = None, renew: np.ndarray | None = None,
+                 pool: ProcessPoolExecutor | None = None) -> np.ndarray:
+        """The columns of the linearised model at ``theta`` (n, n_params), at the states of the last :meth:`te`
+        (call it first); see the module docstring for the kinds of column.
+
+        ``spread`` (n_params,): each parameter's current spread, the half-width of its secant (default its prior
+        scale). ``renew`` (n_params,) bool: the columns to solve (default all); the others keep their columns of
+        the last call (the form modes are always recombined from the single pins').
+        """
+        kinds = self.column_kinds()
+        spread = self.steps() * 10.0 if spread is None else np.asarray(spread, dtype=float)
+        if renew is None or self._J is None:
+            renew = np.ones(self.n_params, dtype=bool)
+        J = np.zeros((self.offsets[-1], self.n_params)) if self._J is None else self._J.copy()
+        todo = [(kind, np.nonzero((kinds == kind) & renew)[0]) for kind in ("derivative", "pin", "kink")]
+        lo = np.maximum(theta - spread, self._lower) - theta
+        hi = np.minimum(theta + spread, self._upper) - theta
+        steps = self.steps()
+        for g in self.groups:
+            if g.states is None:
+                raise ValueError("jacobian() needs the states of te() at the same theta")
+            case = self.case_dict(g, theta)
+            args, where = [], []
+            tmpl = np.zeros(0, dtype=int)
+            if self.symmetric(g, theta):
+                tmpl = todo[1][1]
+            for kind, idx in todo:
+                if kind == "pin" and tmpl.size:
+                    continue
+                for a, b in _blocks(idx.size, max(1, self.workers)):
+                    sel = idx[a:b]
+                    ds = [self.deltas[j] for j in sel]
+                    if kind == "derivative":
+                        args.append((kind, self.jacobian_fn, case, ds, list(steps[sel]), None, g.loads, g.angles,
+                                     g.states, self.law))
+                    else:
+                        args.append((kind, 1 if kind == "pin" else None, case, ds, list(lo[sel]), list(hi[sel]),
+                                     g.loads, g.angles, g.states, self.law))
+                    where.append(sel)
+            blocks = list(pool.map(_task, args)) if pool is not None and len(args) > 1 else [_task(a) for a in args]
+            self.solves += sum(2 * len(w) for w in where)
+            rows = np.cumsum([0] + [len(a) for a in g.angles])
+            Jg = np.zeros((rows[-1], self.n_params))
+            if tmpl.size:
+                Jg[:, tmpl] = self.pin_templates(g, theta, tmpl, lo, hi)
+                where.append(tmpl)
+                blocks.append(Jg[:, tmpl])
+            done = np.concatenate(where) if where else np.zeros(0, dtype=int)
+            for sel, blk in zip(where, blocks):
+                Jg[:, sel] = blk
+            for k, i in enumerate(g.runs):
+                J[self.offsets[i]:self.offsets[i + 1], done] = Jg[rows[k]:rows[k + 1]][:, done]
+        self._combine_forms(J, kinds)
+        self._J = J
+        return J
+
+    def symmetric(self, group: CaseGroup, theta: np.ndarray) -> bool:
+        """Whether the group's case at ``theta`` repeats under a turn of one pin pitch (see the module docstring)."""
+        pos = 0
+        for c in self.candidates:
+            asym = c.pattern is not None or "pin" in dict(c.instance) or c.key in ("sun_eccentricity",
+                                                                                    "pin_circle_offset")
+            if asym and np.any(theta[pos:pos + c.n_params] != 0.0):
+                return False
+            pos += c.n_params
+        errors = group.base.get("errors") or {}
+        return not any(k in ASYMMETRIC_KEYS for k in errors) and not any(
+            isinstance(v, list) or (isinstance(v, dict) and "pin" in v) for v in errors.values())
+
+    def pin_templates(self, group: CaseGroup, theta: np.ndarray, idx: np.ndarray, lo: np.ndarray,
+                      hi: np.ndarray) -> np.ndarray:
+        """The single-pin secant columns ``idx`` of a symmetric group from pin 0's, solved on a uniform grid and
+        shifted (see the module docstring); rows = the group's readings stacked."""
+        d = self.dataset.design
+        zp, ratio = int(d.z_pins), float(d.ratio)
+        period = ratio * 360.0
+        M = TEMPLATE_PER_PIN * zp
+        grid = np.arange(M) * period / M
+        angles = [grid if dd > 0 else grid[::-1] for _, dd in group.loads]
+        case = self.case_dict(group, theta)
+        base, states = _solve(case, group.loads, angles, self.law)
+        self.solves += 1
+        out = np.empty((sum(len(a) for a in group.angles), idx.size))
+        made: dict = {}
+        for col, j in enumerate(idx):
+            c = self._owner[j]
+            p = dict(c.instance)["pin"]
+            key = (c.key, c.side, float(lo[j]), float(hi[j]))
+            if key not in made:
+                pin0 = self._pin_index[(c.key, 0)][0 if c.side > 0 else -1]
+                cols = secant_columns(case, [self.deltas[pin0]], [lo[j]], [hi[j]], group.loads, angles, states,
+                                      self.law, 1)[:, 0]
+                self.solves += 2
+                rows = np.cumsum([0] + [len(a) for a in angles])
+                made[key] = [_periodic(a, cols[rows[k]:rows[k + 1]], period) for k, a in enumerate(angles)]
+            shift = p * period / zp
+            out[:, col] = np.concatenate([sp(np.mod(a - shift, period)) for sp, a in zip(made[key], group.angles)])
+        return out
+
+    def _combine_forms(self, J: np.ndarray, kinds: np.ndarray) -> None:
+        """The form modes' columns as the combination of the single pins' columns their patterns give (each pin's
+        column the mean of its two sides' secants)."""
+        pos = 0
+        for c in self.candidates:
+            if kinds[pos] == "form":
+                cols = np.column_stack([J[:, self._pin_index[(c.key, p)]].mean(axis=1)
+                                        for p in range(len(c.pattern[0]))])
+                for j, pat in enumerate(c.pattern):
+                    J[:, pos + j] = cols @ np.asarray(pat)
+            pos += c.n_params
+
+
+def _periodic(angles: np.ndarray, values: np.ndarray, period: float) -> CubicSpline:
+    """Periodic cubic spline of values on a uniform grid of angles over one period."""
+    o = np.argsort(angles)
+    return CubicSpline(np.r_[angles[o], period], np.r_[values[o], values[o][0]], bc_type="periodic")
+
+
+def _blocks(n: int, parts: int) -> list:
+    """Contiguous (start, stop) blocks splitting n items into at most ``parts`` non-empty ones."""
+    cuts = np.linspace(0, n, min(parts, max(n, 1)) + 1).astype(int)
+    return [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+
+
+def clip_state(candidates: list, theta: np.ndarray) -> np.ndarray:
+    """The state with every bounded parameter inside its bounds."""
+    out = theta.copy()
+    pos = 0
+    for c in candidates:
+        out[pos:pos + c.n_params] = np.clip(out[pos:pos + c.n_params], c.lower, c.upper)
+        pos += c.n_params
+    return out
+
+
+def finite(x: float) -> bool:
+    return isinstance(x, float) and math.isfinite(x)

@@ -1,0 +1,241 @@
+"""What the loop reports, read from the estimator's posterior: named effects with their intervals, groups the
+data cannot split, unexplained structure, the tests' constants, and the fit before and after.
+
+* A *named effect* is a pure credible set holding one physical candidate. Its value is the posterior mean of its
+  parameters given that it is the effect; its 95 % interval is that of the marginal posterior of the parameter,
+  a mixture of no effect (probability 1 - alpha) and the Gaussian posterior given the effect (alpha): the
+  selection's uncertainty is in the interval. Two components (an eccentricity) are reported as a magnitude and an
+  angle with the components' covariance; the magnitude's interval is the delta method's.
+* A *group* is a pure credible set of several candidates: each would explain the same part of the data, with the
+  size given (its posterior mean given that it is the one; a size beyond the candidate's physical bounds is
+  reported as unbounded) and its probability.
+* *Unexplained* structure is a pure credible set of empirical terms only (an order, a load- or direction-dependent
+  term the physical library does not give); a set mixing both is a group "physical or unexplained".
+* A *diffuse* set (members that do not explain the same signal) names nothing; its effect stays in the fit.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy import optimize, stats
+
+from rvcalib.sparse import credible_sets
+
+
+@dataclass
+class NamedEffect:
+    """A physical effect the data name (see the module docstring)."""
+
+    name: str
+    key: str
+    family: str
+    instance: dict
+    unit: str
+    value: float
+    angle_deg: float | None
+    components: list
+    cov: list
+    ci95: list
+    probability: float
+    meaning: str
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def line(self) -> str:
+        ang = f" at {self.angle_deg:.1f} deg" if self.angle_deg is not None else ""
+        return (f"{self.name} = {self.value:+.4g} {self.unit}{ang} [{self.ci95[0]:.4g}, {self.ci95[1]:.4g}] "
+                f"(probability {self.probability:.3f})")
+
+
+@dataclass
+class CalibrationResult:
+    """The result of :func:`rvcalib.loop.calibrate` (:meth:`to_dict` is the JSON)."""
+
+    effects: list
+    groups: list
+    unexplained: list
+    diffuse: list
+    nuisance: list
+    rms_before: float
+    rms_after: float
+    noise_arcsec: float
+    sigma_arcsec: float
+    stopped_by: str
+    cap_binds: bool
+    seconds: float
+    linearisations: int
+    settings: dict
+    notes: list
+    reducer: dict
+    calibrated_case: dict
+    residuals: list = field(default_factory=list, repr=False)
+
+    def to_dict(self) -> dict:
+        d = {k: v for k, v in self.__dict__.items() if k != "residuals"}
+        d["effects"] = [e.to_dict() for e in self.effects]
+        return json.loads(json.dumps(d, default=_jsonable))
+
+    @property
+    def status(self) -> str:
+        """``explained`` when the residual is at the noise (within 1.2 x), else ``residual left``."""
+        return "explained" if self.rms_after <= 1.2 * self.noise_arcsec else "residual left"
+
+
+def _jsonable(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"{type(o).__name__} is not JSON serialisable")
+
+
+def mixture_interval(alpha: float, m: float, s: float, level: float = 0.95) -> tuple[float, float]:
+    """Central interval of the mixture (1 - alpha) delta_0 + alpha N(m, s^2)."""
+    if s <= 0:
+        return (min(0.0, m), max(0.0, m)) if alpha < 1 else (m, m)
+
+    def cdf(x: float) -> float:
+        return (1.0 - alpha) * (x >= 0.0) + alpha * stats.norm.cdf((x - m) / s)
+
+    out = []
+    for q in ((1 - level) / 2, (1 + level) / 2):
+        lo, hi = min(0.0, m) - 10 * s, max(0.0, m) + 10 * s
+        if cdf(0.0) >= q and cdf(-1e-300) < q:
+            out.append(0.0)
+            continue
+        out.append(float(optimize.brentq(lambda x: cdf(x) - q, lo, hi)))
+    return out[0], out[1]
+
+
+def _member(c, mean: np.ndarray, tau: np.ndarray, prob: float) -> dict:
+    v = mean * tau
+    size, ang = c.size(v)
+    bounded = all(c.lower <= x <= c.upper for x in v)
+    return {"name": c.effect_name, "key": c.key, "family": c.family, "instance": dict(c.instance), "unit": c.unit,
+            "value": float(size) if bounded else "unbounded", "angle_deg": ang, "probability": prob}
+
+
+def _effect(c, alpha: float, m: np.ndarray, S: np.ndarray, level: float) -> NamedEffect:
+    """A named effect from its parameters' posterior given the effect (mean m, covariance S, physical units) and
+    the probability alpha that it is an effect at all."""
+    size, ang = c.size(m)
+    if c.polar:
+        g = m / max(size, 1e-300)
+        se = math.sqrt(max(float(g @ S @ g), 0.0))
+        z = stats.norm.ppf(0.5 + level / 2)
+        ci = [max(0.0, size - z * se), size + z * se]
+    else:
+        ci = list(mixture_interval(alpha, float(m[0]), math.sqrt(max(float(S[0, 0]), 0.0)), level))
+    return NamedEffect(c.effect_name, c.key, c.family, dict(c.instance), c.unit, float(size), ang,
+                       [float(x) for x in m], S.tolist(), ci, float(alpha), c.meaning)
+
+
+def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float) -> NamedEffect:
+    """The named effect of candidate c (feature f) from every single effect that includes it."""
+    sl = slice(F.starts[f], F.starts[f + 1])
+    parts = [(e.alpha[f], e.mean[sl], e.cov_of(F, f)) for e in effects if e.prior_variance > 0 and e.alpha[f] > 1e-3]
+    a_tot = min(1.0, sum(a for a, _, _ in parts))
+    m = sum(a * mu for a, mu, _ in parts) / max(a_tot, 1e-300)
+    S = sum(a * (cv + np.outer(mu, mu)) for a, mu, cv in parts) / max(a_tot, 1e-300) - np.outer(m, m)
+    return _effect(c, a_tot, m * tau, S * np.outer(tau, tau), level)
+
+
+def _unexplained(members: list, cands: list) -> dict:
+    ms = [m for m in members if m["family"] == "empirical"]
+    c = next(c for c in cands if c.effect_name == ms[0]["name"])
+    return {"label": ms[0]["name"], "order": c.order, "kind": c.key, "amplitude_arcsec": ms[0]["value"],
+            "phase_deg": ms[0]["angle_deg"], "probability": sum(m["probability"] for m in ms), "members": members}
+
+
+def read_dense(fc: list, e, F, tau: np.ndarray, level: float) -> tuple[list, list]:
+    """The always-estimated candidates (one fixed effect over all of them): each named where its interval excludes
+    zero, unless its posterior correlation with another is so strong (|r| > 0.95) that only their combination is
+    determined: such a pair is a group with the size each would have alone."""
+    m = e.mean[F.starts[0]:F.starts[1]] * tau
+    S = e.cov_of(F, 0) * np.outer(tau, tau)
+    sd = np.sqrt(np.maximum(np.diag(S), 1e-300))
+    corr = S / np.outer(sd, sd)
+    named, groups = [], []
+    pos, spans = 0, []
+    for c in fc:
+        spans.append(slice(pos, pos + c.n_params))
+        pos += c.n_params
+    tied = set()
+    for i in range(len(fc)):
+        for j in range(i + 1, len(fc)):
+            if fc[i].n_params == fc[j].n_params == 1 and abs(corr[spans[i], spans[j]][0, 0]) > 0.95:
+                tied |= {i, j}
+                members = []
+                for k, o in ((i, j), (j, i)):
+                    a, b = spans[k].start, spans[o].start
+                    alone = m[a] - S[a, b] / S[b, b] * m[b]      # its posterior mean were the other zero
+                    members.append({"name": fc[k].effect_name, "key": fc[k].key, "family": fc[k].family,
+                                    "instance": dict(fc[k].instance), "unit": fc[k].unit, "value": float(alone),
+                                    "angle_deg": None, "probability": 1.0})
+                groups.append({"kind": "physical", "coverage": level, "purity": float(abs(corr[a, b])),
+                               "members": members})
+    for i, c in enumerate(fc):
+        if i in tied:
+            continue
+        eff = _effect(c, 1.0, m[spans[i]], S[spans[i], spans[i]], level)
+        if eff.ci95[0] > 0 or eff.ci95[1] < 0 or (c.polar and eff.ci95[0] > 0):
+            named.append(eff)
+    return named, groups
+
+
+def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed: tuple) -> tuple:
+    """Named effects, groups, unexplained structure and diffuse sets from a fit (see the module docstring)."""
+    level = settings.coverage
+    named, groups, unexplained, diffuse = [], [], [], []
+    for f in fixed:
+        n, g = read_dense(feature_cands[f], fit.effects[f], F, tau[F.starts[f]:F.starts[f + 1]], level)
+        named += n
+        groups += g
+    cands = [fc[0] for fc in feature_cands]
+    for cs in sorted(credible_sets(F, fit, settings.sparse()), key=lambda s: -s.log_bf):
+        if cs.effect < len(fixed):
+            continue
+        eff = fit.effects[cs.effect]
+        members = [_member(cands[f], eff.mean[F.starts[f]:F.starts[f + 1]], tau[F.starts[f]:F.starts[f + 1]], p)
+                   for f, p in zip(cs.features, cs.probabilities)]
+        info = {"members": members, "coverage": cs.coverage, "purity": cs.purity, "log_bf": cs.log_bf}
+        if not cs.pure(settings.sparse()):
+            if all(d["members"] != members for d in diffuse):
+                diffuse.append(info)
+            continue
+        fams = {cands[f].family for f in cs.features}
+        if cs.size == 1 and cands[cs.features[0]].physical:
+            f = cs.features[0]
+            if all(e.name != cands[f].effect_name for e in named):
+                named.append(_named(cands[f], fit.effects, f, F, tau[F.starts[f]:F.starts[f + 1]], level))
+        elif fams == {"empirical"}:
+            unexplained.append(_unexplained(members, cands))
+        else:
+            info["kind"] = "physical" if "empirical" not in fams else "physical or unexplained"
+            groups.append(info)
+    return named, groups, unexplained, diffuse
+
+
+def assemble(dataset, pb, F, fit, scales, theta, te, settings, info: dict) -> CalibrationResult:
+    """The result of a finished loop (see :func:`rvcalib.loop.calibrate`); ``pb`` the calibration's problem."""
+    tau = np.concatenate(scales)
+    named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed)
+    resid = pb.y - te - pb.R @ info["b_r"]
+    consts = pb.proj.constants(resid)
+    r = pb.proj(resid)
+    offs = np.cumsum([0] + [run.n for run in dataset.runs])
+    m = pb.model
+    case = m.case_dict(m.groups[0], theta) if hasattr(m, "groups") and m.groups else {}
+    return CalibrationResult(
+        effects=named, groups=groups, unexplained=unexplained, diffuse=diffuse,
+        nuisance=[{"test": t, "constant_arcsec": float(c)} for t, c in zip(pb.tests, consts)],
+        rms_before=info["rms_before"], rms_after=float(np.sqrt(np.mean(r ** 2))),
+        noise_arcsec=float(dataset.noise_arcsec()), sigma_arcsec=float(math.sqrt(fit.sigma2)),
+        stopped_by=info["stopped_by"], cap_binds=fit.n_supported - len(pb.fixed) >= settings.max_effects,
+        seconds=float(info["seconds"]), linearisations=info["linearisations"], settings=settings.to_dict(),
+        notes=list(pb.library.notes) + list(info["ramp_lines"]), reducer=dataset.reducer(), calibrated_case=case,
+        residuals=[r[offs[i]:offs[i + 1]] for i in range(len(dataset.runs))])

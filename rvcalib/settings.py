@@ -1,0 +1,90 @@
+"""The loop's settings: one frozen object, validated in one place, echoed into the result."""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+from rvcalib.library import FAMILIES
+from rvcalib.sparse import SparseSettings
+
+CONTACTS = (None, "physical", "impact")
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """What :func:`rvcalib.loop.calibrate` does, with its defaults.
+
+    Attributes
+    ----------
+    max_effects : int
+        Most single effects the estimator may use (L of :mod:`rvcalib.sparse`). A cap, not a choice: the data
+        choose how many are supported; the result says when every one was used (the cap binds).
+    coverage : float
+        Level of the credible sets and of the intervals (0.95).
+    min_purity : float
+        Smallest correlation of the fitted signals of a credible set's members for the set to be reported.
+    empirical_weight : float
+        Prior weight of the whole empirical block, in units of one physical type's weight.
+    max_order : int or None
+        Highest harmonic order of the empirical block (default: the highest the sparsest run's readings resolve).
+    max_linearisations : int
+        Most linearisations of the reducer model (the estimator is re-run at each).
+    step_tolerance : float
+        The iteration has converged when the last linearisation's step changes the model TE by at most this
+        fraction of the noise (RMS over the readings).
+    workers : int
+        Processes for the Jacobian's columns.
+    contact : str or None
+        The contact law of the reducer model: None (each case's, rvdyn's default: physical), physical or impact.
+    rated_Nm : float or None
+        Rated torque of the reducer for its datasheet (N m); None: no datasheet is computed for a design other
+        than the default.
+    families : tuple of str
+        Candidate families in the library.
+    """
+
+    max_effects: int = 30
+    coverage: float = 0.95
+    min_purity: float = 0.5
+    empirical_weight: float = 1.0
+    max_order: int | None = None
+    max_linearisations: int = 8
+    step_tolerance: float = 0.1
+    workers: int = 1
+    contact: str | None = None
+    rated_Nm: float | None = None
+    families: tuple = FAMILIES
+
+    def validate(self) -> "CalibrationSettings":
+        """Return self, or raise ValueError naming the field, its value and what is allowed."""
+        self.sparse().validate()
+
+        def bad(name: str, allowed: str) -> None:
+            raise ValueError(f"settings.{name} = {getattr(self, name)!r} is not allowed: {allowed}")
+
+        if not (math.isfinite(self.empirical_weight) and self.empirical_weight > 0):
+            bad("empirical_weight", "a finite number > 0")
+        if self.max_order is not None and not (isinstance(self.max_order, int) and 1 <= self.max_order <= 5000):
+            bad("max_order", "None or an integer in 1..5000")
+        if not (isinstance(self.max_linearisations, int) and 1 <= self.max_linearisations <= 100):
+            bad("max_linearisations", "an integer in 1..100")
+        if not (math.isfinite(self.step_tolerance) and self.step_tolerance > 0):
+            bad("step_tolerance", "a finite number > 0")
+        if not (isinstance(self.workers, int) and 1 <= self.workers <= 64):
+            bad("workers", "an integer in 1..64")
+        if self.contact not in CONTACTS:
+            bad("contact", f"one of {list(CONTACTS)}")
+        if self.rated_Nm is not None and not (math.isfinite(self.rated_Nm) and 0 < self.rated_Nm <= 20000):
+            bad("rated_Nm", "None or a number in (0, 20000] N m")
+        if not self.families or any(f not in FAMILIES for f in self.families):
+            bad("families", f"a non-empty tuple from {list(FAMILIES)}")
+        return self
+
+    def sparse(self) -> SparseSettings:
+        """The estimator's part of the settings."""
+        return SparseSettings(max_effects=self.max_effects, coverage=self.coverage, min_purity=self.min_purity)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["families"] = list(self.families)
+        return d
