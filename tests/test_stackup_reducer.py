@@ -56,6 +56,7 @@ def test_bad_reducer_is_named(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_study_on_the_three_crank_rv160n_example(tmp_path, capsys):
     """The RV-160N-like example (examples/designs/rv160n.json, a case file: three cranks, ratio 81): the study
     runs on it, and the Monte Carlo draws every instance of the crank-wise errors on all three cranks (a planet

@@ -21,6 +21,7 @@ def sweeps():
                           points=5).figures for n in (2, 3)}
 
 
+@pytest.mark.slow
 def test_budget_per_crank_adds_up_to_the_part(sweeps) -> None:
     for n, f in sweeps.items():
         per = f["budget_per_crank"]
@@ -34,6 +35,7 @@ def test_budget_per_crank_adds_up_to_the_part(sweeps) -> None:
         assert values[1] == pytest.approx(values[2], rel=1e-6), part
 
 
+@pytest.mark.slow
 def test_three_cranks_are_stiffer_as_parallel_load_paths(sweeps) -> None:
     """Each crank carries 1/n of the torque: a part whose deflection goes as F^p (per crank) winds the output up
     by n (T/n)^(p+1)-like sums, so from two cranks to three its share scales by (2/3)^p; the carrier's pillars
