@@ -87,7 +87,7 @@ class Reducer:
         unless ``state`` is given).
     tolerance_mm : float
         B-spline budget of the exact curves (cycloid envelope, involute flanks), mm (default 1e-4).
-    state : (theta_out_rad, (psi_0, psi_1) rad) or None
+    state : (theta_out_rad, (psi_0, ..., psi_(n-1)) rad: one per crank) or None
         Explicit output and crank angles (e.g. a solved pose from ``rvdyn``).
     check : bool
         Run :func:`rvcad.check.check_case` first (a case that cannot give valid solids raises
