@@ -17,7 +17,11 @@ What the "rig" does, per run:
    (``amplitude * cos(k theta_out + phase)``, arcsec).
 4. A start-up transient ``A exp(-i / tau)`` (arcsec, sample i) added to the output reading of the
    first samples of chosen runs; such runs are recorded ``extra_revolutions`` longer.
-5. Duplicated samples (a row written twice) at random places.
+5. The rig's zero per test: a rig zeroes its TE at a homing before each test, so every run of one
+   test reads the TE plus the same unknown constant (``test_offsets``, arcsec, added to the output
+   reading; conventions.md, "Measured-data format"). The dataset does not record which runs share a
+   test; the answer file does (``test_offsets``, ``run_tests``).
+6. Duplicated samples (a row written twice) at random places.
 """
 from __future__ import annotations
 
@@ -56,7 +60,8 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
     Returns
     -------
     list of dict
-        ``name, key, value, unit`` (magnitude for two-component effects, with ``angle_deg``).
+        ``name, key, value, unit`` (magnitude for two-component effects, with ``angle_deg``); a Table 4
+        error also has its ``instance`` (``{}`` for the all-pins instance of a pin-wise error).
     """
     out: list[dict[str, Any]] = []
     for key, spec in (hidden.get("errors") or {}).items():
@@ -73,6 +78,7 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
                 inst = {k: item.get(k, et.defaults[k]) for k in et.instance_keys}
             name = key + ("[" + ",".join(f"{k}={v}" for k, v in inst.items()) + "]" if inst else "")
             d = {"name": name, "key": key, "value": float(item["value"]), "unit": et.unit}
+            d["instance"] = dict(inst)
             if et.has_angle:
                 d["angle_deg"] = float(item.get("angle_deg", 0.0))
             out.append(d)
@@ -107,7 +113,7 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
                      revolutions: float = 1.0, transient: dict[str, Any] | None = None, duplicates: int = 0,
                      seed: int = 0, answer_path: str | Path | None = None, speed_rpm: float | None = None,
                      start_deg: float = 0.0, design: dict[str, Any] | None = None,
-                     write_design: bool = True) -> Path:
+                     write_design: bool = True, test_offsets: dict[str, float] | None = None) -> Path:
     """Write a simulated measured dataset and its answer file.
 
     Parameters
@@ -116,7 +122,9 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         Dataset folder to create (``runs.csv``, ``samples.csv``).
     runs : list of dict
         Each ``{"run", "load_Nm", "direction"}`` plus optional ``"declared": {error key: value}``
-        (default instance, written to runs.csv and used in the truth) and ``"temperature_C"``.
+        (default instance, written to runs.csv and used in the truth), ``"temperature_C"`` and
+        ``"test"`` (the id of the test, one homing of the rig, the run belongs to; default the run's
+        own id).
     hidden : dict or None
         The truth the dataset does not declare: ``"errors"`` (case JSON errors, any instance),
         ``"model"`` (rvdyn model options), ``"measurement"`` (``output_encoder_eccentricity_um``,
@@ -154,6 +162,9 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     write_design : bool
         Write the design into the dataset folder as ``design.json`` (only for a non-default design),
         as a bench that knows its reducer would.
+    test_offsets : dict or None
+        The rig's zero of each test: test id -> constant (arcsec) added to the TE reading of every
+        run of that test (tests not listed: 0). Not written to the dataset; the answer file holds it.
 
     Returns
     -------
@@ -172,6 +183,7 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         raise ValueError(f"revolutions {revolutions} must be >= 1 (the format needs one output revolution)")
     if not runs:
         raise ValueError("runs must list at least one run")
+    run_tests, offsets = _test_offsets(runs, test_offsets)
     rng = np.random.default_rng(seed)
     out = Path(out_dir)
     des = Design.from_dict(design)
@@ -230,6 +242,7 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         out_read = th_out + np.degrees(eo * 1e-3 / OUTPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_out) + po))
         in_read = th_in + np.degrees(ei * 1e-3 / INPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_in) + pi_))
         out_read = out_read * (1.0 + 1e-6 * float(meas.get("output_encoder_scale_ppm", 0.0)))
+        out_read = out_read + offsets.get(run_tests[rid], 0.0) / 3600.0
         out_read = out_read + rng.normal(0.0, noise_arcsec, M) / 3600.0
         in_read = in_read + rng.normal(0.0, input_noise_arcsec, M) / 3600.0
         t = k * 0.01
@@ -262,13 +275,28 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
               "start_deg": float(start_deg), "revolutions": revolutions,
               "transient": tr or None, "duplicates": int(duplicates), "seed": seed,
               "encoder_radii_mm": {"output": OUTPUT_ENCODER_RADIUS_MM, "input": INPUT_ENCODER_RADIUS_MM},
-              "design": des.to_dict(), "ratio": ratio}
+              "design": des.to_dict(), "ratio": ratio, "test_offsets": offsets, "run_tests": run_tests}
     ap = Path(answer_path) if answer_path is not None else out.parent / f"{out.name}.answer.json"
     ap.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(ap) as tmp:
         with open(tmp, "w", encoding="utf-8") as fh:
             json.dump(answer, fh, indent=2)
     return ap
+
+
+def _test_offsets(runs: list[dict[str, Any]], test_offsets: dict[str, float] | None
+                  ) -> tuple[dict[str, str], dict[str, float]]:
+    """Each run's test id and the validated offsets (test id -> arcsec) of ``test_offsets``."""
+    run_tests = {str(r["run"]): str(r.get("test", r["run"])) for r in runs}
+    offsets: dict[str, float] = {}
+    for t, v in (test_offsets or {}).items():
+        if str(t) not in run_tests.values():
+            raise ValueError(f"test_offsets key {t!r} is no run's test; allowed: {sorted(set(run_tests.values()))}")
+        x = float(v)
+        if not math.isfinite(x):
+            raise ValueError(f"test_offsets[{t!r}] = {v!r} must be a finite number of arcsec")
+        offsets[str(t)] = x
+    return run_tests, offsets
 
 
 def standard_runs(loads: tuple[float, ...] = (10.0, 30.0), directions: tuple[int, ...] = (1, -1),
