@@ -25,7 +25,8 @@ appends to ``benchmarks/results.csv`` (:mod:`results_log`, benchmark ``bench_loo
 ``<method>_<set>_passed`` ...; ``<method>_<set>_subset_...`` for a subset of the seeds).
 
 Run: ``python benchmarks/bench_loop.py --set dev|heldout [--method old|new] [--seeds N ...] [--workers 1|2]
-[--out DIR] [--draws DIR] [--fresh] [--verbose]``.
+[--out DIR] [--draws DIR] [--fresh] [--verbose] [--report-only]`` (``--report-only``: the table of the draws
+already run, none run, nothing recorded).
 """
 from __future__ import annotations
 
@@ -114,9 +115,9 @@ def draw_line(rec: dict[str, Any]) -> str:
     if rec["error"]:
         return f"seed {rec['seed']}: {verdict} (raised) wall {rec['wall_s']:.0f} s"
     verd = [e["verdict"] for e in s["effects"]]
-    comp = "none" if s["compliance"] is None else f"{s['compliance']:.4g}"
+    comp = "/".join("none" if x is None else f"{x:.4g}" for x in (s["compliance"], s["compliance_truth"]))
     return (f"seed {rec['seed']}: {verdict}  RMS {s['rms_after']:.4g}/{s['noise']:.4g} = {s['rms_ratio']:.2f}x  "
-            f"compliance {comp}/{s['compliance_truth']:.4g}  named {len(verd)} (off {verd.count('off')}, false "
+            f"compliance {comp}  named {len(verd)} (off {verd.count('off')}, false "
             f"{verd.count('false name')}, small extra {verd.count('small extra')})  covered "
             f"{s['covered']}/{s['n_intervals']}  groups {len(s['groups'])}  wall {rec['wall_s']:.0f} s  "
             f"CPU {rec['cpu_s']:.0f} s  stopped by: {rec['result'].get('stopped_by', '')}")
@@ -156,6 +157,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--draws", default=None, help="folder of the cached draws (default OUT/draws)")
     ap.add_argument("--fresh", action="store_true", help="run draws already scored in OUT again")
     ap.add_argument("--verbose", action="store_true", help="print the method's progress (old loop)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="print the draws already run in OUT (scored again), run none and record nothing")
     args = ap.parse_args(argv)
     seeds = seeds_of(args.set, args.seeds)
     out = Path(args.out or f"bench-loop-{args.method}-{args.set}")
@@ -169,6 +172,8 @@ def main(argv: list[str] | None = None) -> int:
         old = json.loads(path.read_text()) if path.is_file() and not args.fresh else None
         if old is not None and old.get("method") == args.method:
             rec, note = old, "  (run by an earlier call, scored again)"
+        elif args.report_only:
+            continue
         else:
             rec, note = run_draw(seed, args.set, args.method, draws, args.workers, args.verbose), ""
             save(rec, path)             # the run is kept even if the scoring fails
@@ -179,13 +184,17 @@ def main(argv: list[str] | None = None) -> int:
         for line in (([rec["error"]] if rec["error"] else []) + rec["score"]["reasons"]
                      + score_lines(rec["score"])):
             print("    " + line, flush=True)
+    if not recs:
+        print("no draw run yet")
+        return 1
     summ = summary(recs)
     cov = "none named" if summ["coverage"] is None else f"{summ['coverage']:.1%}"
     print(f"SUMMARY {args.method} {args.set}: {summ['passed']}/{summ['draws']} pass ({summ['raised']} raised); "
           f"pooled coverage {summ['covered']}/{summ['n_intervals']} = {cov}; median wall "
           f"{summ['median_wall_s']:.0f} s, median CPU {summ['median_cpu_s']:.0f} s ({args.workers} worker(s); "
           f"load average now {os.getloadavg()[0]:.1f})", flush=True)
-    record_summary(args.method, args.set, set(seeds) == set(SETS[args.set]), summ)
+    if not args.report_only:
+        record_summary(args.method, args.set, set(seeds) == set(SETS[args.set]), summ)
     return 0 if summ["passed"] == summ["draws"] else 1
 
 

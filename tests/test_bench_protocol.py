@@ -280,7 +280,11 @@ def test_bench_loop_fails_a_raising_method_and_resumes(tmp_path, monkeypatch, ca
     out = capsys.readouterr().out
     assert "seed 101: FAIL (raised)" in out and "SUMMARY old dev: 0/1 pass (1 raised)" in out
     bench_loop.main(argv)                                              # reused, not run again
-    assert calls == ["old"]
+    assert calls == ["old"] and len(recorded) == 2
+    bench_loop.main(argv + ["--report-only"])                          # printed, not recorded
+    assert calls == ["old"] and len(recorded) == 2
+    assert bench_loop.main(["--set", "dev", "--out", str(tmp_path / "empty"), "--report-only"]) == 1
+    assert calls == ["old"] and "no draw run yet" in capsys.readouterr().out
     bench_loop.main(argv + ["--fresh"])
     assert calls == ["old", "old"]
     assert json.loads(ap.read_text())["test_offsets"] == {}
