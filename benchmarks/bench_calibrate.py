@@ -29,11 +29,9 @@ realistic mode prints wall and CPU seconds and writes each draw's result JSON).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import re
-import resource
 import sys
 import tempfile
 import time
@@ -43,9 +41,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench_common import cpu_seconds, forward_workers  # noqa: E402
 from rvcad.errors import ERROR_TYPES  # noqa: E402
 from rvcalib.dataset import read_dataset  # noqa: E402
-from rvcalib import forward  # noqa: E402
 from rvcalib.forward import cache_stats, clear_cache  # noqa: E402
 from rvcalib.effects import polar_to_xy  # noqa: E402
 from rvcalib.identify import Calibrator, calibrate  # noqa: E402
@@ -55,31 +53,6 @@ from rvcalib.simulate import simulate_dataset, standard_runs  # noqa: E402
 
 TARGET_S = 60.0
 DRAW_TARGET_S = 180.0
-
-
-@contextlib.contextmanager
-def forward_workers(workers: int):
-    """The loop's forward model on ``workers`` local processes for the block (as ``rv-calibrate --workers``);
-    one process keeps the in-process runner."""
-    if workers <= 1:
-        yield
-        return
-    from rvdyn.runner import Runner
-
-    runner = Runner(executor=workers, memory_bytes=forward.CACHE_BYTES, law=forward.forward_runner().law,
-                    warm_bytes=forward.WARM_BYTES)
-    prev = forward.use_runner(runner)
-    try:
-        yield
-    finally:
-        forward.use_runner(prev)
-        runner.close()
-
-
-def cpu_seconds() -> float:
-    """CPU seconds of this process and of its finished children (the worker processes, once closed)."""
-    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return time.process_time() + ch.ru_utime + ch.ru_stime
 
 
 def realistic_hidden(rng: np.random.Generator, compliance: float = 0.2) -> dict:

@@ -17,12 +17,17 @@ What the "rig" does, per run:
    (``amplitude * cos(k theta_out + phase)``, arcsec).
 4. A start-up transient ``A exp(-i / tau)`` (arcsec, sample i) added to the output reading of the
    first samples of chosen runs; such runs are recorded ``extra_revolutions`` longer.
-5. Duplicated samples (a row written twice) at random places.
+5. The rig's zero per test: a rig zeroes its TE at a homing before each test, so every run of one
+   test reads the TE plus the same unknown constant (``test_offsets``, arcsec, added to the output
+   reading; conventions.md, "Measured-data format"). The dataset does not record which runs share a
+   test; the answer file does (``test_offsets``, ``run_tests``).
+6. Duplicated samples (a row written twice) at random places.
 """
 from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +61,8 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
     Returns
     -------
     list of dict
-        ``name, key, value, unit`` (magnitude for two-component effects, with ``angle_deg``).
+        ``name, key, value, unit`` (magnitude for two-component effects, with ``angle_deg``); a Table 4
+        error also has its ``instance`` (``{}`` for the all-pins instance of a pin-wise error).
     """
     out: list[dict[str, Any]] = []
     for key, spec in (hidden.get("errors") or {}).items():
@@ -73,6 +79,7 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
                 inst = {k: item.get(k, et.defaults[k]) for k in et.instance_keys}
             name = key + ("[" + ",".join(f"{k}={v}" for k, v in inst.items()) + "]" if inst else "")
             d = {"name": name, "key": key, "value": float(item["value"]), "unit": et.unit}
+            d["instance"] = dict(inst)
             if et.has_angle:
                 d["angle_deg"] = float(item.get("angle_deg", 0.0))
             out.append(d)
@@ -107,7 +114,7 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
                      revolutions: float = 1.0, transient: dict[str, Any] | None = None, duplicates: int = 0,
                      seed: int = 0, answer_path: str | Path | None = None, speed_rpm: float | None = None,
                      start_deg: float = 0.0, design: dict[str, Any] | None = None,
-                     write_design: bool = True) -> Path:
+                     write_design: bool = True, test_offsets: dict[str, float] | None = None) -> Path:
     """Write a simulated measured dataset and its answer file.
 
     Parameters
@@ -116,7 +123,9 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         Dataset folder to create (``runs.csv``, ``samples.csv``).
     runs : list of dict
         Each ``{"run", "load_Nm", "direction"}`` plus optional ``"declared": {error key: value}``
-        (default instance, written to runs.csv and used in the truth) and ``"temperature_C"``.
+        (default instance, written to runs.csv and used in the truth), ``"temperature_C"`` and
+        ``"test"`` (the id of the test, one homing of the rig, the run belongs to; default the run's
+        own id).
     hidden : dict or None
         The truth the dataset does not declare: ``"errors"`` (case JSON errors, any instance),
         ``"model"`` (rvdyn model options), ``"measurement"`` (``output_encoder_eccentricity_um``,
@@ -154,6 +163,9 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     write_design : bool
         Write the design into the dataset folder as ``design.json`` (only for a non-default design),
         as a bench that knows its reducer would.
+    test_offsets : dict or None
+        The rig's zero of each test: test id -> constant (arcsec) added to the TE reading of every
+        run of that test (tests not listed: 0). Not written to the dataset; the answer file holds it.
 
     Returns
     -------
@@ -161,87 +173,30 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         The answer file.
     """
     hidden = dict(hidden or {})
-    for k in hidden:
-        if k not in ("errors", "model", "measurement", "harmonics", "design"):
-            raise ValueError(f"hidden key {k!r} is unknown; allowed: errors, model, measurement, harmonics, design")
-    meas = dict(hidden.get("measurement") or {})
-    for k in meas:
-        if k not in MEASUREMENT_KEYS:
-            raise ValueError(f"hidden.measurement key {k!r} is unknown; allowed: {list(MEASUREMENT_KEYS)}")
+    meas = _check_hidden(hidden)
     if revolutions < 1.0:
         raise ValueError(f"revolutions {revolutions} must be >= 1 (the format needs one output revolution)")
     if not runs:
         raise ValueError("runs must list at least one run")
+    run_tests, offsets = _test_offsets(runs, test_offsets)
     rng = np.random.default_rng(seed)
     out = Path(out_dir)
-    des = Design.from_dict(design)
-    check_periodic(des)
-    built = Design.from_dict(dict(des.to_dict(), **dict(hidden.get("design") or {})))   # the reducer as built
-    if built.ratio != des.ratio:
-        raise ValueError(f"hidden.design changes the ratio from {des.ratio:g} to {built.ratio:g}; allowed: fields of "
-                         "the reducer as built that keep the declared design's ratio (e.g. a profile modification)")
-    ratio = float(des.ratio)
+    des, built = _designs(design, hidden)
     N = int(samples_per_rev)
     if N < 8:
         raise ValueError(f"samples_per_rev {samples_per_rev} must be >= 8")
-    out.mkdir(parents=True, exist_ok=True)
-    step = period_deg(des) / N
-    tr = dict(transient or {})
-    tr_runs = tr.get("runs", "all")
     declared_keys = sorted({k for r in runs for k in (r.get("declared") or {})})
     for k in declared_keys:
         if k not in ERROR_TYPES:
             raise ValueError(f"runs[].declared key {k!r} is unknown; allowed: {sorted(ERROR_TYPES)}")
+    out.mkdir(parents=True, exist_ok=True)
+    rig = _Rig(float(des.ratio), period_deg(des) / N, N, float(revolutions), float(start_deg), dict(transient or {}),
+               meas, list(hidden.get("harmonics") or []), float(noise_arcsec), float(input_noise_arcsec))
     rows, samples = [], []
     for r in runs:
-        rid = str(r["run"])
-        d = int(r.get("direction", 1))
-        load = float(r.get("load_Nm", 20.0))
-        decl = dict(r.get("declared") or {})
-        base: dict[str, Any] = {"errors": dict(decl), "load_Nm": load, "direction": d}
-        if design or hidden.get("design"):
-            base["design"] = built.to_dict()
-        if "temperature_C" in r:
-            base["model"] = {"temperature_C": float(r["temperature_C"])}
-        errs = []
-        for key, spec in (hidden.get("errors") or {}).items():
-            for item in (spec if isinstance(spec, list) else [spec]):
-                errs.append((key, item if isinstance(item, dict) else {"value": item}))
-        truth = merge_case(base, errs, dict(hidden.get("model") or {}))
-        Case.from_dict(truth)  # validate (names the field)
-        has_tr = bool(tr) and (tr_runs == "all" or rid in [str(x) for x in tr_runs])
-        revs = revolutions + (float(tr.get("extra_revolutions", 0.1)) if has_tr else 0.0)
-        M = int(math.ceil(revs * N - 1e-9))
-        k = np.arange(M)
-        th_in = float(start_deg) + d * k * step
-        te = te_at(truth, th_in)  # exact at every sample
-        th_out = th_in / ratio + te / 3600.0
-        for h in hidden.get("harmonics") or []:
-            amp = float(h["amplitude_arcsec"]) * (load if h.get("per_Nm") else 1.0)
-            te_h = amp * np.cos(int(h["order"]) * np.radians(th_out) + math.radians(float(h.get("phase_deg", 0.0))))
-            th_out = th_out + te_h / 3600.0
-        if has_tr:
-            th_out = th_out + float(tr.get("amplitude_arcsec", 20.0)) * np.exp(
-                -k / float(tr.get("tau_samples", 5.0))) / 3600.0
-        eo = float(meas.get("output_encoder_eccentricity_um", 0.0))
-        po = math.radians(float(meas.get("output_encoder_phase_deg", 0.0)))
-        ei = float(meas.get("input_encoder_eccentricity_um", 0.0))
-        pi_ = math.radians(float(meas.get("input_encoder_phase_deg", 0.0)))
-        out_read = th_out + np.degrees(eo * 1e-3 / OUTPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_out) + po))
-        in_read = th_in + np.degrees(ei * 1e-3 / INPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_in) + pi_))
-        out_read = out_read * (1.0 + 1e-6 * float(meas.get("output_encoder_scale_ppm", 0.0)))
-        out_read = out_read + rng.normal(0.0, noise_arcsec, M) / 3600.0
-        in_read = in_read + rng.normal(0.0, input_noise_arcsec, M) / 3600.0
-        t = k * 0.01
-        samples.append(pd.DataFrame({"run": rid, "input_deg": in_read, "output_deg": out_read, "time_s": t}))
-        row: dict[str, Any] = {"run": rid, "load_Nm": load, "direction": d}
-        for key in declared_keys:
-            row[key] = float(decl.get(key, 0.0))
-        if "temperature_C" in r:
-            row["temperature_C"] = float(r["temperature_C"])
-        if speed_rpm is not None:
-            row["speed_rpm"] = float(speed_rpm)
-        rows.append(row)
+        truth = _truth_case(r, hidden, built.to_dict() if design or hidden.get("design") else None)
+        samples.append(rig.readings(r, truth, offsets.get(run_tests[str(r["run"])], 0.0), rng))
+        rows.append(_run_row(r, declared_keys, speed_rpm))
     sdf = pd.concat(samples, ignore_index=True)
     if duplicates:
         idx = np.sort(rng.choice(len(sdf), size=int(duplicates), replace=False))
@@ -252,23 +207,145 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     _write_csv_atomic(rdf, out / "runs.csv")
     _write_csv_atomic(sdf, out / "samples.csv")
     if design and write_design and des != Design():
-        with atomic_path(out / "design.json") as tmp:
-            with open(tmp, "w", encoding="utf-8") as fh:
-                json.dump(des.to_dict(), fh, indent=2)
-    te_noise = math.sqrt(noise_arcsec ** 2 + (input_noise_arcsec / ratio) ** 2)
+        _write_json_atomic(des.to_dict(), out / "design.json")
+    te_noise = math.sqrt(noise_arcsec ** 2 + (input_noise_arcsec / rig.ratio) ** 2)
     answer = {"dataset": str(out), "hidden": hidden, "expected_effects": expected_effects(hidden),
               "noise_te_arcsec": te_noise, "noise_output_arcsec": noise_arcsec,
               "noise_input_arcsec": input_noise_arcsec, "samples_per_rev": N,
               "start_deg": float(start_deg), "revolutions": revolutions,
-              "transient": tr or None, "duplicates": int(duplicates), "seed": seed,
+              "transient": rig.transient or None, "duplicates": int(duplicates), "seed": seed,
               "encoder_radii_mm": {"output": OUTPUT_ENCODER_RADIUS_MM, "input": INPUT_ENCODER_RADIUS_MM},
-              "design": des.to_dict(), "ratio": ratio}
+              "design": des.to_dict(), "ratio": rig.ratio, "test_offsets": offsets, "run_tests": run_tests}
     ap = Path(answer_path) if answer_path is not None else out.parent / f"{out.name}.answer.json"
-    ap.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(ap) as tmp:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(answer, fh, indent=2)
+    _write_json_atomic(answer, ap)
     return ap
+
+
+def _write_json_atomic(obj: Any, path: Path) -> None:
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(obj, fh, indent=2)
+
+
+def _check_hidden(hidden: dict[str, Any]) -> dict[str, Any]:
+    """Validate the keys of ``hidden``; returns its measurement effects."""
+    for k in hidden:
+        if k not in ("errors", "model", "measurement", "harmonics", "design"):
+            raise ValueError(f"hidden key {k!r} is unknown; allowed: errors, model, measurement, harmonics, design")
+    meas = dict(hidden.get("measurement") or {})
+    for k in meas:
+        if k not in MEASUREMENT_KEYS:
+            raise ValueError(f"hidden.measurement key {k!r} is unknown; allowed: {list(MEASUREMENT_KEYS)}")
+    return meas
+
+
+def _designs(design: dict[str, Any] | None, hidden: dict[str, Any]) -> tuple[Design, Design]:
+    """The declared design and the reducer as built (plus ``hidden.design``), which must keep the ratio."""
+    des = Design.from_dict(design)
+    check_periodic(des)
+    built = Design.from_dict(dict(des.to_dict(), **dict(hidden.get("design") or {})))
+    if built.ratio != des.ratio:
+        raise ValueError(f"hidden.design changes the ratio from {des.ratio:g} to {built.ratio:g}; allowed: fields of "
+                         "the reducer as built that keep the declared design's ratio (e.g. a profile modification)")
+    return des, built
+
+
+def _truth_case(r: dict[str, Any], hidden: dict[str, Any], design: dict[str, Any] | None) -> dict[str, Any]:
+    """The case the rig's reducer runs in run ``r``: its declared errors plus the hidden errors and model
+    options (validated, naming the field)."""
+    base: dict[str, Any] = {"errors": dict(r.get("declared") or {}), "load_Nm": float(r.get("load_Nm", 20.0)),
+                            "direction": int(r.get("direction", 1))}
+    if design is not None:
+        base["design"] = design
+    if "temperature_C" in r:
+        base["model"] = {"temperature_C": float(r["temperature_C"])}
+    errs = []
+    for key, spec in (hidden.get("errors") or {}).items():
+        for item in (spec if isinstance(spec, list) else [spec]):
+            errs.append((key, item if isinstance(item, dict) else {"value": item}))
+    truth = merge_case(base, errs, dict(hidden.get("model") or {}))
+    Case.from_dict(truth)
+    return truth
+
+
+def _run_row(r: dict[str, Any], declared_keys: list[str], speed_rpm: float | None) -> dict[str, Any]:
+    """The run's row of runs.csv."""
+    decl = dict(r.get("declared") or {})
+    row: dict[str, Any] = {"run": str(r["run"]), "load_Nm": float(r.get("load_Nm", 20.0)),
+                           "direction": int(r.get("direction", 1))}
+    for key in declared_keys:
+        row[key] = float(decl.get(key, 0.0))
+    if "temperature_C" in r:
+        row["temperature_C"] = float(r["temperature_C"])
+    if speed_rpm is not None:
+        row["speed_rpm"] = float(speed_rpm)
+    return row
+
+
+@dataclass(frozen=True)
+class _Rig:
+    """The rig's sampling and reading errors (module docstring, steps 1-5): ratio, sample step (input deg),
+    samples per output revolution, revolutions per run, start angle (deg), transient, measurement effects,
+    harmonics outside the library, and the encoders' noise (arcsec)."""
+
+    ratio: float
+    step: float
+    N: int
+    revolutions: float
+    start_deg: float
+    transient: dict[str, Any]
+    meas: dict[str, Any]
+    harmonics: list[dict[str, Any]]
+    noise_arcsec: float
+    input_noise_arcsec: float
+
+    def readings(self, r: dict[str, Any], truth: dict[str, Any], offset_arcsec: float,
+                 rng: np.random.Generator) -> pd.DataFrame:
+        """Run ``r``'s samples (``run, input_deg, output_deg, time_s``): the true TE of ``truth`` at every
+        sample, the reading errors, the test's rig zero and the noise (drawn from ``rng``, output then input)."""
+        rid, d, load = str(r["run"]), int(r.get("direction", 1)), float(r.get("load_Nm", 20.0))
+        tr = self.transient
+        tr_runs = tr.get("runs", "all")
+        has_tr = bool(tr) and (tr_runs == "all" or rid in [str(x) for x in tr_runs])
+        revs = self.revolutions + (float(tr.get("extra_revolutions", 0.1)) if has_tr else 0.0)
+        M = int(math.ceil(revs * self.N - 1e-9))
+        k = np.arange(M)
+        th_in = self.start_deg + d * k * self.step
+        th_out = th_in / self.ratio + te_at(truth, th_in) / 3600.0  # the TE exact at every sample
+        for h in self.harmonics:
+            amp = float(h["amplitude_arcsec"]) * (load if h.get("per_Nm") else 1.0)
+            te_h = amp * np.cos(int(h["order"]) * np.radians(th_out) + math.radians(float(h.get("phase_deg", 0.0))))
+            th_out = th_out + te_h / 3600.0
+        if has_tr:
+            th_out = th_out + float(tr.get("amplitude_arcsec", 20.0)) * np.exp(
+                -k / float(tr.get("tau_samples", 5.0))) / 3600.0
+        meas = self.meas
+        eo = float(meas.get("output_encoder_eccentricity_um", 0.0))
+        po = math.radians(float(meas.get("output_encoder_phase_deg", 0.0)))
+        ei = float(meas.get("input_encoder_eccentricity_um", 0.0))
+        pi_ = math.radians(float(meas.get("input_encoder_phase_deg", 0.0)))
+        out_read = th_out + np.degrees(eo * 1e-3 / OUTPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_out) + po))
+        in_read = th_in + np.degrees(ei * 1e-3 / INPUT_ENCODER_RADIUS_MM * np.sin(np.radians(th_in) + pi_))
+        out_read = out_read * (1.0 + 1e-6 * float(meas.get("output_encoder_scale_ppm", 0.0)))
+        out_read = out_read + offset_arcsec / 3600.0
+        out_read = out_read + rng.normal(0.0, self.noise_arcsec, M) / 3600.0
+        in_read = in_read + rng.normal(0.0, self.input_noise_arcsec, M) / 3600.0
+        return pd.DataFrame({"run": rid, "input_deg": in_read, "output_deg": out_read, "time_s": k * 0.01})
+
+
+def _test_offsets(runs: list[dict[str, Any]], test_offsets: dict[str, float] | None
+                  ) -> tuple[dict[str, str], dict[str, float]]:
+    """Each run's test id and the validated offsets (test id -> arcsec) of ``test_offsets``."""
+    run_tests = {str(r["run"]): str(r.get("test", r["run"])) for r in runs}
+    offsets: dict[str, float] = {}
+    for t, v in (test_offsets or {}).items():
+        if str(t) not in run_tests.values():
+            raise ValueError(f"test_offsets key {t!r} is no run's test; allowed: {sorted(set(run_tests.values()))}")
+        x = float(v)
+        if not math.isfinite(x):
+            raise ValueError(f"test_offsets[{t!r}] = {v!r} must be a finite number of arcsec")
+        offsets[str(t)] = x
+    return run_tests, offsets
 
 
 def standard_runs(loads: tuple[float, ...] = (10.0, 30.0), directions: tuple[int, ...] = (1, -1),

@@ -1,0 +1,202 @@
+"""Benchmark protocol of the calibration loop: a method on a fixed set of realistic draws, scored by one rule.
+
+For each seed of the set (:data:`realistic.DEV_SEEDS` or :data:`realistic.HELDOUT_SEEDS`, or a subset), it
+draws the reducer (:mod:`realistic`; cached under ``--draws``, default ``OUT/draws``, so a rerun reuses it),
+runs the method with its DEFAULT options on the dataset alone (the answer is read only to score), times
+it (wall and CPU seconds, the worker processes' CPU included), scores it (:mod:`score`: the pass rule and the
+interval coverage) and writes ``OUT/seed<N>.json`` (``seed, set, method, workers, wall_s, cpu_s,
+load_average, error, result, score``). A draw whose method raises is a fail, with the error printed. A
+draw already scored in ``OUT`` by the same method is reused (``--fresh`` runs it again), so an
+interrupted run resumes.
+
+Methods:
+
+* ``old``: the current loop, :func:`rvcalib.identify.calibrate` with its defaults, its result mapped to the
+  schema by :mod:`adapt_old`;
+* ``new``: ``rvcalib.loop.calibrate(dataset, settings=None).to_dict()``.
+
+``--workers 2`` gives the forward model (:mod:`rvcalib.forward`) two local processes, as ``rv-calibrate
+--workers 2``.
+
+It prints one line per draw (verdict, RMS after against the noise, compliance, named effects, coverage,
+seconds) with each named effect against its truth and the groups, then the summary: the pass count, the
+pooled coverage of the named effects' 95 % intervals and the median wall and CPU seconds, which it
+appends to ``benchmarks/results.csv`` (:mod:`results_log`, benchmark ``bench_loop``, figures
+``<method>_<set>_passed`` ...; ``<method>_<set>_subset_...`` for a subset of the seeds).
+
+Run: ``python benchmarks/bench_loop.py --set dev|heldout [--method old|new] [--seeds N ...] [--workers 1|2]
+[--out DIR] [--draws DIR] [--fresh] [--verbose] [--report-only]`` (``--report-only``: the table of the draws
+already run, none run, nothing recorded).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+import traceback
+from pathlib import Path
+from typing import Any, Callable
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_common import cpu_seconds, forward_workers  # noqa: E402
+from rvcad.atomic import atomic_path  # noqa: E402
+from realistic import SETS, generate, seeds_of  # noqa: E402
+from score import pool, score, score_lines  # noqa: E402
+
+METHODS = ("old", "new")
+
+
+def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """One method with its default options on a dataset; the result in the schema (:mod:`score`)."""
+    if method == "old":
+        from adapt_old import old_calibrate
+
+        return old_calibrate(dataset, log=log)
+    if method == "new":
+        from rvcalib.loop import calibrate as calibrate_new
+
+        return calibrate_new(dataset, settings=None).to_dict()
+    raise ValueError(f"method {method!r} is unknown; allowed: {list(METHODS)}")
+
+
+def _clear_forward_cache() -> None:
+    """Start each draw with a cold forward-model cache (the draw's truth was solved through it)."""
+    try:
+        from rvcalib.forward import clear_cache
+    except ImportError:
+        return
+    clear_cache()
+
+
+def run_draw(seed: int, set_name: str, method: str, draws: Path, workers: int,
+             verbose: bool = False) -> dict[str, Any]:
+    """Draw (or reuse), run and time one seed; returns the per-draw record (not yet scored)."""
+    from rvcalib.dataset import read_dataset
+
+    folder = generate(seed, draws)
+    _clear_forward_cache()
+    result, error = None, None
+    t0, c0 = time.perf_counter(), cpu_seconds()
+    log = (lambda s: print(f"    [{time.perf_counter() - t0:7.1f} s] {s}", flush=True)) if verbose else None
+    try:
+        with forward_workers(workers):
+            result = run_method(method, read_dataset(folder / "dataset"), log)
+    except Exception as exc:  # a method that raises fails the draw; the protocol goes on
+        error = f"{type(exc).__name__}: {exc}"
+        traceback.print_exc()
+    wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
+    return {"seed": seed, "set": set_name, "method": method, "workers": workers, "wall_s": wall, "cpu_s": cpu,
+            "load_average": os.getloadavg()[0], "dataset": str(folder / "dataset"), "error": error,
+            "result": result}
+
+
+def rescore(rec: dict[str, Any]) -> dict[str, Any]:
+    """The record with its ``score`` from its result and its draw's answer (the scorer is cheap and
+    deterministic, so a reused record is scored by the current rules)."""
+    answer = json.loads((Path(rec["dataset"]).parent / "answer.json").read_text())
+    return dict(rec, score=score(rec["result"], answer, rec["error"]))
+
+
+def save(rec: dict[str, Any], path: Path) -> None:
+    """Write a per-draw record atomically."""
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(json.dumps(rec, indent=1, default=str), encoding="utf-8")
+
+
+def draw_line(rec: dict[str, Any]) -> str:
+    """One line of a draw's figures."""
+    s = rec["score"]
+    verdict = "PASS" if s["passed"] else "FAIL"
+    if rec["error"]:
+        return f"seed {rec['seed']}: {verdict} (raised) wall {rec['wall_s']:.0f} s"
+    verd = [e["verdict"] for e in s["effects"]]
+    comp = "/".join("none" if x is None else f"{x:.4g}" for x in (s["compliance"], s["compliance_truth"]))
+    return (f"seed {rec['seed']}: {verdict}  RMS {s['rms_after']:.4g}/{s['noise']:.4g} = {s['rms_ratio']:.2f}x  "
+            f"compliance {comp}  named {len(verd)} (off {verd.count('off')}, false "
+            f"{verd.count('false name')}, small extra {verd.count('small extra')})  covered "
+            f"{s['covered']}/{s['n_intervals']}  groups {len(s['groups'])}  wall {rec['wall_s']:.0f} s  "
+            f"CPU {rec['cpu_s']:.0f} s  stopped by: {rec['result'].get('stopped_by', '')}")
+
+
+def summary(recs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Pass count, pooled coverage and median seconds over the records."""
+    p = pool([r["score"] for r in recs])
+    p["median_wall_s"] = statistics.median(r["wall_s"] for r in recs) if recs else None
+    p["median_cpu_s"] = statistics.median(r["cpu_s"] for r in recs) if recs else None
+    p["raised"] = sum(bool(r["error"]) for r in recs)
+    return p
+
+
+def record_summary(method: str, set_name: str, full: bool, summ: dict[str, Any]) -> None:
+    """Append the summary figures to ``benchmarks/results.csv``."""
+    from results_log import record
+
+    tag = f"{method}_{set_name}" + ("" if full else "_subset")
+    figs = [(f"{tag}_draws", summ["draws"], "count"), (f"{tag}_passed", summ["passed"], "count"),
+            (f"{tag}_raised", summ["raised"], "count"), (f"{tag}_named", summ["n_intervals"], "count")]
+    if summ["coverage"] is not None:
+        figs.append((f"{tag}_coverage", summ["coverage"], "fraction"))
+    if summ["median_wall_s"] is not None:
+        figs += [(f"{tag}_median_wall_seconds", summ["median_wall_s"], "s"),
+                 (f"{tag}_median_cpu_seconds", summ["median_cpu_s"], "s")]
+    record("bench_loop", figs)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--set", required=True, choices=sorted(SETS), help="seed set")
+    ap.add_argument("--method", default="old", choices=METHODS, help="the loop to run (default old)")
+    ap.add_argument("--seeds", type=int, nargs="*", default=None, help="a subset of the set's seeds")
+    ap.add_argument("--workers", type=int, default=1, choices=(1, 2), help="forward-model processes")
+    ap.add_argument("--out", default=None, help="folder of the per-draw JSON (default ./bench-loop-METHOD-SET)")
+    ap.add_argument("--draws", default=None, help="folder of the cached draws (default OUT/draws)")
+    ap.add_argument("--fresh", action="store_true", help="run draws already scored in OUT again")
+    ap.add_argument("--verbose", action="store_true", help="print the method's progress (old loop)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="print the draws already run in OUT (scored again), run none and record nothing")
+    args = ap.parse_args(argv)
+    seeds = seeds_of(args.set, args.seeds)
+    out = Path(args.out or f"bench-loop-{args.method}-{args.set}")
+    draws = (Path(args.draws) if args.draws else out / "draws").resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"{args.method} loop on the {args.set} set, seeds {seeds}, {args.workers} worker process(es); "
+          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; draws in {draws}", flush=True)
+    recs = []
+    for seed in seeds:
+        path = out / f"seed{seed}.json"
+        old = json.loads(path.read_text()) if path.is_file() and not args.fresh else None
+        if old is not None and old.get("method") == args.method:
+            rec, note = old, "  (run by an earlier call, scored again)"
+        elif args.report_only:
+            continue
+        else:
+            rec, note = run_draw(seed, args.set, args.method, draws, args.workers, args.verbose), ""
+            save(rec, path)             # the run is kept even if the scoring fails
+        rec = rescore(rec)
+        save(rec, path)
+        recs.append(rec)
+        print(draw_line(rec) + note, flush=True)
+        for line in (([rec["error"]] if rec["error"] else []) + rec["score"]["reasons"]
+                     + score_lines(rec["score"])):
+            print("    " + line, flush=True)
+    if not recs:
+        print("no draw run yet")
+        return 1
+    summ = summary(recs)
+    cov = "none named" if summ["coverage"] is None else f"{summ['coverage']:.1%}"
+    print(f"SUMMARY {args.method} {args.set}: {summ['passed']}/{summ['draws']} pass ({summ['raised']} raised); "
+          f"pooled coverage {summ['covered']}/{summ['n_intervals']} = {cov}; median wall "
+          f"{summ['median_wall_s']:.0f} s, median CPU {summ['median_cpu_s']:.0f} s ({args.workers} worker(s); "
+          f"load average now {os.getloadavg()[0]:.1f})", flush=True)
+    if not args.report_only:
+        record_summary(args.method, args.set, set(seeds) == set(SETS[args.set]), summ)
+    return 0 if summ["passed"] == summ["draws"] else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
