@@ -31,6 +31,7 @@ already run, none run, nothing recorded).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import statistics
@@ -51,7 +52,7 @@ from score import pool, score, score_lines  # noqa: E402
 METHODS = ("old", "new")
 
 
-def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = None) -> dict[str, Any]:
+def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = None, workers: int = 1) -> dict[str, Any]:
     """One method with its default options on a dataset; the result in the schema (:mod:`score`)."""
     if method == "old":
         from adapt_old import old_calibrate
@@ -59,8 +60,9 @@ def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = No
         return old_calibrate(dataset, log=log)
     if method == "new":
         from rvcalib.loop import calibrate as calibrate_new
+        from rvcalib.settings import CalibrationSettings
 
-        return calibrate_new(dataset, settings=None).to_dict()
+        return calibrate_new(dataset, settings=CalibrationSettings(workers=workers), log=log).to_dict()
     raise ValueError(f"method {method!r} is unknown; allowed: {list(METHODS)}")
 
 
@@ -84,8 +86,8 @@ def run_draw(seed: int, set_name: str, method: str, draws: Path, workers: int,
     t0, c0 = time.perf_counter(), cpu_seconds()
     log = (lambda s: print(f"    [{time.perf_counter() - t0:7.1f} s] {s}", flush=True)) if verbose else None
     try:
-        with forward_workers(workers):
-            result = run_method(method, read_dataset(folder / "dataset"), log)
+        with forward_workers(workers) if method == "old" else contextlib.nullcontext():
+            result = run_method(method, read_dataset(folder / "dataset"), log, workers)
     except Exception as exc:  # a method that raises fails the draw; the protocol goes on
         error = f"{type(exc).__name__}: {exc}"
         traceback.print_exc()
