@@ -33,6 +33,7 @@ from scipy import interpolate, ndimage
 
 from rvcad.params import Design
 from rvcalib.dataset import MeasuredDataset, RunRecord
+from rvcalib.orders import base_orders
 
 #: Chance of one false line in a spectrum (see the module docstring).
 P_FALSE = 0.01
@@ -143,9 +144,8 @@ def find_lines(spec: OrderSpectrum, p_false: float = P_FALSE) -> list[dict]:
 
 def reducer_orders(design: Design, max_order: float, max_harmonic: int = MAX_HARMONIC) -> dict[int, str]:
     """Orders the reducer has, up to ``max_order``, with a label each (module docstring)."""
-    n = int(round(design.ratio))
-    zc, zp, nc = int(design.z_disc), int(design.z_pins), int(design.n_cranks)
-    bases = [("lobe", zc), ("pin", zp), ("sun", n - 1), ("input", n), ("stage I mesh", int(design.z_sun) * (n - 1))]
+    nc = int(design.n_cranks)
+    bases = [(name, b) for name, b in base_orders(design).items() if name != "output"]
     out: dict[int, str] = {}
     for h in range(1, max_harmonic + 1):
         out.setdefault(h, f"output x{h}")
