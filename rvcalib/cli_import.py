@@ -64,7 +64,8 @@ def summary(result: dict) -> str:
         lines.append(f"{Path(f['file']).name}: test {f['test']}, {cond}")
         for r in f["runs"]:
             lines.append(f"  run {r['run']} (direction {r['direction']:+d}): {r['readings']} readings, "
-                         f"{r['revolutions']:.4f} revolutions at {r['speed_rpm_from_readings']:.5g} rpm input -> {r['samples']} samples "
+                         f"{r['revolutions']:.4f} revolutions at {r['speed_rpm_from_readings']:.5g} rpm input, noise "
+                         f"{r['noise_arcsec_readings']:.3g} arcsec -> {r['samples']} samples "
                          f"({r['samples_per_rev']:.5g} per revolution), {len(r['gaps'])} gap(s), times from "
                          f"{r['time_from']}")
     for n in result["notes"]:

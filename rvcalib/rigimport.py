@@ -43,6 +43,7 @@ from rsm.csvio import read_csv_strict
 from rvcad.atomic import atomic_path, remove_stale_temps
 from rvcad.params import Design
 from rvcad.validation import DatasetError, OptionError
+from rvcalib.dataset import load_design, noise_estimate
 
 #: Accepted names of the four columns, per direction: (output angle names, TE name).
 LAYOUT = {+1: (("Poisition_Output_Reducer_Fw", "Position_Output_Reducer_Fw"), "Transmission_Error_Fw"),
@@ -367,8 +368,6 @@ def file_conditions(path: Path, load_Nm: float | None, speed_rpm: float | None,
 
 
 def _reducer(ratio: float | None, design: "str | Path | dict | Design | None") -> tuple[float, Design | None]:
-    from rvcalib.dataset import load_design
-
     if (ratio is None) == (design is None):
         raise OptionError("give exactly one of --ratio N and --reducer DESIGN.json (the reducer's ratio converts "
                           "output angle and TE to the input angle)", field="--ratio", value=ratio,
@@ -383,8 +382,6 @@ def _reducer(ratio: float | None, design: "str | Path | dict | Design | None") -
 
 def _check_existing_design(out: Path, ratio: float) -> None:
     """A design.json already in the dataset folder must have the ratio the readings are converted with."""
-    from rvcalib.dataset import load_design
-
     if (out / "design.json").is_file():
         des = load_design(None, out)[0]
         if abs(des.ratio - ratio) > 1e-9:
@@ -425,7 +422,10 @@ def import_rig(files: "list[str | Path]", out: str | Path, *, ratio: float | Non
     dict
         ``dataset`` (folder), ``ratio``, ``samples_per_rev``, ``files`` (per file: ``file``, ``test``,
         conditions, ``conditions_from``, ``runs``: per run ``run``, ``direction``, ``readings``,
-        ``revolutions``, ``samples``, ``samples_per_rev``, ``gaps``, ``time_from``, ``filter``), ``notes``.
+        ``revolutions``, ``speed_rpm_from_readings``, ``noise_arcsec_readings`` (the noise of the readings as read,
+        :func:`rvcalib.dataset.noise_estimate`: at the rig's density the TE is smooth from one reading to
+        the next; after averaging down the same estimate also takes in the orders near the new band's end),
+        ``samples``, ``samples_per_rev``, ``gaps``, ``time_from``, ``filter``), ``notes``.
     """
     if not files:
         raise OptionError("no rig file given", field="FILES", value=[], allowed="one or more CSV files")
@@ -458,6 +458,7 @@ def import_rig(files: "list[str | Path]", out: str | Path, *, ratio: float | Non
                          "speed_rpm": cond.speed_rpm, "temperature_C": cond.temperature_C})
             per.append({"run": rid, "direction": d, "readings": int(rec.output_deg.size),
                         "revolutions": rec.revolutions, "speed_rpm_from_readings": rec.input_speed_rpm(n_ratio),
+                        "noise_arcsec_readings": noise_estimate(rec.te_deg * 3600.0),
                         "samples": int(arr["output_deg"].size),
                         "samples_per_rev": info["samples_per_rev"], "gaps": rec.gaps, "time_from": rec.time_source,
                         "filter": info["filter"], "dropped_segments": info["dropped_segments"]})
