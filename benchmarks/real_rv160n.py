@@ -20,8 +20,8 @@ The design. ``benchmarks/data/rv160n_2crank.json`` holds the published RV-160N s
 pins, 39 lobes, pin circle 223 mm, eccentricity 2.0 mm, module 1.5 mm) with two cranks at 0 and 180 deg (the
 model's crank count); every other size is the default design's assumption scaled by 223/128 (the pin circles'
 ratio): pin radius 5.2 mm, widths 17.4 mm, cam radius 15.7 mm, journal radius 12.2 mm, roller sizes, housing
-radius 139.4 mm. What two cranks cost: the record's order 3 and its 39 k +- 3 sidebands are no orders of a
-two-crank design, so the spectrum reports them at a fixed frequency and the loop cannot explain them.
+radius 139.4 mm. What two cranks cost: the record's sidebands 39 k +- 3 (orders 75, 153, 237, 315) are no orders
+of a two-crank design, so the spectrum reports them at a fixed frequency, and the loop has no effect for them.
 
 Figures are appended to ``benchmarks/results.csv`` (:mod:`results_log`).
 
