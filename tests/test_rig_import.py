@@ -14,8 +14,8 @@ import pytest
 
 from rvcalib.cli import main
 from rvcalib.dataset import read_dataset
-from rvcalib.rigimport import (antialias_filter, decimate, default_samples_per_rev, import_rig, parse_conditions,
-                               read_rig_file)
+from rvcalib.rigfilter import antialias_filter, decimate, default_samples_per_rev
+from rvcalib.rigimport import import_rig, parse_conditions, read_rig_file
 
 #: A ratio-81 design (the dataset reader converts the readings with the design's ratio).
 R81 = {"z_sun": 18, "z_planet": 36}
