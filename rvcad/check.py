@@ -25,12 +25,13 @@ Lengths in mm at the API, angles in rad inside.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy.optimize import linprog
 
-from rvcad.errors import Case
+from rvcad.errors import Case, as_case
 from rvcad.geometry import ReducerGeometry
 from rvcad.params import closest_cranks
 from rvcad.plan import PLATE_RIM_CLEARANCE_MM
@@ -245,12 +246,15 @@ def _blame(case: Case, limit: float) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- entry point
-def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool = True) -> dict[str, Any]:
+def check_case(case: "Case | dict[str, Any] | str | Path | None", geometry: ReducerGeometry | None = None,
+               cache: bool = True) -> dict[str, Any]:
     """Refuse a case that cannot give valid, assemblable solids; return the measured margins.
 
     Parameters
     ----------
-    case : Case
+    case : Case, dict, str, Path or None
+        What :func:`rvcad.reducer` takes: a case, the case JSON object as a dict, the path of a case
+        JSON file, or None (the nominal case).
     geometry : ReducerGeometry or None
         Pre-built geometry of the case.
     cache : bool
@@ -267,6 +271,7 @@ def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool 
     DesignError
         With the field, its value and what is allowed.
     """
+    case = as_case(case)
     key = case.key()
     if cache and key in _MEMO:
         if isinstance(_MEMO[key], DesignError):
