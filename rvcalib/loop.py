@@ -128,6 +128,22 @@ def _active(fit, F: Features, n: int, settings, fixed: tuple) -> tuple[np.ndarra
     return idx[idx < n], idx[idx >= n] - n, sd
 
 
+def _global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.ndarray, np.ndarray]:
+    """The always-estimated block's maximum a posteriori alone (no other effect), through the reducer model: the
+    state the first linearisation starts from. A clearance or preload of the whole ring changes how every other
+    error shows, so the other candidates' columns are taken where the ring's fit already is."""
+    m = pb.model
+    dense = np.array([i for i, c in enumerate(c for c in m.candidates for _ in range(c.n_params)) if c.dense], int)
+    if dense.size == 0:
+        return theta, te
+    tau = np.array([c.prior_scale for c in m.candidates for _ in range(c.n_params)])
+    sigma = max(float(pb.dataset.noise_arcsec()), 1e-3)
+    sd = np.concatenate([tau, np.ones(pb.R.shape[1])])
+    theta, _, te, _ = refine(m, pb.y, pb.proj, pb.R, theta, np.zeros(pb.R.shape[1]), dense, np.zeros(0, int), sd,
+                             sigma, pool=pool, log=log)
+    return theta, te
+
+
 class _Problem:
     """What one calibration holds: data, library, model, columns, projection."""
 
@@ -192,7 +208,9 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     fit = F = scales = spread = renew = None
     active_prev: tuple = ()
     stopped = "max_linearisations"
+    b_r = np.zeros(R.shape[1])
     with pool_cm as pool:
+        theta, te = _global_fit(pb, theta, te, pool, log)
         for it in range(1, settings.max_linearisations + 1):
             J = m.jacobian(theta, spread, renew, pool)
             scales = scales or _scales(pb.library, m, J, R, pb.readings)

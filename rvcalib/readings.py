@@ -64,12 +64,8 @@ def _empirical(cand, dataset) -> np.ndarray:
 
 
 def test_ids(dataset) -> list[str]:
-    """The test (one homing of the rig) of each run: the dataset's ``tests`` when it has them, else the runs
-    of one load, speed and temperature form one test."""
-    tests = getattr(dataset, "tests", None)
-    if tests:
-        return [tests[r.run] for r in dataset.runs]
-    return [f"load {r.load_Nm:g} N m, speed {r.speed_rpm}, temperature {r.temperature_C}" for r in dataset.runs]
+    """The test (one homing of the rig) of each run (:attr:`rvcalib.dataset.MeasuredDataset.tests`)."""
+    return [dataset.tests.of_run[r.run] for r in dataset.runs]
 
 
 def nuisance_columns(dataset) -> tuple[np.ndarray, list[str]]:

@@ -23,9 +23,12 @@ from rvcalib.reducer_model import ModelEvaluationError
 
 
 def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np.ndarray, active_s: np.ndarray,
-           active_r: np.ndarray, prior_sd: np.ndarray, sigma: float, spread: np.ndarray | None = None, max_nfev: int = 12, pool=None,
-           log=None):
+           active_r: np.ndarray, prior_sd: np.ndarray, sigma: float, spread: np.ndarray | None = None,
+           max_nfev: int | None = None, pool=None, log=None):
     """The MAP of the active parameters (see the module docstring).
+
+    The active reading coefficients enter linearly: for each state of the solved ones they are the ridge solution
+    (variable projection), so the nonlinear search runs over the solved parameters alone.
 
     Parameters
     ----------
@@ -39,6 +42,7 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
     prior_sd : (p + m,) prior standard deviation of every parameter (sqrt(V) s)
     sigma : float, the noise standard deviation, arcsec
     spread : (p,) or None, the secants' half-widths (the model's default: the prior scales)
+    max_nfev : int or None, most model evaluations (default 10 + 2 per active solved parameter)
 
     Returns
     -------
@@ -46,43 +50,68 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
         The refined parameters, the model TE there and the objective (the sum of squares above).
     """
     p = theta.size
-    lo = np.concatenate([model._lower[active_s], np.full(active_r.size, -np.inf)])
-    hi = np.concatenate([model._upper[active_s], np.full(active_r.size, np.inf)])
-    sd = np.concatenate([prior_sd[active_s], prior_sd[p + active_r]])
-    x0 = np.clip(np.concatenate([theta[active_s], b_r[active_r]]), lo, hi)
+    lo, hi = model._lower[active_s], model._upper[active_s]
+    sd = prior_sd[active_s]
+    Ra = proj(R[:, active_r])
+    ra_prior = 1.0 / prior_sd[p + active_r] ** 2
+    A = Ra.T @ Ra / sigma ** 2 + np.diag(ra_prior)
     cache: dict = {}
+    b = b_r.copy()
 
-    def unpack(x):
-        th, br = theta.copy(), b_r.copy()
-        th[active_s] = x[:active_s.size]
-        br[active_r] = x[active_s.size:]
-        return th, br
+    def linear(r: np.ndarray) -> np.ndarray:
+        return np.linalg.solve(A, Ra.T @ r / sigma ** 2) if active_r.size else np.zeros(0)
+
+    def state(x):
+        th = theta.copy()
+        th[active_s] = x
+        return th
 
     def fun(x):
-        th, br = unpack(x)
+        th = state(x)
         try:
             te = model.te(th)
         except ModelEvaluationError:
-            return np.full(y.size + x.size, 1e6)
-        cache["x"], cache["te"] = x.copy(), te
-        return np.concatenate([proj(y - te - R @ br) / sigma, x / sd])
+            return np.full(y.size + x.size + active_r.size, 1e6)
+        r = proj(y - te - R @ _zero(b_r, active_r))
+        br = linear(r)
+        cache["x"], cache["te"], cache["br"] = x.copy(), te, br
+        return np.concatenate([(r - Ra @ br) / sigma, x / sd, br * np.sqrt(ra_prior)])
 
     def jac(x):
-        th, _ = unpack(x)
         if not np.array_equal(cache.get("x"), x):
             fun(x)
         renew = np.zeros(p, dtype=bool)
         renew[active_s] = True
-        J = model.jacobian(th, spread, renew, pool)
-        top = -proj(np.column_stack([J[:, active_s], R[:, active_r]])) / sigma
-        return np.vstack([top, np.diag(1.0 / sd)])
+        J = proj(model.jacobian(state(x), spread, renew, pool)[:, active_s])
+        if active_r.size:
+            J = J - Ra @ np.linalg.solve(A, Ra.T @ J / sigma ** 2)
+        return np.vstack([-J / sigma, np.diag(1.0 / sd), np.zeros((active_r.size, active_s.size))])
 
-    if x0.size == 0:
-        return theta, b_r, model.te(theta), float("nan")
-    res = optimize.least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale=sd, max_nfev=max_nfev)
-    th, br = unpack(res.x)
-    te = model.te(th)
+    if active_s.size == 0:
+        te = model.te(theta)
+        b[active_r] = linear(proj(y - te - R @ _zero(b_r, active_r)))
+        return theta, _zero(b, np.zeros(0, int)) + _only(b, active_r, b_r), te, float("nan")
+    x0 = np.clip(theta[active_s], lo, hi)
+    nfev = max_nfev or 10 + 2 * active_s.size
+    res = optimize.least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale=sd, max_nfev=nfev)
+    if not np.array_equal(cache.get("x"), res.x):
+        fun(res.x)
+    b[active_r] = cache["br"]
     if log:
         log(f"  nonlinear estimate of {active_s.size} solved and {active_r.size} reading parameters: "
             f"{res.nfev} evaluations, objective {2 * res.cost:.1f} ({res.message})")
-    return th, br, te, float(2 * res.cost)
+    return state(res.x), b, cache["te"], float(2 * res.cost)
+
+
+def _zero(b: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """b with the entries ``idx`` set to zero."""
+    out = b.copy()
+    out[idx] = 0.0
+    return out
+
+
+def _only(b: np.ndarray, idx: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Zeros but for the entries ``idx`` of b."""
+    out = np.zeros_like(ref)
+    out[idx] = b[idx]
+    return out
