@@ -30,7 +30,7 @@ class Assembly:
     theta_in_deg : float
         Input (sun) angle, degrees; the other moving parts follow the ideal kinematics
         (:meth:`ReducerGeometry.placement`) unless ``state`` is given.
-    state : (theta_out rad, (psi_0, psi_1) rad) or None
+    state : (theta_out rad, (psi_0, ..., psi_(n-1)) rad: one per crank) or None
         Explicit output and crank angles at ``theta_in_deg`` (e.g. the pose solved by ``rvdyn``).
     geometry : ReducerGeometry or None
         Pre-built geometry of the case (saves rebuilding it).

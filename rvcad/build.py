@@ -17,7 +17,6 @@ STEP, placed as in ``assembly.step``. The 0.1 um STL comes from rvcad's own exac
 """
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -25,29 +24,11 @@ from typing import Any
 
 from rvcad.assembly import Assembly
 from rvcad.check import check_case
-from rvcad.errors import Case, load_case
+from rvcad.errors import Case, as_case
 from rvcad.geometry import ReducerGeometry
 from rvcad.params import Design
 from rvcad.plan import DEFAULT_TOLERANCE_MM, AxialLayout
-from rvcad.validation import CaseError, OptionError, reject
-
-
-def as_case(case: Case | dict[str, Any] | str | Path | None) -> Case:
-    """A validated :class:`Case` from a case, a dict (the case JSON object) or a JSON file path.
-
-    Raises :class:`rvcad.validation.CaseError` (a ``ValueError``) for anything else."""
-    if case is None:
-        return Case.from_dict({"name": "nominal"})
-    if isinstance(case, Case):
-        return case
-    if isinstance(case, Mapping):
-        d = dict(case)
-        d.setdefault("name", "nominal" if not d else "case")
-        return Case.from_dict(json.loads(json.dumps(d)))
-    if isinstance(case, (str, Path)):
-        return load_case(case)
-    reject("case", case, "a rvcad.Case, a dict (the case JSON object) or the path of a case JSON file",
-           f"is of type {type(case).__name__}", CaseError)
+from rvcad.validation import OptionError, reject
 
 
 class _Parts(Mapping):
@@ -87,7 +68,7 @@ class Reducer:
         unless ``state`` is given).
     tolerance_mm : float
         B-spline budget of the exact curves (cycloid envelope, involute flanks), mm (default 1e-4).
-    state : (theta_out_rad, (psi_0, psi_1) rad) or None
+    state : (theta_out_rad, (psi_0, ..., psi_(n-1)) rad: one per crank) or None
         Explicit output and crank angles (e.g. a solved pose from ``rvdyn``).
     check : bool
         Run :func:`rvcad.check.check_case` first (a case that cannot give valid solids raises

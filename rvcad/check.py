@@ -9,7 +9,7 @@ error-perturbed geometry of the case, raising :class:`rvcad.validation.DesignErr
 * stage I teeth: a tip land and a root gap on both gears. Thinning the planet teeth by
   ``design.stage1_backlash_mm`` turns both flanks by b / (2 r_pitch); the tip land vanishes at
   ``b_max = b + s_tip r_pitch / r_tip`` (0.99 mm with the default gears: 1.0 mm points the planet);
-* crank holes: the holes of the two cranks in each disc (radius ``cam_radius_mm``, moved by
+* crank holes: the holes of the cranks in each disc (radius ``cam_radius_mm``, moved by
   ``errors.disc_hole_eccentricity``) do not overlap and stay inside the disc root circle; the
   journal holes of the plates (moved by ``errors.carrier_hole_eccentricity``) stay inside the rim;
 * contacts (:func:`pin_interference`): the smallest largest penetration of the pins into the
@@ -25,13 +25,15 @@ Lengths in mm at the API, angles in rad inside.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy.optimize import linprog
 
-from rvcad.errors import Case
+from rvcad.errors import Case, as_case
 from rvcad.geometry import ReducerGeometry
+from rvcad.params import closest_cranks
 from rvcad.plan import PLATE_RIM_CLEARANCE_MM
 from rvcad.validation import DesignError, quote, reject
 
@@ -78,6 +80,14 @@ def _check_gears(g: ReducerGeometry) -> None:
 
 
 # ----------------------------------------------------------------------------- crank holes
+def hole_separation(holes: np.ndarray) -> tuple[float, int, int]:
+    """Smallest centre distance (mm) between the crank holes ``holes`` (n, 2) and the two holes, ``(sep, i, j)``."""
+    dist = np.linalg.norm(holes[:, None, :] - holes[None, :, :], axis=-1)
+    dist[np.diag_indices(len(holes))] = np.inf
+    i, j = np.unravel_index(int(np.argmin(dist)), dist.shape)
+    return float(dist[i, j]), int(min(i, j)), int(max(i, j))
+
+
 def _check_holes(g: ReducerGeometry) -> None:
     """The perturbed crank holes of each disc and plate: apart from each other, inside root and rim."""
     d = g.design
@@ -87,10 +97,11 @@ def _check_holes(g: ReducerGeometry) -> None:
     checks = [(f"disc{k}", g.disc_holes[k], r_hole, root, "errors.disc_hole_eccentricity") for k in range(d.n_discs)]
     checks.append(("flange and carrier", g.carrier_holes, r_journal, rim, "errors.carrier_hole_eccentricity"))
     for part, holes, r, limit, field in checks:
-        sep = float(np.linalg.norm(holes[1] - holes[0]))
+        sep, i, j = hole_separation(holes)
         if sep <= 2.0 * r:
+            which = "the crank holes" if len(holes) == 2 else f"crank holes {i} and {j}"
             reject("design.crank_angles_deg", list(d.crank_angles_deg), f"holes more than {2 * r:g} mm apart",
-                   f"with the errors puts the crank holes of {part} {sep:.4f} mm apart (they overlap)", DesignError)
+                   f"with the errors puts {which} of {part} {sep:.4f} mm apart (they overlap)", DesignError)
         reach = float(np.max(np.linalg.norm(holes, axis=-1))) + r
         if reach >= limit:
             where = "root circle" if part.startswith("disc") else "rim"
@@ -115,7 +126,7 @@ def pin_interference(g: ReducerGeometry, states: int = INTERFERENCE_STATES, roun
     the solver can take, mm.
 
     At each of ``states`` ideal states over one crank revolution the solver's coordinates, the
-    output angle and the crank angles (``x = (Rp dtheta_out, e dpsi_0, e dpsi_1)``, mm, as in
+    output angle and the crank angles (``x = (Rp dtheta_out, e dpsi_0, ..., e dpsi_(n-1))``, mm, as in
     ``rvdyn.solver``), may change; the gaps the solver keeps, the pins of both discs and the loaded
     stage I flanks (the case's direction), linearised by finite differences (``g + J x``), give a
     linear programme ``min t, -(g + J x) <= t`` (scipy ``linprog``) inside a trust region,
@@ -235,12 +246,15 @@ def _blame(case: Case, limit: float) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- entry point
-def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool = True) -> dict[str, Any]:
+def check_case(case: "Case | dict[str, Any] | str | Path | None", geometry: ReducerGeometry | None = None,
+               cache: bool = True) -> dict[str, Any]:
     """Refuse a case that cannot give valid, assemblable solids; return the measured margins.
 
     Parameters
     ----------
-    case : Case
+    case : Case, dict, str, Path or None
+        What :func:`rvcad.reducer` takes: a case, the case JSON object as a dict, the path of a case
+        JSON file, or None (the nominal case).
     geometry : ReducerGeometry or None
         Pre-built geometry of the case.
     cache : bool
@@ -249,7 +263,7 @@ def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool 
     Returns
     -------
     dict
-        ``planet_tip_land_mm``, ``sun_tip_land_mm``, ``crank_hole_separation_mm``,
+        ``planet_tip_land_mm``, ``sun_tip_land_mm``, ``crank_hole_separation_mm`` (nominal, the closest two),
         ``pin_penetration_mm`` (largest over the states of the smallest reachable contact penetration).
 
     Raises
@@ -257,6 +271,7 @@ def check_case(case: Case, geometry: ReducerGeometry | None = None, cache: bool 
     DesignError
         With the field, its value and what is allowed.
     """
+    case = as_case(case)
     key = case.key()
     if cache and key in _MEMO:
         if isinstance(_MEMO[key], DesignError):
@@ -289,7 +304,7 @@ def _check(case: Case, geometry: ReducerGeometry | None) -> dict[str, Any]:
             f"{MAX_PENETRATION_MM * 1e3:g} um (the solver's elastic contact limit)", field=fields[0], value=values[0],
             allowed=f"an overlap of at most {MAX_PENETRATION_MM * 1e3:g} um")
     d = g.design
-    sep = 2.0 * d.center_distance_mm * abs(math.sin(0.5 * math.radians(d.crank_angles_deg[1] - d.crank_angles_deg[0])))
+    sep = 2.0 * d.center_distance_mm * abs(math.sin(0.5 * math.radians(closest_cranks(d.crank_angles_deg)[2])))
     return {"planet_tip_land_mm": _tooth_lands(g.planet)[0], "sun_tip_land_mm": _tooth_lands(g.sun)[0],
             "crank_hole_separation_mm": sep, "pin_penetration_mm": pen}
 

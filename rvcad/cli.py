@@ -115,8 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--theta-in-deg", type=_angle, default=0.0, metavar="DEG",
                    help="input (sun) angle at which the assembly files place the moving parts, degrees "
                         "(default 0; the others follow the ideal kinematics)")
-    e.add_argument("--state", type=_state, default=None, metavar="OUT_DEG,CRANK0_DEG,CRANK1_DEG",
-                   help="place the assembly at this output angle and these crank angles (degrees) instead of the "
+    e.add_argument("--state", type=_state, default=None, metavar="OUT_DEG,CRANK0_DEG,CRANK1_DEG[,...]",
+                   help="place the assembly at this output angle and these crank angles (degrees, one per crank) "
+                        "instead of the "
                         "ideal kinematics at --theta-in-deg, e.g. the equilibrium printed by "
                         "'python -m rvdyn.pose CASE.json --theta-in-deg DEG'")
     e.add_argument("--parts", default=None, metavar="PATTERNS",

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -430,6 +431,24 @@ def load_case(path: str | Path | None) -> Case:
                f"a JSON object with keys from {list(CASE_KEYS)}", "is not an object", CaseError)
     d.setdefault("name", p.stem)
     return Case.from_dict(d)
+
+def as_case(case: Case | dict[str, Any] | str | Path | None) -> Case:
+    """A validated :class:`Case` from a case, a dict (the case JSON object) or a JSON file path.
+
+    Raises :class:`rvcad.validation.CaseError` (a ``ValueError``) for anything else."""
+    if case is None:
+        return Case.from_dict({"name": "nominal"})
+    if isinstance(case, Case):
+        return case
+    if isinstance(case, Mapping):
+        d = dict(case)
+        d.setdefault("name", "nominal" if not d else "case")
+        return Case.from_dict(json.loads(json.dumps(d)))
+    if isinstance(case, (str, Path)):
+        return load_case(case)
+    reject("case", case, "a rvcad.Case, a dict (the case JSON object) or the path of a case JSON file",
+           f"is of type {type(case).__name__}", CaseError)
+
 
 class ResolvedErrors:
     """Per-instance perturbations in mm and rad, ready for the geometry.

@@ -289,7 +289,7 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
         the export of another case or tolerance (otherwise refused).
     progress : callable or None
         Called with each :class:`ExportedFile` when it is done.
-    state : (theta_out rad, (psi_0, psi_1) rad) or None
+    state : (theta_out rad, (psi_0, ..., psi_(n-1)) rad: one per crank) or None
         Place the assembly at this state (e.g. the pose solved by ``rvdyn``) instead of the ideal
         kinematics at ``theta_in_deg``.
     pose : str or None

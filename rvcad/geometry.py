@@ -2,17 +2,17 @@
 
 :class:`ReducerGeometry` resolves a :class:`~rvcad.errors.Case` into the perturbed positions
 of every feature (pins, holes, cams, gear centres) and places the moving parts for any state
-``(theta_in, theta_out, psi_0, psi_1)``. The CAD parts (:mod:`rvcad.parts`) and the contact
+``(theta_in, theta_out, psi_0, ..., psi_(n-1))``. The CAD parts (:mod:`rvcad.parts`) and the contact
 analysis (:mod:`rvdyn`) both read their geometry from here: the exported geometry is the
 analysed geometry.
 
 Frames (conventions.md): fixed frame, right-handed about +z. The carrier turns by
 ``theta_out``; crank j sits at ``(a + F_j) u(beta_j)`` in the carrier frame, turns by the
 absolute angle ``psi_j`` and carries the cam of disc k at eccentricity ``e + E_jk`` and phase
-``psi_j + k pi + D_jk / e``. Disc k hangs on the cams of both cranks: its pose is the rigid
-least-squares fit of its two crank holes to the two cam centres (equal bearing stiffness; a
-hole-distance mismatch is taken up in the bearings and carries no torque). Lengths in mm,
-angles in rad inside.
+``psi_j + k pi + D_jk / e``. Disc k hangs on the cams of all n cranks (two by default, three on the
+larger frames): its pose is the rigid least-squares fit of its n crank holes to the n cam centres (equal
+bearing stiffness; the mismatch of holes and cams, one distance for two cranks, 2n - 3 for n, is taken up in
+the bearings). Lengths in mm, angles in rad inside.
 """
 from __future__ import annotations
 
@@ -58,6 +58,17 @@ def _u(a: np.ndarray) -> np.ndarray:
     out[..., 0] = np.cos(a)
     out[..., 1] = np.sin(a)
     return out
+
+
+def procrustes_angle(H: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Rotation (rad) of the rigid least-squares fit of point sets H (..., n, 2) onto C (..., n, 2) (broadcast over
+    the leading axes): with both taken about their means, ``atan2(sum h x c, sum h . c)`` (the planar Kabsch fit;
+    minimises ``sum |R h + t - c|^2`` over the rotation R and the translation t)."""
+    h = H - H.mean(axis=-2, keepdims=True)
+    c = C - C.mean(axis=-2, keepdims=True)
+    cross = (h[..., 0] * c[..., 1] - h[..., 1] * c[..., 0]).sum(axis=-1)
+    dot = (h[..., 0] * c[..., 0] + h[..., 1] * c[..., 1]).sum(axis=-1)
+    return np.arctan2(cross, dot)
 
 
 class ReducerGeometry:
@@ -162,14 +173,22 @@ class ReducerGeometry:
     def disc_poses(self, theta_out: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pose of each disc: centre (N, n_discs, 2) mm and rotation (N, n_discs) rad.
 
-        Rigid least-squares fit of the disc's two crank holes to its two cam centres.
+        Rigid least-squares fit of the disc's crank holes to its cam centres (equal, isotropic bearings: the pose
+        that minimises the sum of the squared hole-cam offsets). Two cranks: the rotation is the angle between the
+        hole line and the cam line. Three or more (docs/physics.md, section 3): with the holes ``h_j`` and cams
+        ``c_j`` taken about their means, the rotation is ``atan2(sum h_j x c_j, sum h_j . c_j)`` (the planar
+        Procrustes / Kabsch fit), the same angle for two. Either way the centre is the mean of the cams minus the
+        rotated mean of the holes.
         """
         C = self.cam_centers(theta_out, psi)  # (N, nc, nd, 2)
         C = np.swapaxes(C, 1, 2)  # (N, nd, nc, 2)
         H = self.disc_holes  # (nd, nc, 2)
-        dc = C[:, :, 1] - C[:, :, 0]
-        dh = H[:, 1] - H[:, 0]
-        ang = np.arctan2(dc[..., 1], dc[..., 0]) - np.arctan2(dh[..., 1], dh[..., 0])[None]
+        if C.shape[2] == 2:
+            dc = C[:, :, 1] - C[:, :, 0]
+            dh = H[:, 1] - H[:, 0]
+            ang = np.arctan2(dc[..., 1], dc[..., 0]) - np.arctan2(dh[..., 1], dh[..., 0])[None]
+        else:
+            ang = procrustes_angle(H, C)
         theta_out = np.atleast_1d(theta_out)
         ang = theta_out[:, None] + (np.mod(ang - theta_out[:, None] + np.pi, 2 * np.pi) - np.pi)
         mid = (C[:, :, 0] + C[:, :, 1]) / 2.0 if C.shape[2] == 2 else C.mean(axis=2)  # as np.mean forms it
@@ -311,7 +330,7 @@ class ReducerGeometry:
 
     # ------------------------------------------------------------------ placement
     def placement(self, theta_in: float, theta_out: float | None = None,
-                  psi: tuple[float, float] | None = None) -> dict[str, tuple[float, float, float]]:
+                  psi: tuple[float, ...] | None = None) -> dict[str, tuple[float, float, float]]:
         """Planar placement ``(x mm, y mm, rotation deg)`` of every moving part at one state.
 
         Default state: the ideal kinematics at ``theta_in`` (rad). Keys: ``sun``, ``carrier``,

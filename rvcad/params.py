@@ -51,7 +51,9 @@ class Design:
         Circumferential backlash of the stage I mesh on the pitch circle, mm (assumption: 0;
         the planet teeth are thinned by this amount).
     crank_angles_deg : tuple of float
-        Angular positions of the crankshafts in the carrier frame, degrees (assumption: 0, 180).
+        Angular positions of the crankshafts in the carrier frame, degrees (assumption: 0, 180). Two or more
+        (:data:`MAX_CRANKS` at most) as the planets, the crank holes and the pillars between them fit: RV reducers
+        of the larger frames have three crankshafts, evenly spaced (:func:`even_crank_angles`).
     gear_width_mm, disc_width_mm, disc_gap_mm, plate_width_mm : float
         Axial widths, mm (assumptions of this implementation).
     cam_radius_mm : float
@@ -78,6 +80,7 @@ class Design:
     carrier_pillars, carrier_pillar_radius_mm : int, float
         Pillars joining the output flange and the carrier end plate (round bars on the crank circle, midway
         between the cranks), mm; their bending and shear twist the carrier (rvdyn.bearings.carrier_torsional_stiffness).
+        Not given (None): one pillar between each pair of neighbouring cranks, ``n_cranks`` pillars.
     pin_seat_clearance_mm : float
         Radial clearance of a pin in its housing groove (groove radius = pin radius + this), mm; the conformal
         line contact of the seat is in series with the pin-disc contact (rvdyn.bearings.pin_seat_contact).
@@ -102,7 +105,7 @@ class Design:
     module_mm: float = 1.25
     pressure_angle_deg: float = 20.0
     stage1_backlash_mm: float = 0.0
-    crank_angles_deg: tuple[float, float] = (0.0, 180.0)
+    crank_angles_deg: tuple[float, ...] = (0.0, 180.0)
     gear_width_mm: float = 10.0
     disc_width_mm: float = 10.0
     disc_gap_mm: float = 0.5
@@ -137,7 +140,8 @@ class Design:
     # are taken as large as the crank holes (cam_radius_mm), so a pillar is a round bar of radius
     # cam_radius - e - 0.7 mm = 7 mm. Pin seats: each pin lies in a semicircular groove of the housing whose
     # radius is the pin radius plus pin_seat_clearance_mm (a running fit: the pins turn in their grooves).
-    carrier_pillars: int = 2
+    # Not given: one pillar between each pair of neighbouring cranks (n_cranks pillars; 2 for the default design).
+    carrier_pillars: int | None = None
     carrier_pillar_radius_mm: float = 7.0
     pin_seat_clearance_mm: float = 0.01
     # The housing ring under the pin forces (rvdyn.housing, docs/physics.md section 9): held round at the main
@@ -150,6 +154,11 @@ class Design:
     profile_shift_mm: float = 0.0
     profile_rotation_deg: float = 0.0
     # ---- end of the bearing block ---------------------------------------------------------------------
+
+    def __post_init__(self) -> None:
+        # the pillars follow the cranks unless given: one between each pair of neighbouring cranks
+        if self.carrier_pillars is None and isinstance(self.crank_angles_deg, (tuple, list)):
+            object.__setattr__(self, "carrier_pillars", len(self.crank_angles_deg))
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -184,7 +193,7 @@ class Design:
 
     @property
     def n_cranks(self) -> int:
-        """Number of crankshafts (2)."""
+        """Number of crankshafts (2 by default; 3 on the larger RV frames)."""
         return len(self.crank_angles_deg)
 
     @property
@@ -205,7 +214,11 @@ class Design:
         return d
 
     def replace(self, **changes: Any) -> "Design":
-        """Copy with fields changed, validated."""
+        """Copy with fields changed, validated. A design whose pillars follow its cranks (one pillar between each
+        pair of neighbouring cranks) keeps following them when only ``crank_angles_deg`` is changed."""
+        if ("crank_angles_deg" in changes and "carrier_pillars" not in changes
+                and self.carrier_pillars == self.n_cranks):
+            changes["carrier_pillars"] = None
         d = replace(self, **changes)
         d.validate()
         return d
@@ -213,11 +226,12 @@ class Design:
     def validate(self) -> "Design":
         """Raise :class:`~rvcad.validation.DesignError` naming the field if the design cannot be built.
 
-        Checks, in this order: the type of every field (integers, finite numbers, two crank
-        angles), the physical range of every field (:data:`FIELD_RANGES`), then the relations
-        between fields: Zc = Zp - 1, pins that do not overlap, the shortening coefficient
-        e Zp / Rp < 1, the two planets apart on the crank circle
-        (radius = the stage I centre distance), and the cam, journal, centre-hole and housing radii.
+        Checks, in this order: the type of every field (integers, finite numbers, 2 to
+        :data:`MAX_CRANKS` crank angles), the physical range of every field (:data:`FIELD_RANGES`), then the
+        relations between fields: Zc = Zp - 1, pins that do not overlap, the shortening coefficient
+        e Zp / Rp < 1, neighbouring planets apart on the crank circle (radius = the stage I centre distance),
+        the cam, journal, centre-hole and housing radii, and the pillar holes of the discs between neighbouring
+        crank holes.
         What the solids need beyond these relations (tip lands and root gaps of the teeth, crank
         holes apart and inside the disc root and plate rim, pins against the discs with the errors
         applied) is :func:`rvcad.check.check_case`, run before anything is exported. Undercut (pin radius above the smallest
@@ -241,13 +255,13 @@ class Design:
             where = f"design.{f.name}"
             if f.name == "crank_angles_deg":
                 if not isinstance(v, (tuple, list)):
-                    reject(where, v, "a list of 2 angles in degrees", f"is of type {type(v).__name__}", DesignError)
+                    reject(where, v, CRANK_LIST, f"is of type {type(v).__name__}", DesignError)
                 for i, x in enumerate(v):
                     as_real(x, f"{where}[{i}]", unit="deg", cls=DesignError)
             elif isinstance(default, bool):
                 if not isinstance(v, bool):
                     reject(where, v, "true or false", f"is of type {type(v).__name__}", DesignError)
-            elif isinstance(default, int):
+            elif isinstance(default, int) or f.name == "carrier_pillars":
                 as_int(v, where, cls=DesignError)
             elif isinstance(default, float):
                 as_real(v, where, cls=DesignError)
@@ -263,12 +277,12 @@ class Design:
     def _check_ranges(self) -> None:
         for name, (lo, hi, lo_open, why) in FIELD_RANGES.items():
             v = getattr(self, name)
-            if type(self.__dataclass_fields__[name].default) is int:
+            if type(self.__dataclass_fields__[name].default) is int or name == "carrier_pillars":
                 as_int(v, f"design.{name}", lo=int(lo), hi=int(hi), cls=DesignError, why=why)
             elif name == "crank_angles_deg":
-                if len(v) != 2:
-                    reject(f"design.{name}", list(v), "exactly 2 crank angles (two crankshafts)",
-                           f"lists {len(v)}", DesignError)
+                if not 2 <= len(v) <= MAX_CRANKS:
+                    reject(f"design.{name}", list(v), f"2 to {MAX_CRANKS} crank angles (crankshafts), e.g. "
+                           f"{list(even_crank_angles(3))} for three", f"lists {len(v)}", DesignError)
                 for i, x in enumerate(v):
                     as_real(x, f"design.{name}[{i}]", lo=lo, hi=hi, unit="deg", cls=DesignError, why=why)
             else:
@@ -291,18 +305,21 @@ class Design:
         if not k1 < 1.0:
             bad("eccentricity_mm", self.eccentricity_mm, f"< Rp / Zp = {rp / self.z_pins:.4f} mm",
                 f"mm gives a shortening coefficient e*Zp/Rp = {k1:.4f} >= 1 (a looped, unusable profile)")
-        # the two planets on the crank circle: its radius is the stage I centre distance a, so two planets
-        # (tip radius m (Z2/2 + 1 + x2)) at crank angles beta_0, beta_1 stand 2 a sin(|beta_1 - beta_0| / 2)
-        # apart and must not overlap (the crank holes in the discs and plates are rvcad.check's)
+        # the planets on the crank circle: its radius is the stage I centre distance a, so two neighbouring planets
+        # (tip radius m (Z2/2 + 1 + x2)) at crank angles beta_i, beta_j stand 2 a sin(|beta_j - beta_i| / 2) apart
+        # and must not overlap (the crank holes in the discs and plates are rvcad.check's)
         a = self.center_distance_mm
-        c0, c1 = self.crank_angles_deg
-        chord = 2.0 * a * abs(math.sin(math.radians(c1 - c0) / 2.0))
         need = 2.0 * (self.planet_pitch_radius_mm + self.module_mm * (1.0 + PLANET_SHIFT))
+        i, j, gap = closest_cranks(self.crank_angles_deg)
+        chord = 2.0 * a * abs(math.sin(math.radians(gap) / 2.0))
         if chord <= need:
             min_deg = 2.0 * math.degrees(math.asin(min(1.0, need / (2.0 * a))))
-            bad("crank_angles_deg", [int(c) if float(c).is_integer() else c for c in (c0, c1)],
-                f"cranks at least {min_deg:.2f} deg apart (and at most {360 - min_deg:.2f} deg)",
-                f"puts the two planets {chord:.3f} mm apart on the {a:g} mm crank circle (the stage I centre "
+            given = [int(c) if float(c).is_integer() else c for c in self.crank_angles_deg]
+            which = "the two planets" if self.n_cranks == 2 else f"planets {i} and {j}"
+            most = (f"and at most {360 - min_deg:.2f} deg" if self.n_cranks == 2
+                    else f"at most {int(360.0 // min_deg) if min_deg > 0 else MAX_CRANKS} cranks")
+            bad("crank_angles_deg", given, f"cranks at least {min_deg:.2f} deg apart ({most})",
+                f"puts {which} {chord:.3f} mm apart on the {a:g} mm crank circle (the stage I centre "
                 f"distance): their tip circles ({need:.3f} mm across) overlap")
         if self.cam_radius_mm + self.eccentricity_mm >= a:
             bad("cam_radius_mm", self.cam_radius_mm, f"< crank radius - eccentricity = {a - self.eccentricity_mm:g} mm",
@@ -333,6 +350,16 @@ class Design:
                 f"< Rp - pin radius - 2 e - crank radius = "
                 f"{rp - self.pin_radius_mm - 2 * self.eccentricity_mm - a:g} mm",
                 "mm: the pillar holes of the discs reach the disc root")
+        # a pillar midway between two neighbouring cranks (angular gap g) stands 2 a sin(g / 4) from each crank:
+        # its hole in the discs (pillar radius + e) must clear both crank holes (cam radius)
+        _, _, gap = closest_cranks(self.crank_angles_deg)
+        apart = 2.0 * a * math.sin(math.radians(gap) / 4.0)
+        if apart <= self.cam_radius_mm + ph:
+            bad("carrier_pillar_radius_mm", self.carrier_pillar_radius_mm,
+                f"< {apart - self.cam_radius_mm - self.eccentricity_mm:.4f} mm (a pillar midway between the "
+                f"closest cranks, {gap:g} deg apart, stands {apart:.4f} mm from each)",
+                f"mm: the pillar holes of the discs (pillar radius + eccentricity) cut into the crank holes "
+                f"(cam radius {self.cam_radius_mm:g} mm)")
         if self.housing_outer_radius_mm <= rp + self.pin_radius_mm:
             bad("housing_outer_radius_mm", self.housing_outer_radius_mm,
                 f"> Rp + pin radius = {rp + self.pin_radius_mm:g} mm", "mm does not hold the pins")
@@ -362,7 +389,7 @@ class Design:
         """Build and validate from a dict (the ``design`` object of a case JSON).
 
         ``None`` gives the default design. Unknown keys, wrong types (a crank angle list that is
-        not a list of 2 numbers, a tooth count that is not an integer) and values out of range raise
+        not a list of 2 to :data:`MAX_CRANKS` numbers, a tooth count that is not an integer) and values out of range raise
         :class:`~rvcad.validation.DesignError` naming the field.
         """
         if d is None:
@@ -384,12 +411,11 @@ class Design:
             where = f"design.{f.name}"
             if f.name == "crank_angles_deg":
                 if not isinstance(v, (list, tuple)):
-                    reject(where, v, "a list of 2 angles in degrees", f"is of type {type(v).__name__}, not a list",
-                           DesignError)
+                    reject(where, v, CRANK_LIST, f"is of type {type(v).__name__}, not a list", DesignError)
                 kw[f.name] = tuple(as_real(x, f"{where}[{i}]", unit="deg", cls=DesignError) for i, x in enumerate(v))
             elif isinstance(f.default, bool):
                 kw[f.name] = v
-            elif isinstance(f.default, int):
+            elif isinstance(f.default, int) or f.name == "carrier_pillars":
                 kw[f.name] = as_int(v, where, cls=DesignError)
             elif isinstance(f.default, float):
                 kw[f.name] = as_real(v, where, cls=DesignError)
@@ -416,6 +442,30 @@ def _memo_key(d: Any) -> str | None:
         return json.dumps(d, sort_keys=True, allow_nan=False)
     except (TypeError, ValueError):
         return None
+
+
+#: Most crankshafts a design may list (the planets, crank holes and pillars must fit between them as well).
+MAX_CRANKS = 12
+#: What ``design.crank_angles_deg`` allows, in messages.
+CRANK_LIST = f"a list of 2 to {MAX_CRANKS} angles in degrees (one per crankshaft)"
+
+
+def even_crank_angles(n: int) -> tuple[float, ...]:
+    """``n`` crank angles evenly spaced from 0, degrees: ``(0, 120, 240)`` for three cranks."""
+    return tuple(360.0 * j / n for j in range(n))
+
+
+def closest_cranks(angles_deg: tuple[float, ...] | list[float]) -> tuple[int, int, float]:
+    """The two neighbouring cranks closest together on the carrier and their angular distance, degrees in
+    [0, 180]: ``(i, j, gap)`` with i < j the indices in ``angles_deg`` (of the 2 or more given)."""
+    best = (0, 1, 360.0)
+    n = len(angles_deg)
+    for i in range(n):
+        for j in range(i + 1, n):
+            g = abs(math.remainder(float(angles_deg[j]) - float(angles_deg[i]), 360.0))
+            if g < best[2]:
+                best = (i, j, g)
+    return best
 
 
 #: Arrangements of the two tapered journal bearings of a crank (``Design.journal_bearing_arrangement``).

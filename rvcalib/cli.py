@@ -174,7 +174,12 @@ def summary(res, paths: dict) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status (0 ok, 2 bad input)."""
+    """Entry point; returns the exit status (0 ok, 2 bad input). ``rv-calibrate import ...``: :mod:`rvcalib.cli_import`."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "import":
+        from rvcalib.cli_import import main as import_main
+
+        return import_main(argv[1:])
     args = build_parser().parse_args(argv)
     from rvcalib import forward
     from rvcalib.identify import calibrate

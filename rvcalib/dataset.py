@@ -1,7 +1,7 @@
 """Read and validate a measured dataset (conventions, "Measured data").
 
 A dataset is a folder with ``runs.csv`` (one row per run: ``run, load_Nm, direction``, optional
-declared Table 4 error columns, ``temperature_C``, ``speed_rpm``) and ``samples.csv`` (``run,
+declared Table 4 error columns, ``temperature_C``, ``speed_rpm``, ``test``) and ``samples.csv`` (``run,
 input_deg, output_deg``, optional ``time_s``). :func:`read_dataset` returns a
 :class:`MeasuredDataset` or raises ``DatasetError`` (a ``ValueError``, :mod:`rvcad.validation`)
 with a message that names the file, the column and the run.
@@ -26,8 +26,10 @@ The reducer measured is the folder's ``design.json`` (the ``design`` object of a
 to TE; a record whose input/output span ratio does not match it is refused, and without a design
 the message says that the ratio does not match the default.
 
-Angles are absolute encoder readings: the TE mean (lost motion, load wind-up) is taken as
-measured, so input and output encoders must share their zero (no offset is fitted per run).
+Angles are absolute encoder readings, but a rig zeroes its TE at a homing position before each test:
+the runs of one test share one unknown constant (the rig's zero, a nuisance). ``MeasuredDataset.tests``
+(:mod:`rvcalib.testgroups`) says which runs form a test: the optional ``test`` column of ``runs.csv``,
+else one test per load, speed and temperature.
 """
 from __future__ import annotations
 
@@ -44,11 +46,12 @@ from rvcad.params import Design
 from rvcad.validation import DatasetError, read_json_file
 
 from rvcalib.orders import check_periodic, period_deg
+from rvcalib.testgroups import TestGroups, group_tests
 
 ARCSEC_PER_DEG = 3600.0
 
 RUN_REQUIRED = ("run", "load_Nm", "direction")
-RUN_OPTIONAL = ("temperature_C", "speed_rpm")
+RUN_OPTIONAL = ("temperature_C", "speed_rpm", "test")
 SAMPLE_REQUIRED = ("run", "input_deg", "output_deg")
 SAMPLE_OPTIONAL = ("time_s",)
 
@@ -92,6 +95,8 @@ class RunRecord:
         What was repaired or could not be checked.
     design : Design
         The reducer measured (its ratio converts the readings to TE).
+    test : str
+        Id of the test (one homing of the rig) the run belongs to (:mod:`rvcalib.testgroups`).
     """
 
     run: str
@@ -107,6 +112,7 @@ class RunRecord:
     noise_arcsec: float = float("nan")
     notes: list[str] = field(default_factory=list)
     design: Design = field(default_factory=Design)
+    test: str = ""
 
     @property
     def ratio(self) -> float:
@@ -163,6 +169,10 @@ class MeasuredDataset:
     design_source : str
         Where the design came from: ``default`` (the paper's reducer), ``design.json`` in the
         dataset folder, or the file given (``--reducer``).
+    tests : TestGroups
+        The tests (one homing of the rig each): ``tests.of_run`` maps run id -> test id,
+        ``tests.ids`` lists the tests; default (None given): one test per load, speed and temperature
+        of the runs.
     """
 
     path: Path
@@ -171,6 +181,17 @@ class MeasuredDataset:
     declared_keys: list[str] = field(default_factory=list)
     design: Design = field(default_factory=Design)
     design_source: str = "default"
+    tests: TestGroups | None = None
+
+    def __post_init__(self) -> None:
+        if self.tests is None:
+            self.tests = group_tests(pd.DataFrame({
+                "run": [r.run for r in self.runs], "load_Nm": [r.load_Nm for r in self.runs],
+                **({"speed_rpm": [r.speed_rpm for r in self.runs]} if all(r.speed_rpm is not None for r in self.runs) else {}),
+                **({"temperature_C": [r.temperature_C for r in self.runs]}
+                   if all(r.temperature_C is not None for r in self.runs) else {})}))
+        for r in self.runs:
+            r.test = self.tests.of_run[r.run]
 
     @property
     def ratio(self) -> float:
@@ -251,7 +272,7 @@ def load_design(source: "str | Path | dict | Design | None", folder: Path | None
 def _read_csv(path: Path, what: str) -> pd.DataFrame:
     if not path.is_file():
         raise DatasetError(f"{what} file '{path}' does not exist (a dataset folder holds runs.csv and samples.csv)")
-    df = read_csv_strict(path, f"{what} file", DatasetError, dtype={"run": str}, skipinitialspace=True)
+    df = read_csv_strict(path, f"{what} file", DatasetError, dtype={"run": str, "test": str}, skipinitialspace=True)
     if len(df) == 0:
         raise DatasetError(f"{what} file '{path}' has a header but no rows")
     dup = [c for c in df.columns if list(df.columns).count(c) > 1]
@@ -349,6 +370,8 @@ def _read_runs(path: Path) -> tuple[pd.DataFrame, list[str]]:
             i = int(np.argmin(s))
             raise DatasetError(f"runs.csv: column 'speed_rpm' run {runs.iloc[i]} is {s[i]:g}; the speed must be >= 0")
         out["speed_rpm"] = s
+    if "test" in df.columns:
+        out["test"] = df["test"]
     return out, keys
 
 
@@ -571,4 +594,6 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
             raise DatasetError(f"runs.csv: run {rid}: {exc}") from None
         records.append(rec)
         notes.extend(rnotes)
-    return MeasuredDataset(path=root, runs=records, notes=notes, declared_keys=keys, design=des, design_source=des_src)
+    tests = group_tests(runs_df)
+    return MeasuredDataset(path=root, runs=records, notes=notes, declared_keys=keys, design=des, design_source=des_src,
+                           tests=tests)

@@ -49,6 +49,16 @@ def period_deg(design: Design) -> float:
     return ratio(design) * 360.0
 
 
+def base_orders(design: Design) -> dict[str, int]:
+    """The reducer's base orders (cycles per output revolution), by what turns or meshes: ``output`` 1 (the
+    carrier), ``lobe`` Zc (the discs' lobes passing the pins, the cranks' absolute turns), ``pin`` Zp (the
+    cranks relative to the carrier), ``sun`` N - 1 (the sun relative to the carrier), ``input`` N and
+    ``stage I mesh`` Z1 (N - 1) (sun teeth passing the planets)."""
+    n = int(round(ratio(design)))
+    return {"output": 1, "lobe": int(design.z_disc), "pin": int(design.z_pins), "sun": n - 1, "input": n,
+            "stage I mesh": int(design.z_sun) * (n - 1)}
+
+
 def orders_that_matter(design: Design) -> list[int]:
     """1, Zc, Zp, 2 Zc, 2 Zp and the input orders N - 1, N, N + 1 (sorted, unique)."""
     n = int(round(ratio(design)))

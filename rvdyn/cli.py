@@ -188,8 +188,14 @@ def _stiffness(args: argparse.Namespace) -> int:
     print(f"  backlash           {f['backlash_arcmin']:.4f} arcmin")
     print(f"  hysteresis loss    {f['hysteresis_loss_arcmin']:.4f} arcmin")
     print(f"  compliance budget at rated torque (arcsec, total {f['budget_total_arcsec']:.2f}):")
+    per_crank = f.get("budget_per_crank", {})
+    if per_crank:
+        n = len(next(iter(per_crank.values())))
+        print(f"    {'part':21s} {'arcsec':>8s}  {'share':>7s}   per crank " + " ".join(f"{j:>7d}" for j in range(n)))
     for part, arcsec in sorted(f["budget"].items(), key=lambda kv: -kv[1]):
-        print(f"    {part:18s} {arcsec:8.3f}  ({100 * arcsec / max(f['budget_total_arcsec'], 1e-300):5.1f} %)")
+        cranks = " ".join(f"{v:7.3f}" for v in per_crank.get(part, []))
+        print(f"    {part:21s} {arcsec:8.3f}  ({100 * arcsec / max(f['budget_total_arcsec'], 1e-300):5.1f} %)"
+              + (f"             {cranks}" if cranks else ""))
     if "sensitivity" in f:
         print("  rigidity's elasticity to each assumed size (d ln k / d ln s: +1 % size -> about E % rigidity):")
         for r in sorted(f["sensitivity"], key=lambda r: -abs(r["elasticity"] or 0.0)):

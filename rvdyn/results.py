@@ -46,6 +46,11 @@ class Solution:
         ``model.torsional_compliance_arcsec_per_Nm`` times the torque, when it is set); empty in the rigid limit and
         with the spring model of floating discs (impact law or rigid supports with a cam-bearing clearance),
         and when the solver's ``want_parts`` is False (:func:`rvdyn.te.run_te`: the TE alone).
+    crank_parts_rad : dict of (N, n_cranks) rad
+        The parts each crank carries, crank by crank (their sum over the cranks is the part of ``parts_rad``):
+        ``gears`` (its planet's mesh), and with elastic supports ``crank_torsion``, ``cam_bearings`` (its cams on
+        both discs), ``journal_bearings``, ``crank_bending`` and the bearing seats; empty where ``parts_rad``
+        is. The pins, the pin seats and the carrier's pillars are common to all cranks.
     peak_pressure_MPa : (N,) MPa, largest Hertzian pin-disc contact pressure (NaN in the rigid limit)
     warnings : list of str
     pin_force_N : (N, n_discs, Zp) N or None, pin contact forces (None in the rigid limit)
@@ -65,6 +70,7 @@ class Solution:
     iterations: int = 0
     x: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
     parts_rad: dict = field(default_factory=dict)
+    crank_parts_rad: dict = field(default_factory=dict)
     peak_pressure_MPa: np.ndarray = field(default_factory=lambda: np.zeros(0))
     warnings: list = field(default_factory=list)
     pin_force_N: np.ndarray | None = field(default=None, repr=False)
@@ -127,6 +133,7 @@ class ResultsMixin:
         T = load_Nm * 1e3 + self.friction_Nmm
         n1 = self.nd * self.zp
         parts: dict[str, np.ndarray] = {}
+        crank_parts: dict[str, np.ndarray] = {}
         warnings: list[str] = []
         cam_F = None
         want = self.want_parts                          # the wind-up parts and cam forces (not the TE's)
@@ -138,12 +145,17 @@ class ResultsMixin:
                 f, dx = self._unit_load_forces(law, delta, direction, th, x)   # dF/dT, N per N mm
                 work = f * np.maximum(delta, 0.0)
                 parts = {"pins": work[:, :n1].sum(axis=1), "gears": work[:, n1:].sum(axis=1)}
+                # each planet's mesh: its loaded and coast flank columns
+                gears_j = work[:, n1:n1 + self.nc] + work[:, n1 + self.nc:]
+                crank_parts["gears"] = gears_j
                 if self.chain is not None:
                     parts["crank_torsion"] = self.torsion_share * parts["gears"]
                     parts["gears"] = parts["gears"] - parts["crank_torsion"]
+                    crank_parts["crank_torsion"] = self.torsion_share * gears_j
+                    crank_parts["gears"] = gears_j - crank_parts["crank_torsion"]
                     parts["pin_seats"] = self._seat_parts(f[:, :n1], F[:, :n1])
                     parts["pins"] = parts["pins"] - parts["pin_seats"]
-                    parts.update(self._chain_parts(th, x, dx, law))
+                    parts.update(self._chain_parts(th, x, dx, law, crank_parts))
                     cam_F = self.chain_cam_forces(th, x, law)
                     self._raw_last = None
                 if self.compliance_rad_per_Nmm > 0.0:   # the lumped compliance (model option) is a part too
@@ -164,6 +176,7 @@ class ResultsMixin:
             peak_force_N=np.full(th.size, np.nan) if nan else F.max(axis=1),
             max_penetration_mm=pen,
             stage1_force_N=np.full((th.size, self.nc), np.nan) if nan else F[:, n1:n1 + self.nc],
-            iterations=iters, x=x, parts_rad=parts, peak_pressure_MPa=pressure, warnings=warnings,
+            iterations=iters, x=x, parts_rad=parts, crank_parts_rad=crank_parts, peak_pressure_MPa=pressure,
+            warnings=warnings,
             pin_force_N=None if nan else F[:, :n1].reshape(th.size, self.nd, self.zp), cam_force_N=cam_F,
             n_pin_contacts=(delta[:, :n1] > (1e-12 if not law.rigid else 0.0)).sum(axis=1))

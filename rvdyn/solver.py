@@ -2,13 +2,14 @@
 
 Model (derivation and assumptions in docs/physics.md):
 
-- Coordinates per step: carrier (output) angle ``theta_out`` and the absolute angles ``psi_0``,
-  ``psi_1`` of the two cranks; with a cam-bearing clearance, three more per disc (translation
-  and rotation of the disc relative to the least-squares fit of its holes to its cams).
-- Disc k's pose follows the cams of both cranks (rigid least-squares fit of its two holes,
-  :meth:`rvcad.geometry.ReducerGeometry.disc_poses`): the over-constraint of a disc held by two
-  cranks is resolved there; the two cranks share the load through the pin contacts of both discs
-  and through their own sun-planet meshes.
+- Coordinates per step: carrier (output) angle ``theta_out`` and the absolute angles ``psi_j`` of the
+  n cranks (two by default, three on the larger frames); with a cam-bearing clearance, three more per disc
+  (translation and rotation of the disc relative to the least-squares fit of its holes to its cams).
+- Disc k's pose follows the cams of all cranks (rigid least-squares fit of its n holes,
+  :meth:`rvcad.geometry.ReducerGeometry.disc_poses`): with rigid supports the over-constraint of a disc held by
+  n cranks (2n - 3 hole-cam mismatches) is resolved there, with floating discs in the bearings (an equal,
+  isotropic spring per hole, whose least-energy pose is that fit); the cranks share the load through the pin
+  contacts of both discs and through their own sun-planet meshes.
 - Contacts: every pin with both discs (exact signed gap, two-sided by geometry) and the sun with
   each planet on both flanks (the coast flank is open by the stage I backlash, zero by default).
   Each carries ``F = K delta**n``; stored energy ``K delta**(n+1)/(n+1)``.

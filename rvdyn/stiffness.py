@@ -19,7 +19,9 @@ torque is swept -rated -> +rated -> -rated and the output torsion angle recorded
    torque (rigid limit, TE(-1) - TE(+1)); ``hysteresis_loss`` = the curve's width at zero torque
    (play plus friction); ``torsional_rigidity`` = b/a, read as the secant of the mid-curve between
    3 % and 100 % of rated torque (b = 0.97 T_rated, a = its angle), mean of both sides; ``budget`` =
-   each part's output wind-up at rated torque (arcsec, mean of both directions).
+   each part's output wind-up at rated torque (arcsec, mean of both directions); ``budget_per_crank`` = the
+   parts each crank carries (its planet's mesh, torsion, cam and journal bearings, bending, bearing seats),
+   crank by crank, in the same unit (their sum over the cranks is the part's ``budget``).
 """
 from __future__ import annotations
 
@@ -67,6 +69,7 @@ class StiffnessResult:
     figures : dict
         ``torsional_rigidity_Nm_per_arcmin``, ``lost_motion_arcmin``, ``backlash_arcmin``,
         ``hysteresis_loss_arcmin``, ``rated_torque_Nm``, ``budget`` (part -> arcsec at rated torque),
+        ``budget_per_crank`` (part -> one arcsec figure per crank, for the parts a crank carries),
         ``preloaded`` (the errors make an interference the parts take as a preload: no play, and the preload's
         normal forces keep the friction band open at zero torque),
         ``pins_in_contact`` (torque fraction of rated -> pin contacts of both discs, positive side)
@@ -167,6 +170,7 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     th = np.array([math.radians(theta_in_deg)])
     sides = {}
     budget_acc: dict[str, list[float]] = {}
+    crank_acc: dict[str, list[np.ndarray]] = {}
     warnings: list[str] = []
     preloaded = False
     for sign in (1, -1):
@@ -185,6 +189,8 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
             if f == 1.0:
                 for k, v in sol.parts_rad.items():
                     budget_acc.setdefault(k, []).append(float(v[0]) * ARCSEC_PER_RAD)
+                for k, v in sol.crank_parts_rad.items():
+                    crank_acc.setdefault(k, []).append(np.asarray(v[0], dtype=float) * ARCSEC_PER_RAD)
         sides[sign] = rows
     # the housing ring in series (rvdyn.housing; elastic supports only, as the other supports): its wind-up
     # along each side's levels, added to the equilibrium's torsion in the sense of the torque
@@ -252,6 +258,7 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
         "rated_torque_Nm": rated,
         "budget": budget,
         "budget_total_arcsec": float(sum(budget.values())),
+        "budget_per_crank": {k: [float(x) for x in np.mean(v, axis=0)] for k, v in crank_acc.items()},
         "pins_in_contact": {f"{f:g}": int(sol.n_pin_contacts[0]) for f, (_, sol) in zip((0.0,) + LEVELS, sides[1])},
         "contact": s.law.kind,
         "supports": "elastic" if s.supports is not None else "rigid",

@@ -315,10 +315,13 @@ class SupportChain:
         return E, g, H, gc, Hc, Hqs, Hss
 
     def parts(self, x: np.ndarray, dx: np.ndarray, dcam: np.ndarray, ddcam: np.ndarray,
-              rigid: bool = False, tang: np.ndarray | None = None) -> dict[str, np.ndarray]:
+              rigid: bool = False, tang: np.ndarray | None = None,
+              per_crank: dict | None = None) -> dict[str, np.ndarray]:
         """Unit-load wind-up of the supports (N,) rad: ``sum q . d`` with ``d`` each part's actual
         deflection and ``q`` its force per unit output torque (tangent stiffness times ``dx = dx/dT``,
-        ``ddcam`` = d(dcam)/dT)."""
+        ``ddcam`` = d(dcam)/dT). ``per_crank`` (a dict, filled in): the same sums of the parts each crank carries
+        (its cam bearings on both discs and their seats, its journal bearings and their seats, its bending),
+        crank by crank, (N, nc) rad; the carrier's pillars carry all cranks' far journals together."""
         N = x.shape[0]
         s = self.sup
         csc, csj = (0.0, 0.0) if rigid else (s.cam_seat_c, s.journal_seat_c)
@@ -347,6 +350,17 @@ class SupportChain:
             out["journal_bearing_seats"] = journal_seat
         if self.n_carrier:                                                      # the pillars: k_s s ds/dT
             out["carrier"] = self.k_s * x[:, self.base + nq] * dx[:, self.base + nq]
+        if per_crank is not None:
+            cam_j = np.einsum("nkja,nkja->nj", qc, dcam)
+            cam_seat_j = csc * np.einsum("nkja,nkja->nj", qc, gc)
+            journal_j = np.einsum("njax,njax->nj", qj, u)
+            journal_seat_j = csj * np.einsum("njax,njax->nj", qj, fj)
+            per_crank.update({"cam_bearings": cam_j - cam_seat_j, "journal_bearings": journal_j - journal_seat_j,
+                              "crank_bending": np.einsum("kl,njlx,njkx->nj", self.Kb, dw, w)})
+            if csc > 0.0:
+                per_crank["cam_bearing_seats"] = cam_seat_j
+            if csj > 0.0:
+                per_crank["journal_bearing_seats"] = journal_seat_j
         return out
 
 
@@ -637,11 +651,13 @@ class SupportMixin:
             Ht[:, i, i] += Hss
         return E, G, Ht
 
-    def _chain_parts(self, th: np.ndarray, x: np.ndarray, dx: np.ndarray, law: ContactLaw) -> dict[str, np.ndarray]:
-        """Wind-up of the supports at the solution per unit-load state derivative ``dx`` (N, ndof) = dx/dT."""
+    def _chain_parts(self, th: np.ndarray, x: np.ndarray, dx: np.ndarray, law: ContactLaw,
+                     per_crank: dict | None = None) -> dict[str, np.ndarray]:
+        """Wind-up of the supports at the solution per unit-load state derivative ``dx`` (N, ndof) = dx/dT
+        (``per_crank``: filled with each crank's share, :meth:`SupportChain.parts`)."""
         _, dcam, Dm, tang = self._chain_unpack(x, self._finish_raw(th, x, law))
         ddcam = np.einsum("nkjad,nd->nkja", Dm, dx)
-        return self.chain.parts(x, dx, dcam, ddcam, law.rigid, tang)
+        return self.chain.parts(x, dx, dcam, ddcam, law.rigid, tang, per_crank)
 
     def chain_cam_forces(self, th: np.ndarray, x: np.ndarray, law: ContactLaw) -> np.ndarray:
         """Forces of the cams on the discs (N, nd, nc, 2) N, fixed frame, at the states x."""

@@ -172,9 +172,11 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
 
 
 def reducer_text(d: Any) -> str:
-    """``Z1 12 / Z2 36, 40 pins, 39 lobes, ratio 121`` style description of a Design."""
+    """``Z1 12 / Z2 36, 40 pins, 39 lobes, ratio 121, ..., 2 cranks at 0/180 deg`` style description of a Design."""
+    cranks = "/".join(f"{a:g}" for a in d.crank_angles_deg)
     return (f"Z1 {d.z_sun} / Z2 {d.z_planet}, {d.z_pins} pins, {d.z_disc} lobes, ratio {d.ratio:.6g}, pin circle "
-            f"{d.pin_circle_diameter_mm:g} mm, e {d.eccentricity_mm:g} mm, pin radius {d.pin_radius_mm:g} mm")
+            f"{d.pin_circle_diameter_mm:g} mm, e {d.eccentricity_mm:g} mm, pin radius {d.pin_radius_mm:g} mm, "
+            f"{d.n_cranks} cranks at {cranks} deg")
 
 
 # ---------------------------------------------------------------------------------------------- figures

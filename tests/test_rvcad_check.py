@@ -229,3 +229,22 @@ def test_rerun_removes_temp_files_of_a_killed_export(tmp_path: Path) -> None:
     assert sorted(rep.removed_temps) == sorted(left)
     assert sorted(p.name for p in out.iterdir()) == sorted(keep + ["case.json", "manifest.json", "pin00.stl"])
     assert remove_stale_temps(out, ["pin00.stl"]) == []
+
+
+def test_check_case_takes_what_reducer_takes(tmp_path: Path) -> None:
+    """A Case, the case JSON object as a dict, the path of a case JSON file, or None (nominal)."""
+    d = {"errors": {"pin_radius": 5.0}}
+    want = check_case(Case.from_dict(d), cache=False)
+    path = tmp_path / "case.json"
+    path.write_text(json.dumps(d))
+    assert check_case(d, cache=False) == want
+    assert check_case(path, cache=False) == want and check_case(str(path), cache=False) == want
+    assert check_case(None, cache=False) == check_case(Case.from_dict({}), cache=False) != want
+    with pytest.raises(DesignError, match=r"design\.stage1_backlash_mm 1\.0 mm thins"):
+        check_case(BAD[0][0])
+    with pytest.raises(ValueError, match=r"errors key 'pin_radus' is unknown"):
+        check_case({"errors": {"pin_radus": 5.0}})
+    with pytest.raises(ValueError, match="case 7 is of type int; allowed: a rvcad.Case, a dict"):
+        check_case(7)
+    with pytest.raises(ValueError, match="case file"):
+        check_case(tmp_path / "missing.json")

@@ -18,7 +18,7 @@ def _turn(a: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
-@pytest.mark.parametrize("design", [{}, {"z_sun": 18, "z_planet": 36}])
+@pytest.mark.parametrize("design", [{}, {"z_sun": 18, "z_planet": 36}, {"crank_angles_deg": [0, 120, 240]}])
 def test_a_disc_turns_about_its_pitch_point_and_the_cranks_against_it_at_i_minus_1_times_z1_over_z2(design):
     """The kinematic facts the friction arms rest on, from the solver's poses by finite differences (rigid limit,
     two input angles 1e-5 rad apart): a material point P of a disc moves at |P - W| per unit output rotation at right
@@ -49,10 +49,13 @@ def test_a_disc_turns_about_its_pitch_point_and_the_cranks_against_it_at_i_minus
         assert np.allclose(np.abs(dpsi - 1.0), rel, rtol=1e-6)                     # crank against carrier and disc
 
 
-def test_the_friction_torque_grows_with_the_load_as_the_load_does():
+@pytest.mark.parametrize("design", [{}, {"crank_angles_deg": [0, 120, 240]}])
+def test_the_friction_torque_grows_with_the_load_as_the_load_does(design):
     """kappa (friction torque per unit coefficient and per N mm of output torque) is the same at 5 and 167 N m
-    within 2 % (pins) and 0.5 % (bearings): in a TE test, Coulomb friction acts as a compliance would."""
-    lo, hi = friction_arms(Case.from_dict({}), 5.0), friction_arms(Case.from_dict({}), 167.0)
+    within 2 % (pins) and 0.5 % (bearings): in a TE test, Coulomb friction acts as a compliance would; with two
+    cranks or three (the bearings' sum then runs over three cranks' cams and journals)."""
+    case = Case.from_dict({"design": design})
+    lo, hi = friction_arms(case, 5.0), friction_arms(case, 167.0)
     assert lo.pins > 0 and lo.bearings > 0 and lo.windup_arcsec_per_Nm > 0
     assert hi.pins == pytest.approx(lo.pins, rel=0.02) and hi.bearings == pytest.approx(lo.bearings, rel=0.005)
     with pytest.raises(ValueError, match="load_Nm 0.0 must be a finite number > 0"):

@@ -54,3 +54,28 @@ def test_bad_reducer_is_named(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--reducer" in err and "z_sun" in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_study_on_the_three_crank_rv160n_example(tmp_path, capsys):
+    """The RV-160N-like example (examples/designs/rv160n.json, a case file: three cranks, ratio 81): the study
+    runs on it, and the Monte Carlo draws every instance of the crank-wise errors on all three cranks (a planet
+    offset per crank, a cam per crank and disc, a carrier hole per crank, a disc hole per disc and crank)."""
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "designs" / "rv160n.json"
+    out = tmp_path / "run"
+    assert cli.main(["--out", str(out), "--reducer", str(example), "--stages", "doe,mc", *SMALL]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["reducer"]["ratio"] == pytest.approx(81.0, rel=1e-12)
+    assert s["reducer"]["design"]["crank_angles_deg"] == [0.0, 120.0, 240.0]
+    assert "3 cranks at 0/120/240 deg" in (out / "report.md").read_text()
+    feats = pd.read_csv(out / "tables" / "mc_features.csv")
+    per = feats["tolerance"].value_counts()
+    assert per["planet_eccentricity"] == 3 * 2                              # x and y per crank
+    assert per["cam_phase"] == per["cam_eccentricity"] == 3 * 2              # crank x disc
+    assert per["carrier_hole_eccentricity"] == 3 and per["disc_hole_eccentricity"] == 2 * 3
+    assert {f"cam_phase[crank=2,disc={k}]" for k in (0, 1)} <= set(feats["feature"])
+    cache = CaseCache(out / "cache")
+    entries = [cache.get(p.stem) for p in cache.entries()]
+    assert entries and all(e["stats"]["ratio"] == pytest.approx(81.0, rel=1e-4) for e in entries)

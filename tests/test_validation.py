@@ -39,7 +39,9 @@ def _case_file(tmp_path: Path, text: str) -> Path:
     ({"z_sun": "12"}, r"design.z_sun '12' is of type str, not an integer"),
     ({"z_sun": 12.5}, r"design.z_sun 12.5 is not an integer"),
     ({"crank_angles_deg": [0, "x"]}, r"design.crank_angles_deg\[1\] 'x' is of type str"),
-    ({"crank_angles_deg": [0, 90, 180]}, r"design.crank_angles_deg \[0.0, 90.0, 180.0\] lists 3; allowed: exactly 2"),
+    ({"crank_angles_deg": [0]}, r"design.crank_angles_deg \[0.0\] lists 1; allowed: 2 to 12 crank angles"),
+    ({"crank_angles_deg": [30.0 * j for j in range(13)]}, r"design.crank_angles_deg \[0.0, 30.0, .* lists 13; "
+                                                          r"allowed: 2 to 12 crank angles"),
     ({"pin_radius_mm": []}, r"design.pin_radius_mm \[\] is of type list, not a number"),
     ({"eccentricity_mm": float("nan")}, r"design.eccentricity_mm nan is not finite"),
 ])
@@ -166,6 +168,15 @@ def test_every_design_field_has_a_range_naming_it(name: str) -> None:
     ({"crank_angles_deg": [0, 0]}, r"design.crank_angles_deg \[0, 0\] puts the two planets 0.000 mm apart"),
     ({"crank_angles_deg": [0, 90]}, r"design.crank_angles_deg \[0, 90\] puts the two planets 42.426 mm apart .*"
                                     r"tip circles \(46.500 mm across\) overlap; allowed: cranks at least 101.61 deg"),
+    ({"crank_angles_deg": [0, 90, 180]}, r"design.crank_angles_deg \[0, 90, 180\] puts planets 0 and 1 42.426 mm apart"
+                                         r".*allowed: cranks at least 101.61 deg apart \(at most 3 cranks\)"),
+    # a pillar midway between cranks 120 deg apart on the 30 mm crank circle stands 2 a sin(30 deg) = 30 mm from
+    # each: its hole (17 + 1.3 mm) and the 12 mm crank hole overlap
+    ({"crank_angles_deg": [0, 120, 240], "cam_radius_mm": 12.0, "disc_center_hole_radius_mm": 11.0,
+      "carrier_pillar_radius_mm": 17.0},
+     r"design.carrier_pillar_radius_mm 17.0 mm: the pillar holes of the discs .* cut into the crank holes \(cam "
+     r"radius 12 mm\); allowed: < 16.7000 mm \(a pillar midway between the closest cranks, 120 deg apart, stands "
+     r"30.0000 mm from each\)"),
     ({"cam_radius_mm": 29.0}, r"design.cam_radius_mm 29.0 mm plus the eccentricity reaches the disc centre"),
     ({"crank_journal_radius_mm": 8.0}, r"design.crank_journal_radius_mm 8.0 mm does not pass through the cam"),
     ({"housing_outer_radius_mm": 66.0}, r"design.housing_outer_radius_mm 66.0 mm does not hold the pins"),
