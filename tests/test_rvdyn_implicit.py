@@ -125,6 +125,15 @@ def test_columns_resolve_the_contacts_curvature_against_solves_to_1e_12_rad():
     assert not bad, f"rows outside the secants at every step: {bad}; RMS relative differences {rel}"
 
 
+@pytest.mark.slow
+def test_three_cranks_columns_lie_between_the_secants():
+    case = Case.from_dict({"design": {"crank_angles_deg": [0.0, 120.0, 240.0]}, "errors": {
+        **BASE_ERRORS, "cam_phase": {"value": 1.5, "crank": 2, "disc": 0}}, "model": BASE_MODEL})
+    names = ["cam phase crank 1 disc 1", "carrier hole crank 1", "pin 7 pitch", "cam-bearing clearance"]
+    bad, rel = _outside_secants(case, _angles(4, 3), names, STEPS)
+    assert not bad, f"rows outside the secants at every step: {bad}; RMS relative differences {rel}"
+
+
 def _small(model: dict) -> tuple[Case, list, list]:
     case = Case.from_dict({"errors": {"pin_radius": -2.0, "cam_phase": 1.5}, "model": model})
     loads = [(20.0, 1), (20.0, -1)]
