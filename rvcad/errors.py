@@ -358,6 +358,62 @@ class Case:
             d["name"] = name
         return Case.from_dict(d)
 
+    def plus(self, delta: dict[str, Any], t: float = 1.0, model_defaults: dict[str, Any] | None = None,
+             field: str = "delta") -> "Case":
+        """This case plus ``t`` times a *direction* in case space (validated).
+
+        ``delta`` is ``{"errors": {...}, "model": {...}}`` (either key optional). Its ``errors`` object has the
+        case JSON's forms (a number for the default instance, objects with instance keys and ``angle_deg``,
+        lists of them, a pin-wise list of numbers); each of its instances times ``t`` adds to this case's
+        instance with the same selectors (key, crank, disc, hole, pin, ``angle_deg``), or is appended as a new
+        instance (the geometry sums instances, so both read the same). Its ``model`` options add ``t`` times
+        their value to this case's value, or to the default when the case does not set the option
+        (``model_defaults`` maps option keys to defaults; the geometric options' defaults are known here, the
+        solver's live in ``rvdyn.options.MODEL_OPTIONS``). Raises :class:`CaseError` naming
+        ``field.errors.KEY`` or ``field.model.KEY`` for a bad delta, and whatever :meth:`from_dict` raises for
+        a sum outside the valid cases."""
+        delta = as_mapping(delta, field, 'an object {"errors": {...}, "model": {...}}', CaseError)
+        for k in delta:
+            if k not in ("errors", "model"):
+                reject(f"{field} key", k, "['errors', 'model']", "is unknown", CaseError)
+        t = _number(t, "t")
+        try:
+            extra = parse_errors(delta.get("errors") or {}, self.design)
+        except CaseError as exc:
+            raise CaseError(f"{field}.{exc}", field=f"{field}.{exc.field or 'errors'}") from None
+        merged: dict[tuple, float] = {}
+        for scale, insts in ((1.0, self.errors), (t, extra)):
+            for inst in insts:
+                sel = (inst.key, inst.crank, inst.disc, inst.hole, inst.pin, inst.angle_deg)
+                merged[sel] = merged.get(sel, 0.0) + scale * inst.value
+        errors: dict[str, list[dict[str, Any]]] = {}
+        for (key, crank, disc, hole, pin, angle), v in merged.items():
+            item: dict[str, Any] = {"value": v}
+            item.update({k: i for k, i in (("crank", crank), ("disc", disc), ("hole", hole), ("pin", pin))
+                         if i is not None and k in ERROR_TYPES[key].instance_keys})
+            if ERROR_TYPES[key].has_angle:
+                item["angle_deg"] = angle
+            errors.setdefault(key, []).append(item)
+        d = self.to_dict()
+        d["errors"] = errors
+        d["model"] = self._model_plus(as_mapping(delta.get("model") or {}, f"{field}.model",
+                                                 "an object of numeric model options", CaseError),
+                                      t, {**{k: o.default for k, o in GEOMETRY_OPTIONS.items()},
+                                          **(model_defaults or {})}, f"{field}.model")
+        return Case.from_dict(d)
+
+    def _model_plus(self, dm: dict[str, Any], t: float, defaults: dict[str, Any], field: str) -> dict[str, Any]:
+        """This case's model options with ``t`` times ``dm`` added (see :meth:`plus`)."""
+        model = dict(self.model)
+        for k, dv in dm.items():
+            base = model.get(k, defaults.get(k))
+            if isinstance(base, str) or base is None:
+                numeric = sorted(o for o, v in defaults.items() if not isinstance(v, str))
+                reject(f"{field} key", k, f"a numeric model option {numeric}",
+                       "is a named choice, not a number" if isinstance(base, str) else "is unknown", CaseError)
+            model[k] = float(base) + t * _number(dv, f"{field}.{k}")
+        return model
+
 
 def load_case(path: str | Path | None) -> Case:
     """Read a case JSON file (``None``: the nominal case with no errors).

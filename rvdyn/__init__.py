@@ -9,6 +9,8 @@ and ``fcl`` (python-fcl distance queries on the exported meshes).
 * :func:`run_cases` / :class:`Runner` -- many cases through a content-keyed disk cache, in this
   process, a local process pool or a Dask cluster (:mod:`rvdyn.runner`, :mod:`rvdyn.cache`).
 * :func:`run_te`, :func:`te_stats`, :func:`backlash` -- the building blocks (:mod:`rvdyn.te`).
+* :func:`te_jacobian` -- the TE's derivatives along directions in case space at converged states, by implicit
+  differentiation of the equilibrium (:mod:`rvdyn.implicit`).
 * :func:`hysteresis` -- the maker's torque sweep and datasheet figures (:mod:`rvdyn.stiffness`);
   contact laws ``impact`` and ``physical`` (:mod:`rvdyn.options`, :mod:`rvdyn.materials`,
   :mod:`rvdyn.bearings`).
@@ -16,11 +18,12 @@ and ``fcl`` (python-fcl distance queries on the exported meshes).
 from rvdyn.api import Result, solve
 from rvdyn.cache import CaseCache, Job
 from rvdyn.contacts import AnalyticContacts, ContactLaw
+from rvdyn.implicit import JacobianResult, te_jacobian
 from rvdyn.runner import Runner, run_cases
 from rvdyn.solver import ARCSEC_PER_RAD, InterferenceError, QuasiStaticSolver, Solution
 from rvdyn.stiffness import StiffnessResult, hysteresis
 from rvdyn.te import TEResult, backlash, run_te, te_stats, write_table_atomic
 
-__all__ = ["ARCSEC_PER_RAD", "AnalyticContacts", "CaseCache", "ContactLaw", "InterferenceError", "Job",
-           "QuasiStaticSolver", "Result", "Runner", "Solution", "StiffnessResult", "TEResult", "backlash", "hysteresis", "run_cases", "run_te",
-           "solve", "te_stats", "write_table_atomic"]
+__all__ = ["ARCSEC_PER_RAD", "AnalyticContacts", "CaseCache", "ContactLaw", "InterferenceError", "JacobianResult",
+           "Job", "QuasiStaticSolver", "Result", "Runner", "Solution", "StiffnessResult", "TEResult", "backlash", "hysteresis", "run_cases", "run_te",
+           "solve", "te_jacobian", "te_stats", "write_table_atomic"]

@@ -178,13 +178,21 @@ class LinearisationMixin:
         kinematic derivative; the provider only supplies the gap value).
         """
         N = x.shape[0]
-        nk = 1 + self.nc
-        dirs = np.broadcast_to(np.asarray(direction), (N,))
         stacked = self._stacked(th_in, x)
         n1 = self.nd * self.zp
         J = np.empty((N, n1 + 2 * self.nc, self.nj))
         gaps, _ = self._pin_gaps(th_in, x, stacked, J[:, :n1].reshape(N, self.nd, self.zp, self.nj))
-        TH, X = stacked
+        g1, J[:, n1:] = self._stage1_linear(th_in, x, direction, stacked)
+        return np.concatenate([gaps.reshape(N, -1), g1], axis=1), J
+
+    def _stage1_linear(self, th_in: np.ndarray, x: np.ndarray, direction,
+                       stacked=None) -> tuple[np.ndarray, np.ndarray]:
+        """The stage I flank gaps (N, 2 nc) mm at the states x and their Jacobians (N, 2 nc, nj), the columns of
+        :meth:`_linearise` after the pin gaps (``stacked``: :meth:`_stacked` of these states if already made)."""
+        N = x.shape[0]
+        nk = 1 + self.nc
+        dirs = np.broadcast_to(np.asarray(direction), (N,))
+        TH, X = self._stacked(th_in, x) if stacked is None else stacked
         to, ps, _, _ = self._unpack(TH, X)
         analytic = isinstance(self.contacts, AnalyticContacts)
         val, der = {}, {}
@@ -196,10 +204,11 @@ class LinearisationMixin:
             j1 = np.zeros((N, self.nc, self.nj))
             j1[..., :nk] = self._central(g_all, N)
             der[flank] = j1
-        up = (dirs == 1)[:, None]
-        g1 = np.concatenate([np.where(up, val[1], val[-1]), np.where(up, val[-1], val[1])], axis=1)
-        j1 = np.concatenate([np.where(up[..., None], der[1], der[-1]), np.where(up[..., None], der[-1], der[1])],
-                            axis=1)
-        G = np.concatenate([gaps.reshape(N, -1), g1], axis=1)
-        J[:, n1:] = j1
-        return G, J
+        return self._flanks(val, dirs), self._flanks(der, dirs)
+
+    @staticmethod
+    def _flanks(v: dict, dirs: np.ndarray) -> np.ndarray:
+        """Per-flank arrays ``{1: (N, nc, ...), -1: ...}`` as the columns of the stage I contacts (N, 2 nc, ...):
+        each state's loaded flank (its direction, ``dirs`` (N,)) first, the coast flank second."""
+        up = (np.asarray(dirs) == 1).reshape((-1, 1) + (1,) * (v[1].ndim - 2))
+        return np.concatenate([np.where(up, v[1], v[-1]), np.where(up, v[-1], v[1])], axis=1)

@@ -414,6 +414,12 @@ class SupportMixin:
                 self._raw_last = (th_in, x, raw)
                 return self._condense(x, raw, 0.0)
             return self._chain_raw(th_in, x, law)
+        return self._disc_arms(th_in, x)
+
+    def _disc_arms(self, th_in: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The disc holes relative to their disc's centre, turned with the disc's kinematic pose (the rigid fit to
+        its cams, without its floats), divided by the turn lever ``a`` (N, nd, nc, 2): a hole moves by the disc's
+        shift plus its turn times ``perp(arm)`` (the floats' columns of the cam-bearing models)."""
         to, ps, _, _ = self._unpack(th_in, x)
         _, ang = self.geom.disc_poses(to, ps)
         c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]        # (N, nd, 1)
@@ -436,11 +442,8 @@ class SupportMixin:
         plate's turn carries journal B, frozen at the linearisation like the offsets)."""
         N, nd, nc, D = x.shape[0], self.nd, self.nc, self.ndof
         nk = 1 + nc
-        to, ps, _, _ = self._unpack(th_in, x)
-        _, ang = self.geom.disc_poses(to, ps)
-        c, sn = np.cos(ang)[:, :, None], np.sin(ang)[:, :, None]
-        h = self.geom.disc_holes[None]
-        arms = np.stack([c * h[..., 0] - sn * h[..., 1], sn * h[..., 0] + c * h[..., 1]], axis=-1) / self.a
+        to, _, _, _ = self._unpack(th_in, x)
+        arms = self._disc_arms(th_in, x)
         Dm = np.zeros((N, nd, nc, 2, D))
         hit = getattr(self, "_stack_poses", None)
         if (hit is not None and hit[1].shape == x.shape and np.array_equal(hit[1], x) and np.array_equal(hit[0], th_in)):
