@@ -12,8 +12,9 @@ within the solver tolerance).
 The Jacobian's columns are the TE change per unit parameter at the current state, by the kind of response:
 
 * smooth parameters (the eccentricities, phases and holes of Table 4, the model options without a kink): the
-  derivative, from ``jacobian_fn`` (default :func:`sensitivity_jacobian`: one-sided differences, each solved by one
-  linearisation of the equilibrium from the current state, rvdyn's sensitivity solve);
+  derivative, from ``jacobian_fn`` (default :func:`implicit_jacobian`, rvdyn's implicit differentiation of the
+  equilibrium; :func:`sensitivity_jacobian`, one-sided differences each solved by one linearisation from the
+  current state, is the alternative);
 * a single pin's pitch, radius or radial position: the TE of a zero-backlash ring responds to one pin with a kink
   (a pin pushed into the loaded flank takes load, one pulled away lifts off), so the column is the central secant
   over the parameter's current spread (statistical linearisation: the best straight line over the values the
@@ -44,6 +45,7 @@ from scipy.interpolate import CubicSpline
 
 from rvcad.errors import Case
 from rvdyn.contacts import ContactLaw
+from rvdyn.implicit import te_jacobian
 from rvdyn.te import run_te_many
 
 from rvcalib.library import CaseDelta
@@ -87,6 +89,25 @@ def sensitivity_jacobian(case_dict: dict, deltas: list, loads: list, angles: lis
         te, _ = _solve(acc.to_dict(case_dict), loads, angles, law, x_init=states, max_outer=1)
         cols.append((np.concatenate(te) - base) / h)
     return np.column_stack(cols) if cols else np.zeros((base.size, 0))
+
+
+def implicit_jacobian(case_dict: dict, deltas: list, loads: list, angles: list, states: list,
+                      law: ContactLaw | None, steps: list) -> np.ndarray:
+    """Columns d TE / d t of ``case (+) t delta`` by implicit differentiation of the equilibrium at ``states``
+    (:func:`rvdyn.implicit.te_jacobian`: one factorisation per reading, no solve per column); each direction is
+    scaled by its step (a tenth of the prior scale) for the geometry's differences and the column scaled back."""
+    scaled = []
+    for delta, h in zip(deltas, steps):
+        acc = CaseDelta()
+        _add_scaled(acc, delta, h)
+        scaled.append({k: v for k, v in acc.to_dict(None).items() if k in ("errors", "model")})
+    res = te_jacobian(Case.from_dict(case_dict), scaled, loads=loads, theta_in_deg=angles, states=states, law=law)
+    J = res.J / np.asarray(steps, dtype=float)[None, :]
+    bad = [i for i, f in enumerate(res.flags) if f is not None and not np.all(np.isfinite(J[:, i]))]
+    if bad:
+        raise ModelEvaluationError(f"no derivative column for {[deltas[i] for i in bad]}: "
+                                   f"{[res.flags[i] for i in bad]}")
+    return J
 
 
 def _add_scaled(acc: CaseDelta, delta: dict, h: float) -> None:
@@ -156,7 +177,7 @@ class ReducerModel:
     workers : int
         Processes for the Jacobian's columns (1: this process).
     jacobian_fn : callable or None
-        ``fn(case_dict, deltas, loads, angles, states, law, steps) -> (n, m)``; default :func:`sensitivity_jacobian`.
+        ``fn(case_dict, deltas, loads, angles, states, law, steps) -> (n, m)``; default :func:`implicit_jacobian`.
     """
 
     dataset: object
@@ -169,7 +190,7 @@ class ReducerModel:
 
     def __post_init__(self) -> None:
         if self.jacobian_fn is None:
-            self.jacobian_fn = sensitivity_jacobian
+            self.jacobian_fn = implicit_jacobian
         period = self.dataset.period_deg
         by_key: dict[str, CaseGroup] = {}
         for i, r in enumerate(self.dataset.runs):
