@@ -237,5 +237,6 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             renew = renew | (m.column_kinds() != "pin")
     return assemble(dataset, pb, F, fit, scales, theta, te, settings,
                     {"rms_before": rms_before, "stopped_by": stopped, "ramp_lines": pb.ramp_lines, "b_r": b_r,
+                     "active_s": a_s, "active_r": a_r, "prior_sd": sd,
                      "seconds": time.perf_counter() - t0, "linearisations": it, "max_order": pb.max_order,
                      "solves": getattr(m, "solves", 0)})

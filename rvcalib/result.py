@@ -111,6 +111,28 @@ def mixture_interval(alpha: float, m: float, s: float, level: float = 0.95) -> t
     return out[0], out[1]
 
 
+class Laplace:
+    """The joint Gaussian posterior of the chosen parameters at the final state (Laplace's approximation of the
+    nonlinear MAP): precision ``X_A' X_A / sigma^2 + diag(1 / prior_sd^2)`` in the scaled units of the last
+    linearisation's columns, mean the refined state. Correlations between chosen effects (a pin's pitch and the
+    ring's fit, say) widen each one's interval, which the estimator's independent single effects do not."""
+
+    def __init__(self, X: np.ndarray, idx: np.ndarray, prior_sd: np.ndarray, sigma2: float, values: np.ndarray,
+                 tau: np.ndarray) -> None:
+        self.pos = {int(j): k for k, j in enumerate(idx)}
+        Xa = X[:, idx]
+        A = Xa.T @ Xa / sigma2 + np.diag(1.0 / prior_sd[idx] ** 2)
+        self.cov = np.linalg.pinv(A) * np.outer(tau[idx], tau[idx])
+        self.mean = values[idx]
+
+    def block(self, a: int, b: int):
+        """(mean, covariance) of the parameters a..b-1 in physical units, or None if they were not chosen."""
+        if any(j not in self.pos for j in range(a, b)):
+            return None
+        k = [self.pos[j] for j in range(a, b)]
+        return self.mean[k], self.cov[np.ix_(k, k)]
+
+
 def _member(c, mean: np.ndarray, tau: np.ndarray, prob: float) -> dict:
     v = mean * tau
     size, ang = c.size(v)
@@ -134,11 +156,15 @@ def _effect(c, alpha: float, m: np.ndarray, S: np.ndarray, level: float) -> Name
                        [float(x) for x in m], S.tolist(), ci, float(alpha), c.meaning)
 
 
-def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float) -> NamedEffect:
-    """The named effect of candidate c (feature f) from every single effect that includes it."""
+def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float, laplace: Laplace | None) -> NamedEffect:
+    """The named effect of candidate c (feature f) from every single effect that includes it; its value and
+    covariance given the effect from the joint posterior of the chosen parameters where it was chosen."""
     sl = slice(F.starts[f], F.starts[f + 1])
     parts = [(e.alpha[f], e.mean[sl], e.cov_of(F, f)) for e in effects if e.prior_variance > 0 and e.alpha[f] > 1e-3]
     a_tot = min(1.0, sum(a for a, _, _ in parts))
+    got = laplace.block(F.starts[f], F.starts[f + 1]) if laplace is not None else None
+    if got is not None:
+        return _effect(c, a_tot, got[0], got[1], level)
     m = sum(a * mu for a, mu, _ in parts) / max(a_tot, 1e-300)
     S = sum(a * (cv + np.outer(mu, mu)) for a, mu, cv in parts) / max(a_tot, 1e-300) - np.outer(m, m)
     return _effect(c, a_tot, m * tau, S * np.outer(tau, tau), level)
@@ -151,12 +177,15 @@ def _unexplained(members: list, cands: list) -> dict:
             "phase_deg": ms[0]["angle_deg"], "probability": sum(m["probability"] for m in ms), "members": members}
 
 
-def read_dense(fc: list, e, F, tau: np.ndarray, level: float) -> tuple[list, list]:
+def read_dense(fc: list, e, F, tau: np.ndarray, level: float, laplace: Laplace | None = None) -> tuple[list, list]:
     """The always-estimated candidates (one fixed effect over all of them): each named where its interval excludes
     zero, unless its posterior correlation with another is so strong (|r| > 0.95) that only their combination is
     determined: such a pair is a group with the size each would have alone."""
     m = e.mean[F.starts[0]:F.starts[1]] * tau
     S = e.cov_of(F, 0) * np.outer(tau, tau)
+    got = laplace.block(F.starts[0], F.starts[1]) if laplace is not None else None
+    if got is not None:
+        m, S = got
     sd = np.sqrt(np.maximum(np.diag(S), 1e-300))
     corr = S / np.outer(sd, sd)
     named, groups = [], []
@@ -187,12 +216,13 @@ def read_dense(fc: list, e, F, tau: np.ndarray, level: float) -> tuple[list, lis
     return named, groups
 
 
-def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed: tuple) -> tuple:
+def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed: tuple,
+                   laplace: Laplace | None = None) -> tuple:
     """Named effects, groups, unexplained structure and diffuse sets from a fit (see the module docstring)."""
     level = settings.coverage
     named, groups, unexplained, diffuse = [], [], [], []
     for f in fixed:
-        n, g = read_dense(feature_cands[f], fit.effects[f], F, tau[F.starts[f]:F.starts[f + 1]], level)
+        n, g = read_dense(feature_cands[f], fit.effects[f], F, tau[F.starts[f]:F.starts[f + 1]], level, laplace)
         named += n
         groups += g
     cands = [fc[0] for fc in feature_cands]
@@ -211,7 +241,7 @@ def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed
         if cs.size == 1 and cands[cs.features[0]].physical:
             f = cs.features[0]
             if all(e.name != cands[f].effect_name for e in named):
-                named.append(_named(cands[f], fit.effects, f, F, tau[F.starts[f]:F.starts[f + 1]], level))
+                named.append(_named(cands[f], fit.effects, f, F, tau[F.starts[f]:F.starts[f + 1]], level, laplace))
         elif fams == {"empirical"}:
             unexplained.append(_unexplained(members, cands))
         else:
@@ -223,7 +253,11 @@ def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed
 def assemble(dataset, pb, F, fit, scales, theta, te, settings, info: dict) -> CalibrationResult:
     """The result of a finished loop (see :func:`rvcalib.loop.calibrate`); ``pb`` the calibration's problem."""
     tau = np.concatenate(scales)
-    named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed)
+    n_s = theta.size
+    idx = np.concatenate([info["active_s"], n_s + info["active_r"]]).astype(int)
+    laplace = Laplace(F.X, idx, info["prior_sd"], fit.sigma2, np.concatenate([theta, info["b_r"]]), tau) \
+        if idx.size else None
+    named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed, laplace)
     resid = pb.y - te - pb.R @ info["b_r"]
     consts = pb.proj.constants(resid)
     r = pb.proj(resid)
