@@ -33,7 +33,7 @@ import rvpaper as paper
 from rvdyn.cache import write_text_atomic
 from rvstudy.augment_section import augment_section
 from rvstudy.paper_readings import readings_section
-from rvstudy import report_mc
+import rvstudy.report_mc as report_mc
 from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyResult
 
 PRIMARY = "mean_abs_arcmin"
