@@ -30,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from results_log import record, slug  # noqa: E402
 from rvcad.errors import Case  # noqa: E402
 from rvcad.geometry import ReducerGeometry  # noqa: E402
 from rvdyn.fcl_contacts import FclContacts  # noqa: E402
@@ -149,6 +150,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     a = ap.parse_args(argv)
     r = run(a.steps, a.repeat)
+    units = {"_s": "s", "_MB": "MB", "_um": "um", "_rad": "rad", "triangles": "count"}
+    record("bench_fcl", [(slug(f"{a.steps} states {k}"), float(v), next((u for s, u in units.items() if s in k), "us"))
+                         for k, v in r.items() if isinstance(v, (int, float)) and k not in ("steps", "repeat")
+                         and v is not None and "load_average" not in k])
     if a.json:
         print(json.dumps(r))
         return 0
