@@ -19,8 +19,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 #: Colours of the cases of one row: the case at +value, at -value, and a case without a sign.
 SIGN_COLOURS = {"+": "tab:blue", "-": "tab:red", "": "black"}
@@ -60,6 +64,18 @@ def _groups(curves: Mapping[str, np.ndarray]) -> dict[str, list[tuple[str, np.nd
     return rows
 
 
+def _share(axes: np.ndarray) -> None:
+    """Shared axes of the (rows, 3) grid: each column's x; one TE scale for the revolution and zoom columns;
+    one amplitude scale for the spectra."""
+    for col in range(3):
+        for ax in axes[1:, col]:
+            ax.sharex(axes[0, col])
+    for ax in list(axes[1:, 0]) + list(axes[:, 1]):
+        ax.sharey(axes[0, 0])
+    for ax in axes[1:, 2]:
+        ax.sharey(axes[0, 2])
+
+
 def plot_te_figure(curves: Mapping[str, np.ndarray], path: str | Path, crank_order: int = 40,
                    titles: Mapping[str, str] | None = None, suptitle: str | None = None) -> Path:
     """Draw the TE figure of ``curves`` (:func:`te_figure`) to ``path`` (PNG, written atomically); returns it."""
@@ -69,7 +85,7 @@ def plot_te_figure(curves: Mapping[str, np.ndarray], path: str | Path, crank_ord
 
 
 def te_figure(curves: Mapping[str, np.ndarray], crank_order: int = 40, titles: Mapping[str, str] | None = None,
-              suptitle: str | None = None):
+              suptitle: str | None = None) -> Figure:
     """The TE figure of ``curves`` (see the module docstring) as a matplotlib ``Figure`` (Agg, pyplot untouched).
 
     Parameters
@@ -98,17 +114,7 @@ def te_figure(curves: Mapping[str, np.ndarray], crank_order: int = 40, titles: M
     rows = _groups(curves)
     fig = Figure(figsize=(13.0, 0.45 + 1.25 * len(rows)), layout="constrained")
     axes = fig.subplots(len(rows), 3, squeeze=False, gridspec_kw={"width_ratios": [2.4, 1.0, 1.6]})
-    for ax in axes[1:, 0]:
-        ax.sharex(axes[0, 0])
-    for ax in axes[1:, 1]:
-        ax.sharex(axes[0, 1])
-    for ax in axes[1:, 2]:
-        ax.sharex(axes[0, 2])
-    for ax in list(axes[:, 0]) + list(axes[:, 1]):
-        if ax is not axes[0, 0]:
-            ax.sharey(axes[0, 0])
-    for ax in axes[1:, 2]:
-        ax.sharey(axes[0, 2])
+    _share(axes)
     period = 360.0 / crank_order
     top_order = max(te.size for members in rows.values() for _, te in members) // 2
     peak = 0.0
