@@ -22,6 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
+from results_log import record, slug  # noqa: E402
 import rvcad  # noqa: E402
 from rvcad.check import check_case  # noqa: E402
 from rvcad.errors import load_case  # noqa: E402
@@ -43,9 +44,13 @@ def main() -> None:
     t0, c0 = time.perf_counter(), time.process_time()
     rep = export_case(case, out, tolerance_um=a.tolerance_um, force=True)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    mb = sum(f.bytes for f in rep.files) / 1e6
     print(f"case {case.name!r}, tolerance {a.tolerance_um} um: {len(rep.files)} files, "
-          f"{sum(f.bytes for f in rep.files) / 1e6:.1f} MB, {wall:.2f} s wall, {cpu:.2f} s CPU "
+          f"{mb:.1f} MB, {wall:.2f} s wall, {cpu:.2f} s CPU "
           f"(includes importing OpenCASCADE)")
+    tag = f"{case.name} {a.tolerance_um:g} um"
+    figures = [(slug(f"{tag} export wall"), wall, "s"), (slug(f"{tag} export cpu"), cpu, "s"),
+               (slug(f"{tag} export size"), mb, "MB")]
     print(f"{'file':16s} {'seconds':>8s} {'faces':>8s} {'MB':>8s} {'dev um':>8s}")
     groups: dict[str, list] = {}
     for f in rep.files:
@@ -64,7 +69,8 @@ def main() -> None:
           f"{rep.design_check['geometry']['pin_penetration_mm'] * 1e3:.3f} um")
     t = time.perf_counter()
     check_case(case, cache=False)
-    print(f"design check alone: {time.perf_counter() - t:.2f} s")
+    figures.append((slug(f"{tag} design check"), time.perf_counter() - t, "s"))
+    print(f"design check alone: {figures[-1][1]:.2f} s")
     t = time.perf_counter()
     r = rvcad.reducer(case, check=False)
     vol = sum(r.parts[n].volume for n in r.names)
@@ -84,9 +90,15 @@ def main() -> None:
         else:
             assert isinstance(part, GearPart)
             d = part.flank_distance(pts[:, :2])
+        stl = part.outline_deviation(tol) * 1e3
         print(f"  {name:8s} STEP max deviation {d.max() * 1e3:.4f} um over {len(pts)} points; "
-              f"STL {part.outline_deviation(tol) * 1e3:.4f} um; {time.perf_counter() - t:.2f} s")
-    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+              f"STL {stl:.4f} um; {time.perf_counter() - t:.2f} s")
+        figures += [(slug(f"{tag} {name} step max deviation"), float(d.max() * 1e3), "um"),
+                    (slug(f"{tag} {name} stl max deviation"), float(stl), "um")]
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak RSS {rss:.0f} MB")
+    figures.append((slug(f"{tag} peak rss"), rss, "MB"))
+    record("bench_export", figures)
     if not a.out and not a.keep:
         shutil.rmtree(out, ignore_errors=True)
     elif not a.out:

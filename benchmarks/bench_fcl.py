@@ -30,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from results_log import record, slug  # noqa: E402
 from rvcad.errors import Case  # noqa: E402
 from rvcad.geometry import ReducerGeometry  # noqa: E402
 from rvdyn.fcl_contacts import FclContacts  # noqa: E402
@@ -142,6 +143,16 @@ def run(steps: int, repeat: int) -> dict:
     return out
 
 
+def _unit(key: str) -> str:
+    """Unit of a figure of :func:`run` from its name."""
+    if "_us_" in f"_{key}_":
+        return "us"
+    for end, unit in (("_s", "s"), ("_MB", "MB"), ("_um", "um"), ("_rad", "rad")):
+        if key.endswith(end) or (end == "_s" and "_s_at_" in key):
+            return unit
+    return "count"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--steps", type=int, default=720, help="states along one output revolution (default 720)")
@@ -149,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     a = ap.parse_args(argv)
     r = run(a.steps, a.repeat)
+    record("bench_fcl", [(slug(f"{a.steps} states {k}"), float(v), _unit(k)) for k, v in r.items()
+                         if isinstance(v, (int, float)) and k not in ("steps", "repeat", "load_average_1min")])
     if a.json:
         print(json.dumps(r))
         return 0

@@ -30,6 +30,7 @@ sys.path.insert(0, str(ROOT))  # run from a clone without installing
 os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep)
                                                           if p])  # the Dask worker processes too
 
+from results_log import record, slug  # noqa: E402
 from rvstudy.study import StudyConfig, run_study  # noqa: E402
 
 TARGET_DRAWS = 100_000
@@ -70,6 +71,7 @@ def main() -> None:
                   f"{t['draws_per_s_per_worker']:.3f} draws per worker-second); "
                   f"{TARGET_DRAWS:,} draws at this rate: {TARGET_DRAWS / rate / 3600:.2f} h "
                   f"({TARGET_DRAWS / rate / 60:.0f} min)", flush=True)
+    record("bench_mc_dask", [(slug(f"{n} workers {a.steps} steps draws per s"), rate, "1/s") for n, _, rate in rows])
     if len(rows) > 1:
         (n1, _, r1), (n2, _, r2) = rows[0], rows[-1]
         print(f"scaling {n1} -> {n2} workers: draws/s x{r2 / r1:.2f} (ideal x{n2 / n1:.2f}); parallel efficiency "

@@ -29,6 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone
 
 import numpy as np  # noqa: E402
 
+from results_log import record, slug  # noqa: E402
+
 from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
 from rvcad.params import Design  # noqa: E402
 from rvdyn.contacts import ContactLaw  # noqa: E402
@@ -106,6 +108,8 @@ def main() -> None:
     print(f"MC draw ({a.case}, {a.contact} law: {len(runs)} analytic solves, steps {[n for _, n in runs]}): "
           f"{best:.3f} s wall, "
           f"{cpu:.3f} s CPU (best of {a.repeat})")
+    tag = f"{a.case} {a.contact} {a.steps} steps"
+    figures = [(slug(f"{tag} separate solves cpu"), cpu, "s")]
     for (c, n), r in zip(runs, rs):
         print(f"  {c.name} load {c.load_Nm:g} N m dir {c.direction:+d}: pp {r.stats['pp']:.6f} arcsec  "
               f"mean {r.stats['mean']:.6f} arcsec")
@@ -123,6 +127,9 @@ def main() -> None:
                     for x, y in zip(rs, rb))
             print(f"MC draw, {name}: {bw:.3f} s wall, {bc:.3f} s CPU (best of {a.repeat}); "
                   f"largest TE difference to the separate runs {d:.2e} arcsec")
+            short = "play batch" if name.startswith("TE run_te") else "one batch"
+            figures += [(slug(f"{tag} {short} cpu"), bc, "s"), (slug(f"{tag} {short} max te difference"), d, "arcsec")]
+    record("bench_mc_draw", figures)
     pr = cProfile.Profile()
     pr.enable()
     solve_all()

@@ -1,6 +1,7 @@
 """Timing of the rsm hot paths (run: ``python benchmarks/bench_rsm.py``).
 
-Prints one line per case: mean wall time over repeats. Not a test; no thresholds.
+Prints one line per case: mean wall time over repeats, and records them in ``benchmarks/results.csv``. Not a
+test; no thresholds.
 """
 
 from __future__ import annotations
@@ -14,10 +15,12 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
+from results_log import record, slug  # noqa: E402
 import rsm  # noqa: E402
 from rvpaper import DATA_DIR as PAPER_DATA  # noqa: E402
 
 DATA = PAPER_DATA
+FIGURES: list[tuple[str, float, str]] = []
 
 
 def _time(label: str, fn, repeat: int = 5) -> None:
@@ -25,7 +28,9 @@ def _time(label: str, fn, repeat: int = 5) -> None:
     t0 = time.perf_counter()
     for _ in range(repeat):
         fn()
-    print(f"{label:<48} {1e3 * (time.perf_counter() - t0) / repeat:9.2f} ms")
+    ms = 1e3 * (time.perf_counter() - t0) / repeat
+    print(f"{label:<48} {ms:9.2f} ms")
+    FIGURES.append((slug(label.split(" (")[0]), ms, "ms"))
 
 
 def main() -> None:
@@ -45,6 +50,7 @@ def main() -> None:
     names = [f"x{i + 1}" for i in range(7)]
     _time("BBD k=7 design + quadratic fit (62 runs, 36 terms)",
           lambda: rsm.fit(rsm.box_behnken(7, 6).coded.assign(y=d7["y"]), names, "y"))
+    record("bench_rsm", FIGURES)
 
 
 if __name__ == "__main__":

@@ -10,8 +10,9 @@ The per-case part solves three representative cases (error free; a BBD edge run 
 ED=-14 um; a validation-like interior point) one after another in this process and prints the seconds
 per case. ``--full`` runs ``rv-stackup`` on its defaults (plus ``--solver``/``--steps`` if given) into a
 temporary folder with ``--no-cache`` and prints the wall time and the stage breakdown; the budget of
-the README's main command is 480 s on a 2-core machine (issue 13: >= 2,000 full-solver Monte Carlo draws
-included); the Monte Carlo's draws per second per worker and the machine's load average are printed.
+the README's main command is 480 s on a 2-core machine (>= 2,000 full-solver Monte Carlo draws
+included); the Monte Carlo's draws per second per worker and the machine's load average are printed. The figures
+are recorded in ``benchmarks/results.csv``.
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
+from results_log import record, slug  # noqa: E402
 from rvstudy.screen import make_case  # noqa: E402
 from rvdyn.te import run_te  # noqa: E402
 
@@ -42,6 +44,7 @@ CASES = {
 
 
 def per_case(solvers: list[str], steps_list: list[int]) -> None:
+    figures = []
     for solver in solvers:
         for steps in steps_list:
             times = []
@@ -57,6 +60,8 @@ def per_case(solvers: list[str], steps_list: list[int]) -> None:
                 times.append(dt)
                 print(f"{solver:8s} {steps:5d} steps  {name:40s} {dt:7.2f} s  {msg}", flush=True)
             print(f"{solver:8s} {steps:5d} steps  mean {sum(times) / len(times):.2f} s per case", flush=True)
+            figures.append((slug(f"{solver} {steps} steps mean per case wall"), sum(times) / len(times), "s"))
+    record("bench_stackup", figures)
 
 
 def full(solver: str | None, steps: int | None, workers: int) -> None:
@@ -91,6 +96,11 @@ def full(solver: str | None, steps: int | None, workers: int) -> None:
             print(f"  Monte Carlo: {mc['full_solver_draws']} full-solver draws ({mc['independent_draws']} independent + "
                   f"{mc['design_draws']} designed), {mc['solves_per_draw']} solves each, in {mc['wall_s']:.1f} s: "
                   f"{mc['draws_per_s_per_worker']:.3f} draws/s per worker ({mc['workers']} workers)")
+        figures = [("default_study_wall", wall, "s"), ("default_study_cpu", cpu, "s"),
+                   ("default_study_cases_solved", c["computed"], "count")]
+        if mc:
+            figures.append(("default_study_mc_draws_per_s_per_worker", mc["draws_per_s_per_worker"], "1/s"))
+        record("bench_stackup", figures)
         print(f"  machine load average (1/5/15 min) before {load0[0]:.1f}/{load0[1]:.1f}/{load0[2]:.1f}, after "
               f"{load1[0]:.1f}/{load1[1]:.1f}/{load1[2]:.1f} on {os.cpu_count()} cores (shared machine)")
 

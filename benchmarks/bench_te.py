@@ -23,6 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
 
+from results_log import record, slug  # noqa: E402
 from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
 from rvdyn.contacts import ContactLaw  # noqa: E402
 from rvdyn.te import run_te  # noqa: E402
@@ -43,6 +44,7 @@ def main() -> None:
              "cam clearance 6 um": Case.from_dict({"model": {"cam_bearing_clearance_um": 6.0}})}
     if a.load0:
         cases["clearance 6 um, load 0"] = Case.from_dict({"model": {"cam_bearing_clearance_um": 6.0}, "load_Nm": 0.0})
+    figures = []
     for solver in a.solver:
         for contact in a.contact:
             for name, case in cases.items():
@@ -56,7 +58,10 @@ def main() -> None:
                     cpu = min(cpu, time.process_time() - c)
                 print(f"{solver:8s} {contact:8s} {name:20s} {a.steps} steps: {best:6.3f} s/rev wall, {cpu:6.3f} s CPU  "
                       f"pp {r.stats['pp']:8.4f} arcsec  mean {r.stats['mean']:9.4f} arcsec")
-    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+                figures.append((slug(f"{solver} {contact} {name} {a.steps} steps cpu"), cpu, "s"))
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak RSS {rss:.0f} MB")
+    figures.append(("peak_rss", rss, "MB"))
     if a.compare and "fcl" in a.solver:
         print(f"fcl vs analytic ({a.contact[-1]} law), TE difference (arcsec):")
         all_cases = {"nominal": {}} | {k: {k: et.paper_value} for k, et in ERROR_TYPES.items()}
@@ -67,6 +72,9 @@ def main() -> None:
             d = rf.table["te_arcsec"].to_numpy() - ra.table["te_arcsec"].to_numpy()
             print(f"  {name:28s} rms {np.sqrt(np.mean(d ** 2)):.4f}  max {np.abs(d).max():.4f}  "
                   f"(analytic pp {ra.stats['pp']:.3f}, fcl {rf.stats['seconds']:.2f} s)")
+            figures.append((slug(f"fcl vs analytic {a.contact[-1]} {name} rms"), float(np.sqrt(np.mean(d ** 2))),
+                            "arcsec"))
+    record("bench_te", figures)
 
 
 if __name__ == "__main__":

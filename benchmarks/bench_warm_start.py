@@ -9,7 +9,8 @@ pin 12's pitch +0.005 deg; another candidate: pin radius +2 um), each cold (the 
 (process time) and the largest TE difference warm - cold (arcsec; the solver tolerance is 1e-9 rad =
 2.06e-4 arcsec).
 
-Run: ``python benchmarks/bench_warm_start.py [--law physical|impact] [--steps 280]``. Figures only.
+Run: ``python benchmarks/bench_warm_start.py [--law physical|impact] [--steps 280]``. Figures only, recorded in
+``benchmarks/results.csv``.
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from results_log import record, slug  # noqa: E402
 from rvcad.errors import Case  # noqa: E402
 from rvcad.geometry import ReducerGeometry  # noqa: E402
 from rvdyn.contacts import AnalyticContacts  # noqa: E402
@@ -60,15 +62,20 @@ def main() -> int:
     parent, t_p = run(base)
     print(f"law {args.law}, {len(CONDS)} conditions x {args.steps} angles; parent cold: outer iterations "
           f"{[s.iterations for s in parent]}, {t_p:.2f} s CPU")
+    tag = f"{args.law} {args.steps} angles"
+    figures = [(slug(f"{tag} parent cold cpu"), t_p, "s")]
     x = [s.x for s in parent]
-    for name, d in [("Jacobian column: cam_eccentricity +0.5 um", pert("cam_eccentricity", 0.5)),
-                    ("trial step: pin_pitch[12] +0.005 deg", pert("pin_pitch", 0.005)),
-                    ("another candidate: pin_radius +2 um", pert("pin_radius", 2.0))]:
+    for name, short, d in [("Jacobian column: cam_eccentricity +0.5 um", "cam_eccentricity", pert("cam_eccentricity", 0.5)),
+                           ("trial step: pin_pitch[12] +0.005 deg", "pin_pitch", pert("pin_pitch", 0.005)),
+                           ("another candidate: pin_radius +2 um", "pin_radius", pert("pin_radius", 2.0))]:
         cold, t_c = run(d)
         warm, t_w = run(d, x)
         diff = max(np.abs(a.te_rad - b.te_rad).max() for a, b in zip(cold, warm)) * ARCSEC_PER_RAD
         print(f"{name}: cold {[s.iterations for s in cold]} {t_c:.2f} s; warm {[s.iterations for s in warm]} "
               f"{t_w:.2f} s; max |TE warm - cold| {diff:.2e} arcsec")
+        figures += [(slug(f"{tag} {short} cold cpu"), t_c, "s"), (slug(f"{tag} {short} warm cpu"), t_w, "s"),
+                    (slug(f"{tag} {short} max te warm - cold"), diff, "arcsec")]
+    record("bench_warm_start", figures)
     return 0
 
 

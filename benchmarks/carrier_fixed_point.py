@@ -5,7 +5,7 @@ The solver (physical law, elastic supports) holds the carrier end plate's turn p
 (``carrier_k`` infinite), the cams displaced by ``l_k a phi`` along the crank circle (journal B carried by the
 end plate, journal A fixed in the flange), and ``phi <- T_B / k_t`` with T_B the torque of the journal-B
 reactions (lever rule from the cam forces), repeated until phi settles. Prints the TE of both, the end plate's
-turn and the far journals' torque share, and the series bound ``T/4 / k_t`` of the earlier model.
+turn and the far journals' torque share, and the series bound ``T/4 / k_t`` of the lever rule with equal discs.
 
 Run: ``python benchmarks/carrier_fixed_point.py [--load-Nm 167] [--input-deg 0]``.
 """
@@ -24,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 import rvdyn.physical as physical  # noqa: E402
+from results_log import record, slug  # noqa: E402
 from rvcad.errors import Case  # noqa: E402
 from rvcad.geometry import ReducerGeometry  # noqa: E402
 from rvdyn.bearings import Supports  # noqa: E402
@@ -83,7 +84,15 @@ def main() -> None:
           f"{phi[0] * ARCSEC_PER_RAD:.3f} arcsec, far journals' share {TB / (T * 1e3):.4f}; the carrier adds "
           f"{(r.te_rad[0] - te0) * ARCSEC_PER_RAD:.3f} arcsec (series bound of the lever rule, beta = 1/2: "
           f"{0.25 * T * 1e3 / sup.carrier_k * ARCSEC_PER_RAD:.3f})")
-    print(f"difference to the equilibrium: {(r.te_rad[0] - sol.te_rad[0]) * ARCSEC_PER_RAD:.2e} arcsec")
+    diff = (r.te_rad[0] - sol.te_rad[0]) * ARCSEC_PER_RAD
+    print(f"difference to the equilibrium: {diff:.2e} arcsec")
+    tag = f"{T:g} Nm input {args.input_deg:g} deg"
+    record("carrier_fixed_point", [
+        (slug(f"{tag} te in equilibrium"), sol.te_rad[0] * ARCSEC_PER_RAD, "arcsec"),
+        (slug(f"{tag} end plate turn"), phi[0] * ARCSEC_PER_RAD, "arcsec"),
+        (slug(f"{tag} far journals share"), TB / (T * 1e3), "1"),
+        (slug(f"{tag} carrier adds"), (r.te_rad[0] - te0) * ARCSEC_PER_RAD, "arcsec"),
+        (slug(f"{tag} fixed point minus equilibrium"), diff, "arcsec")])
 
 
 if __name__ == "__main__":

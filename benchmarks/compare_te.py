@@ -20,6 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from results_log import record, slug  # noqa: E402
 from rvcad.errors import ERROR_TYPES, Case  # noqa: E402
 from rvdyn.contacts import ContactLaw  # noqa: E402
 from rvdyn.te import run_te, run_te_many  # noqa: E402
@@ -85,6 +86,7 @@ def main() -> None:
         print(f"  {k:60s} max |dTE| {d:.3e} arcsec")
     for g, d in worst.items():
         print(f"max |dTE| {g}: {d:.3e} arcsec")
+    record("compare_te", [(slug(f"{a.steps} steps max dte {g}"), d, "arcsec") for g, d in worst.items()])
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ docs/physics.md, section 9, "Housing ring": the pins' forces on the housing at r
 law, supports inside the equilibrium; each along the line from its disc's pitch point to the pin) applied to the pin
 band as a thin ring (inextensional modes n >= 2, ``k_n = pi E I (n^2 - 1)^2 / R^3 + pi R k_f``). ``k_f`` is the
 foundation of the housing wall held round at the main bearings (``Design.housing_support = "main_bearings"``, the
-model's default) or 0 (``"free"``, the upper bound this script printed before the term was modelled: 44 arcsec).
+model's default) or 0 (``"free"``, the upper bound).
 The sweep over k_f shows what a softer hold (e.g. the main bearings' ball sets in series with the wall) would give.
 The unit-load wind-up is ``F^T C F / T`` (loads proportional to T).
 
@@ -23,9 +23,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from results_log import record, slug  # noqa: E402
 from rvcad.errors import Case  # noqa: E402
 from rvcad.geometry import ReducerGeometry  # noqa: E402
-from rvdyn import housing as H  # noqa: E402
+import rvdyn.housing as H  # noqa: E402
 from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver  # noqa: E402
 from rvdyn.te import make_contacts  # noqa: E402
 
@@ -54,12 +55,16 @@ def main() -> None:
     print(f"ring: mean radius {R:.2f} mm, section {h:.1f} x {b:.1f} mm, EI {EI:.4g} N mm^2; wall to the main bearing "
           f"{H.housing_wall_length_mm(d):.2f} mm")
     kf_wall = H.housing_foundation_modulus(d)
+    figures = []
     for label, kf in [("main bearings (default)", kf_wall)] + [(f"k_f {k:g}", k) for k in (5e4, 1.5e4, 5e3, 2e3, 500)] \
             + [("free ring", 0.0)]:
         C = H.ring_compliance(ang, 1.0, EI, R, kf, args.modes)
         d_ = C @ F
-        print(f"{label:>24}: k_f {kf:9.4g} N/mm^2, wind-up {float(F @ d_) / T * ARCSEC_PER_RAD:7.3f} arcsec, largest "
+        windup = float(F @ d_) / T * ARCSEC_PER_RAD
+        print(f"{label:>24}: k_f {kf:9.4g} N/mm^2, wind-up {windup:7.3f} arcsec, largest "
               f"radial displacement {np.abs(d_[:d.z_pins]).max() * 1e3:7.3f} um")
+        figures.append((slug(f"{args.load_Nm:g} Nm windup {label.replace('(default)', '')}"), windup, "arcsec"))
+    record("housing_ring_estimate", figures)
 
 
 if __name__ == "__main__":

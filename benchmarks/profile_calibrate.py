@@ -30,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from results_log import record, slug  # noqa: E402
 from rvcalib import forward  # noqa: E402
 from rvcalib.dataset import read_dataset  # noqa: E402
 from rvcalib.identify import calibrate  # noqa: E402
@@ -173,7 +174,7 @@ def main() -> int:
         from bench_calibrate import check_realistic
         noise = json.loads(folder.with_name(folder.name + ".answer.json").read_text())["noise_te_arcsec"]
         c = check_realistic(res, hidden, noise, cpu)
-        print(f"  issue 10 conditions (seconds: CPU): RMS after/noise {res.rms_after / noise:.2f} "
+        print(f"  realistic-draw conditions (seconds: CPU): RMS after/noise {res.rms_after / noise:.2f} "
               f"{'ok' if c['rms_ok'] else 'FAIL'}; compliance {c['compliance']} {'ok' if c['compliance_ok'] else 'FAIL'}; "
               f"named {'ok' if c['named_ok'] else 'FAIL'}; CPU < 180 s {'ok' if c['seconds_ok'] else 'FAIL'}")
         for name, v, t, unit, ok in c["named"]:
@@ -183,6 +184,9 @@ def main() -> int:
         print(f"{k[:70]:70s} {b:7d} {n:6d} {s:6d} {t:7.1f}")
     tot = np.sum([v for v in stats.values()], axis=0) if stats else [0, 0, 0, 0]
     print(f"{'total forward':70s} {int(tot[0]):7d} {int(tot[1]):6d} {int(tot[2]):6d} {tot[3]:7.1f}")
+    tag = f"{args.law} {'realistic' if hidden is not None else '5 runs'}"
+    record("profile_calibrate", [(slug(f"{tag} cpu"), cpu, "s"), (slug(f"{tag} states linearised"), rows["linearised"],
+                                                                  "count")])
     if args.json:
         Path(args.json).write_text(json.dumps(res.to_dict(), default=str, indent=1))
     if prof:

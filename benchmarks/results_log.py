@@ -16,6 +16,7 @@ import csv
 import datetime as _dt
 import os
 import platform
+import re
 import subprocess
 from collections.abc import Iterable
 from pathlib import Path
@@ -47,6 +48,15 @@ def machine() -> str:
     except OSError:
         pass
     return f"{model}, {os.cpu_count()} cores"
+
+
+def slug(text: str) -> str:
+    """A figure name from free text: lower case, runs of other characters as one ``_``
+    (``"analytic physical nominal 720 steps"`` -> ``analytic_physical_nominal_720_steps``)."""
+    out = re.sub(r"[^a-z0-9.+-]+", "_", text.lower()).strip("_")
+    if not out:
+        raise ValueError(f"figure name {text!r} has no letter or digit")
+    return out
 
 
 def record(benchmark: str, figures: Iterable[tuple[str, float, str]], path: Path | None = None) -> Path:

@@ -12,12 +12,17 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
+from pathlib import Path
 
 from scipy.optimize import brentq
 
-from rvcad.errors import Case
-from rvdyn.sensitivity import rigidity, rigidity_at, rigidity_elasticities, size_value, with_size
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone without installing
+
+from results_log import record, slug  # noqa: E402
+from rvcad.errors import Case  # noqa: E402
+from rvdyn.sensitivity import rigidity, rigidity_at, rigidity_elasticities, size_value, with_size  # noqa: E402
 
 
 def _edge(case: Case, size: str, ok: float, k_ok: float, bad: float, why: str) -> str:
@@ -77,9 +82,12 @@ def main() -> None:
     print(f"default design: rigidity {k0:.2f} N m/arcmin; target {a.target} "
           f"(ln ratio {math.log(a.target / k0):+.3f}); elasticities in {t1 - t0:.1f} s")
     print(f"{'size':44s} {'value':>8s} {'elasticity':>10s}  value alone for the target")
+    figures = [("default_rigidity", k0, "N m/arcmin")]
     for r in tab.itertuples():
         alone = size_alone(case, k0, r.size, r.elasticity, a.target) if abs(r.elasticity) > 0.02 else "(|E| <= 0.02)"
         print(f"{r.size:44s} {r.value:8.4g} {r.elasticity:10.3f}  {alone}")
+        figures.append((slug(f"elasticity {r.size}"), float(r.elasticity), "1"))
+    record("rigidity_sensitivity", figures)
     print(f"total {time.perf_counter() - t0:.1f} s")
 
 

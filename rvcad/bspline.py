@@ -27,7 +27,7 @@ FIT_CHECK_FRACTIONS = np.array([0.0625, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.
 
 #: Most knot spans one STEP edge may have. OpenCASCADE integrates area, volume and inertia of a
 #: face bounded by a B-spline edge with a fixed number of Gauss points per edge (not per span);
-#: with 60 spans per cycloid lobe its default volume was wrong by 10 %, with <= 8 spans per
+#: with 60 spans per cycloid lobe its default volume is wrong by 10 %, with <= 8 spans per
 #: edge it agrees with the closed form to 1e-6 relative. Long curves are therefore split.
 MAX_SPANS_PER_EDGE = 8
 

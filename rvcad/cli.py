@@ -8,7 +8,7 @@ import argparse
 import json
 import math
 import sys
-from rvcad import validation
+import rvcad.validation as validation
 from rvcad.errors import load_case
 from rvcad.validation import MAX_ANGLE_DEG
 from rvcad.export import DEFAULT_TOLERANCE_UM, FORMATS, TOLERANCE_RANGE_UM, ExportedFile, export_case

@@ -114,10 +114,10 @@ class Design:
     crank_journal_radius_mm: float = 7.0
     disc_center_hole_radius_mm: float = 14.0
     housing_outer_radius_mm: float = 80.0
-    # ---- bearings and supports of the physical contact law (rvdyn, issue 11) -------------------------
-    # Assumptions of this implementation (not in the paper; README "Assumptions"): the cam bearings are
-    # needle bearings between cam and disc hole, the crank journal bearings are modelled as cylindrical
-    # roller bearings (one in the flange plate, one in the carrier), all rolling elements steel (GCr15).
+    # ---- bearings and supports of the physical contact law (rvdyn) ---------------------------------
+    # Assumptions of this implementation (not in the paper; docs/conventions.md "Assumptions"): the cam bearings
+    # are needle bearings between cam and disc hole, the crank journal bearings roller bearings (one in the
+    # flange plate, one in the carrier; tapered, below), all rolling elements steel (GCr15).
     cam_bearing_rollers: int = 16
     cam_bearing_roller_diameter_mm: float = 2.5
     cam_bearing_roller_length_mm: float = 8.0
@@ -136,8 +136,8 @@ class Design:
     # pillars set the preload); the arrangement of the RV-E's crank bearings is not published.
     journal_bearing_arrangement: str = "face_to_face"
     # Carrier: the output flange and the carrier end plate joined by pillars through the discs, on the crank
-    # circle midway between the cranks (not in the paper; README "Assumptions"). The pillar holes of the discs
-    # are taken as large as the crank holes (cam_radius_mm), so a pillar is a round bar of radius
+    # circle midway between the cranks (not in the paper; docs/conventions.md "Assumptions"). The pillar holes of
+    # the discs are taken as large as the crank holes (cam_radius_mm), so a pillar is a round bar of radius
     # cam_radius - e - 0.7 mm = 7 mm. Pin seats: each pin lies in a semicircular groove of the housing whose
     # radius is the pin radius plus pin_seat_clearance_mm (a running fit: the pins turn in their grooves).
     # Not given: one pillar between each pair of neighbouring cranks (n_cranks pillars; 2 for the default design).

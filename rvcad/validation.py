@@ -80,7 +80,7 @@ MEMORY_BUDGET_BYTES = 2 * 1024 ** 3
 #: (212 - 156) MB / 3240 steps = 17 kB per step.
 BYTES_PER_STEP = 17_000
 #: Seconds per solved step of the analytic solver (same measurement: 3.99 s solver time for 3600
-#: steps on the shared 2-core machine, 1.1 ms per step).
+#: steps on one core of a 2-core machine, 1.1 ms per step).
 SECONDS_PER_STEP = 1.1e-3
 #: Largest step count of one solve: MEMORY_BUDGET_BYTES / BYTES_PER_STEP = 2.15e9 / 1.7e4 = 126,000,
 #: rounded down to 100,000 (1.7 GB, and 100,000 * 1.1 ms = 110 s per curve).

@@ -249,7 +249,7 @@ def carrier_torsional_stiffness(d: Design, root: bool = True) -> float:
     pillars: ``n_p k r_p^2`` with ``k`` of :func:`guided_beam_stiffness` (material of the carrier, paper
     Table 2) and ``r_p`` the crank circle (the pillars stand midway between the cranks). The plates move as
     rigid bodies; each pillar root turns in its plate against :func:`root_rotational_stiffness` (``root``
-    False: rigidly clamped roots, the earlier model). Both plates are of the carrier's material (ZG65Mn)."""
+    False: rigidly clamped roots, an upper bound of the clamping). Both plates are of the carrier's material (ZG65Mn)."""
     m = MATERIALS["carrier"]
     if MATERIALS["flange_plate"] != Material(MATERIALS["flange_plate"].name, m.E, m.nu):
         raise ValueError("the pillar roots assume the flange plate and the carrier of one material")

@@ -59,7 +59,7 @@ import numpy as np
 
 from rvcad.geometry import ReducerGeometry
 from rvcad.profile import CycloidProfile, InvoluteGear
-from rvdyn import collision
+import rvdyn.collision as collision
 
 #: Height of the fin strips above the profile plane, mm (any positive value gives the same
 #: distances; the point queries sit at z = 0).

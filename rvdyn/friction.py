@@ -39,7 +39,7 @@ import numpy as np
 from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvdyn.bearings import Supports
-from rvdyn import housing
+import rvdyn.housing as housing
 from rvdyn.contacts import ContactLaw
 from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver
 from rvdyn.te import make_contacts

@@ -25,7 +25,7 @@ Supports (``Design.housing_support``):
   ``kappa = 10 (1 + nu)/(12 + 11 nu)``; ``k_f = 2 k``. With L/h below 1 the strips are short blocks, shear-dominated;
   the beam formula is an idealisation (stated in docs/physics.md), and the main bearings are taken as holding the
   wall round (their ball sets are far stiffer in the ring modes than the ring).
-- ``"free"``: no foundation (``k_f = 0``): an upper bound (the earlier benchmark estimate).
+- ``"free"``: no foundation (``k_f = 0``): an upper bound (``benchmarks/housing_ring_estimate.py``).
 
 The wind-up (unit-load method, incremental): along the torque levels of the stiffness sweep the pin forces on the
 housing change by ``dF_j`` over ``dT_j``; the output turns by ``sum_j dF_j^T C dF_j / dT_j`` (``f = dF/dT`` the load

@@ -506,8 +506,7 @@ class Runner:
             # longer kept (beyond the budget, or solved by another process) the neighbourhood's newest state is
             # another case's, and sensitivity solves from there would give their differences against that case,
             # not against this one: the neighbourhood is left without a state, so the solves after it converge
-            # (realistic seed 8, stop 39: the final state's interval Jacobian, differenced after a round of trials
-            # had pushed its state out, came out nearly of rank one, every interval tens of um wide)
+            # (a Jacobian differenced from another case's state can come out nearly of rank one)
             for k in unique:
                 if k in results and unique[k].max_outer is None:
                     st = self.job_states.get(k)

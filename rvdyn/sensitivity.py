@@ -2,7 +2,7 @@
 
 The paper prints the tooth counts, the pin circle, the pin size and the eccentricity (Table 1); every other
 size of the default design (stage I module, bearings, crankshaft, carrier, widths) is an assumption of this
-implementation (README, "Assumptions"). A user comparing :func:`rvdyn.stiffness.hysteresis` with a
+implementation (docs/conventions.md, "Assumptions"). A user comparing :func:`rvdyn.stiffness.hysteresis` with a
 datasheet needs to know which of those sizes the rigidity answers to. For a size ``s`` (a ``design.FIELD`` or
 ``model.OPTION`` of the case JSON) this module evaluates the rigidity ``k`` of the maker's sweep at
 ``s (1 - h)`` and ``s (1 + h)`` (integers: ``s - 1`` and ``s + 1``) and reports the elasticity
@@ -28,7 +28,7 @@ from rvdyn.results import InterferenceError
 from rvdyn.stiffness import hysteresis
 
 #: The default design's sizes that are this implementation's assumptions and act on the torque path
-#: (README, "Assumptions"), and the pin radius (paper Table 1 prints 6 mm, read as the diameter).
+#: (docs/conventions.md, "Assumptions"), and the pin radius (paper Table 1 prints 6 mm, read as the diameter).
 ASSUMED_SIZES: tuple[str, ...] = (
     "design.module_mm", "design.pin_radius_mm", "design.disc_width_mm", "design.plate_width_mm",
     "design.disc_gap_mm", "design.gear_width_mm", "design.cam_radius_mm", "design.crank_journal_radius_mm",

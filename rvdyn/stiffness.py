@@ -37,7 +37,7 @@ from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
 from rvdyn.bearings import Supports
 from rvdyn.contacts import ContactLaw
-from rvdyn import housing
+import rvdyn.housing as housing
 from rvdyn.results import InterferenceError
 from rvdyn.options import model_value
 from rvdyn.solver import ARCSEC_PER_RAD, QuasiStaticSolver

@@ -374,11 +374,11 @@ class SupportMixin:
         output torque ``B[:, 0] Rp`` gives at the crank radius a shared by all cams (nc nd), an estimate that
         only shapes the first Newton step of the inner loop (which then calls this with ``first`` False);
         otherwise 0: the exact tangent (floored at 1e-9 of the one under ``NEWTON_FORCE_N``). A Hessian floored
-        at a bearing's tangent under 0.1 N (the earlier model) is stiffer than the tangent of a bearing that
-        carries less, such as one just beyond its clearance, whose Newton steps then shrink geometrically
+        at a bearing's tangent under 0.1 N throughout would be stiffer than the tangent of a bearing that
+        carries less, such as one just beyond its clearance, whose Newton steps would then shrink geometrically
         (measured: factor 0.88 per iteration) and pass the step test of the inner loop before the state is at
-        its minimum (the rigid limit with a 6 um clearance stopped up to 1.3 arcsec/um short of the closed-form
-        slack); with the exact tangent Newton converges quadratically."""
+        its minimum (the rigid limit with a 6 um clearance short of the closed-form slack by up to 1.3
+        arcsec/um); with the exact tangent Newton converges quadratically."""
         if self.chain is None:
             return
         T = float(np.abs(B[:, 0]).max()) * self.Rp if B.size else 0.0

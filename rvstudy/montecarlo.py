@@ -1,6 +1,6 @@
 """Monte Carlo tolerance stack-up: tolerance distributions, sampling, yield and variance shares.
 
-Default tolerances (documented in the README and the report): every Table 4 error type is normal
+Default tolerances (documented in docs/guide.md and the report): every Table 4 error type is normal
 with mean 0 and standard deviation = its paper value / 3 (``ERROR_TYPES[key].paper_value``: 10 um
 for B..I, 5 um for J, 0.1 deg for K, 0.01 deg for L), applied to its default instance (sun; crank 0;
 crank 0 / disc 0; disc 0 / hole 0; all pins for I and J; pin 0 for L), i.e. the paper value is the

@@ -33,8 +33,9 @@ import rvpaper as paper
 from rvdyn.cache import write_text_atomic
 from rvstudy.augment_section import augment_section
 from rvstudy.paper_readings import readings_section
-from rvstudy import report_mc
+import rvstudy.report_mc as report_mc
 from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyResult
+from rvstudy.te_figure import plot_te_figure
 
 PRIMARY = "mean_abs_arcmin"
 
@@ -449,7 +450,10 @@ def write_report(res: StudyResult) -> Path:
         if cfg.figures:
             files["screen_png"] = str(plot_screen(s, figs / "screen.png"))
         if res.screen.curves and cfg.figures:
-            files["te_curves_png"] = str(report_mc.plot_te_small_multiples(res.screen.curves, figs / "te_curves.png"))
+            titles = {f"screen-{r.letter}": f"{r.letter} {r.error}" for r in s.itertuples()}
+            files["te_curves_png"] = str(plot_te_figure(
+                res.screen.curves, figs / "te_curves.png", crank_order=int(res.reducer.z_pins), titles=titles,
+                suptitle="Single-factor screen: TE of each case (blue: error at +value, red: at -value)"))
         tab(s, "screen")
         add("## 1. Single-factor screen (paper Table 4, Fig. 9)\n")
         add("Each Table 4 error alone at its paper value (default instance) and at minus it; rank 1 = largest "

@@ -2,9 +2,8 @@
 
 Figures (drawn on Agg Figures, pyplot untouched): ``mc_histograms.png`` (one panel per response with
 its limits), ``mc_shares.png`` (Pareto of the variance-based total indices of the full model, first
-order beside, one panel per response) and ``te_curves.png`` (small multiples of the screen's TE
-curves: each panel one error, the curve's mean written in the title and removed from the plotted
-ripple, so an offset does not squash the others).
+order beside, one panel per response). The screen's ``te_curves.png`` is drawn by
+:mod:`rvstudy.te_figure`.
 """
 from __future__ import annotations
 
@@ -258,33 +257,5 @@ def _pareto(sob: pd.DataFrame, path: Path) -> Path:
         h2, l2 = ax2.get_legend_handles_labels()
         ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="center right")
     fig.suptitle("Contributors: variance-based indices of the full solver model (designed sample, 95 % bootstrap bars)")
-    fig.tight_layout()
-    return _save(fig, path)
-
-
-def plot_te_small_multiples(curves: dict[str, np.ndarray], path: Path) -> Path:
-    """TE curves of the screen as small multiples: one panel per case, the mean (offset) in the title and
-    subtracted, so the ripple of every case is readable on its own scale."""
-    from matplotlib.figure import Figure
-
-    names = list(curves)
-    n = len(names)
-    cols = 4
-    rows = max(1, math.ceil(n / cols))
-    fig = Figure(figsize=(3.4 * cols, 2.3 * rows))
-    for i, name in enumerate(names):
-        ax = fig.add_subplot(rows, cols, i + 1)
-        te = np.asarray(curves[name], float)
-        x = np.linspace(0, 360, te.size, endpoint=False)
-        m = float(te.mean())
-        ax.plot(x, te - m, color="tab:blue", lw=0.9)
-        ax.set_title(f"{name}: offset {m:+.1f}\", pp {te.max() - te.min():.1f}\"", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.set_xlim(0, 360)
-        if i % cols == 0:
-            ax.set_ylabel("TE - mean [arcsec]", fontsize=7)
-        if i >= (rows - 1) * cols:
-            ax.set_xlabel("output angle [deg]", fontsize=7)
-    fig.suptitle("Single-factor screen: TE ripple of each case (its offset in the panel title)")
     fig.tight_layout()
     return _save(fig, path)

@@ -10,7 +10,7 @@
   :class:`rvdyn.runner.Runner` in this process without cache; ``rv-stackup`` passes its cached,
   parallel one) and
   returns the tables, the error ranking and the check of the paper's stage I / stage II claim.
-* :func:`plot_screen`, :func:`plot_te_curves`, :func:`plot_sweeps` -- the figures of the report
+* :func:`plot_screen`, :func:`plot_sweeps` -- figures of the report (the TE figure: :mod:`rvstudy.te_figure`)
   (``rv-stackup --stages screen`` writes the tables, figures and report of this stage).
 
 Responses, per case and over one output revolution: ``pp`` (max - min of TE), ``mean``, ``mean_abs``
@@ -347,26 +347,6 @@ def plot_screen(screen: pd.DataFrame, path: str | Path) -> Path:
     a2.set_ylabel("mean |TE| [arcsec]")
     a2.set_xlabel("error type (paper Table 4 letter)")
     a2.legend(fontsize=8)
-    fig.tight_layout()
-    return save_figure_atomic(fig, path)
-
-
-def plot_te_curves(curves: dict[str, np.ndarray], path: str | Path) -> Path:
-    """TE over one output revolution for case A and each error at +paper value (Fig. 9 style)."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(10, 5.5))
-    ax = fig.add_subplot(1, 1, 1)
-    for name, te in curves.items():
-        if name.endswith("-"):
-            continue
-        te = np.asarray(te, dtype=float)
-        x = np.arange(te.size) * 360.0 / te.size
-        ax.plot(x, te / ARCSEC_PER_ARCMIN, lw=1.0, label=name.replace("screen-", "").rstrip("+"))
-    ax.set_xlabel("output angle [deg]")
-    ax.set_ylabel("TE [arcmin]")
-    ax.set_title("Transmission error of each single-factor case")
-    ax.legend(ncol=6, fontsize=7)
     fig.tight_layout()
     return save_figure_atomic(fig, path)
 

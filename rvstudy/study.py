@@ -77,10 +77,10 @@ PHYSICAL_LAW_TEXT = ("physical: Hertz line contact at the pins (local profile cu
 #: Contact law of the Monte Carlo by default (``--mc-contact``): physical, the full physics of the mission. Its
 #: responses (TE peak-to-peak, play at +-3 % rated, torsional rigidity) are set against datasheet limits, which
 #: only the physical law computes (the impact law's rigidity follows the draw's preload, not the parts'
-#: compliance). Measured cost: about 1.5 CPU-s a draw against 0.44 with the impact law (30 draws, one worker;
-#: README "Cost, measured").
+#: compliance). It costs about 3.5 times the impact law's CPU a draw (``benchmarks/bench_mc_draw.py``, figures in
+#: ``benchmarks/results.csv``).
 DEFAULT_MC_CONTACT = "physical"
-#: Default steps per output revolution (see README: 360 resolves every single-pin event; 240 and
+#: Default steps per output revolution (360 resolves every single-pin event; 240 and
 #: fewer alias the peak-to-peak TE of several Table 4 errors by up to a factor 3).
 DEFAULT_STEPS = 360
 DEFAULT_SEED = 20240
@@ -259,7 +259,7 @@ class StudyConfig:
                                  "in this version; use --solver analytic")
 
     def contact_models(self) -> dict[str, str]:
-        """The contact model each section of the report uses (issue 11: the report says it per section).
+        """The contact model each section of the report uses (the report says it per section).
 
         The sections that reproduce the paper (screen, sweeps, design runs and their fits, validation, the
         response-surface loop on them) use the paper's impact law with ``K`` and ``n``, named explicitly

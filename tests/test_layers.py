@@ -83,17 +83,31 @@ def _imports(lazy: bool = False) -> dict[str, set[str]]:
     return {_module_name(p): _import_time_imports(p, lazy) for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
 
 
-@functools.lru_cache(maxsize=2)
-def _graph(lazy: bool = False) -> dict[str, set[str]]:
-    """Project module -> project modules it loads (parent packages included); see :func:`_imports`."""
-    files = _imports(lazy)
+def _ancestors(name: str) -> set[str]:
+    """The packages above a dotted module name: ``a.b.c`` -> ``{"a", "a.b"}``."""
+    return {".".join(name.split(".")[:i]) for i in range(1, name.count(".") + 1)}
+
+
+def _graph_of(files: dict[str, set[str]]) -> dict[str, set[str]]:
+    """Project module -> project modules it loads, from module -> imported names (:func:`_imports`).
+
+    A name the module imports counts as written, ``__init__`` modules included: ``from rvdyn import
+    collision`` in ``rvdyn.fcl_contacts`` loads ``rvdyn`` (its ``__init__``) and ``rvdyn.collision``. The
+    packages above an imported module load first, so they count too (``import rsm.model`` loads ``rsm``),
+    except the module's own packages: they are already loading when it runs, and importing a sibling
+    (``from rvdyn.collision import x``) does not go through them."""
     graph = {}
     for name, imported in files.items():
         deps = {d for d in imported if d in files and d != name}
-        # importing a.b.c runs a/__init__ and a/b/__init__ first
-        deps |= {".".join(d.split(".")[:i]) for d in set(deps) for i in range(1, d.count(".") + 1)}
-        graph[name] = deps - {name} - {".".join(name.split(".")[:i]) for i in range(1, name.count(".") + 1)}
+        implicit = {a for d in deps for a in _ancestors(d)} - _ancestors(name)
+        graph[name] = (deps | implicit) - {name}
     return graph
+
+
+@functools.lru_cache(maxsize=2)
+def _graph(lazy: bool = False) -> dict[str, set[str]]:
+    """Project module -> project modules it loads; see :func:`_graph_of` and :func:`_imports`."""
+    return _graph_of(_imports(lazy))
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -137,6 +151,15 @@ def test_cycle_finder_finds_a_circle():
     assert _cycles({"a": {"b"}, "b": set()}) == []
 
 
+def test_graph_counts_a_package_init_imported_by_name():
+    """``from p import b`` in ``p.a`` goes through ``p/__init__``, which imports ``p.a``: a circle; ``from p.b
+    import x`` does not."""
+    init_circle = {"p": {"p.a"}, "p.a": {"p", "p.b"}, "p.b": set()}
+    assert _cycles(_graph_of(init_circle)) == [["p", "p.a"]]
+    assert _cycles(_graph_of({"p": {"p.a"}, "p.a": {"p.b", "p.b.x"}, "p.b": set()})) == []
+    assert _graph_of({"q.m": {"p.b"}, "p": set(), "p.b": set()})["q.m"] == {"p", "p.b"}  # another package's init
+
+
 def test_graph_sees_import_time_imports_only():
     g = _graph()
     assert "rvdyn.te" in g["rvdyn.runner"] and "rvdyn.cache" in g["rvdyn.runner"]
@@ -148,6 +171,17 @@ def test_no_import_circle(package):
     """No two modules import each other, directly or through others, even inside functions."""
     circles = [c for c in _cycles(_graph(lazy=True)) if any(m == package or m.startswith(package + ".") for m in c)]
     assert circles == [], f"import circles through {package}: {circles}"
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_module_imports_its_own_package_init(package):
+    """A module imports its siblings directly (``from rvdyn.collision import x``, ``import rvdyn.collision as
+    collision``), never through its own package's ``__init__`` (``from rvdyn import collision``), even inside a
+    function: the ``__init__`` imports the package's modules, so that closes a circle."""
+    files = _imports(lazy=True)
+    bad = {m: sorted(names & _ancestors(m)) for m, names in files.items()
+           if (m == package or m.startswith(package + ".")) and names & _ancestors(m)}
+    assert bad == {}, f"modules importing their own package's __init__: {bad}"
 
 
 def _loaded_at_import(module: str, lazy: bool = False) -> set[str]:
