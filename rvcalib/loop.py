@@ -10,12 +10,14 @@ reducer model through rvdyn (:mod:`rvcalib.reducer_model`); the method is writte
    TE ``f(theta)`` and its Jacobian ``J``; the reading-error and empirical columns ``R`` are exact and fixed.
 4. The linearised data ``z = y - f(theta) + J theta``, ``z = [J R] b + e``: the sparse estimator's posterior
    over ``b`` (every candidate at once; the prior scale of each is its tolerance class).
-5. The new state is the posterior mean of the solved parameters; the reducer model is solved there. A step that
-   the model does not follow (its residual worse than the current state's) is halved until it is.
-6. Repeat from 3 until no solved parameter moves more than ``step_tolerance`` posterior standard deviations (or
-   ``max_linearisations``); the last linearisation's posterior is the answer: named effects (credible sets of one
-   physical candidate), groups the data cannot split, unexplained structure (sets of empirical terms) and the
-   intervals, each read from the posterior.
+5. The chosen parameters (the always-estimated block, and the candidates of pure credible sets) are estimated
+   through the reducer model itself (their nonlinear MAP, :mod:`rvcalib.refine`); the others stay at their
+   posterior means.
+6. Repeat from 3 until the chosen set no longer changes and the model TE moves by less than ``step_tolerance``
+   times the noise (or ``max_linearisations``). The empirical block joins only once the physical candidates have
+   converged: what the physics cannot give is judged against the best physical model, not against a
+   linearisation far from it. The last linearisation's posterior is the answer: named effects, groups the data
+   cannot split, unexplained structure and the intervals (:mod:`rvcalib.result`).
 """
 from __future__ import annotations
 
@@ -169,10 +171,16 @@ class _Problem:
         self.starts = np.r_[0, np.cumsum([sum(c.n_params for c in fc) for fc in self.feature_cands])]
         w = Library(self.solved + self.readings).prior_weights(settings.empirical_weight)
         self.prior = np.r_[[1.0] if dense else [], w[len(dense):]]
+        self.empirical = np.array([fc[0].family == "empirical" for fc in self.feature_cands], dtype=bool)
 
-    def features(self, J: np.ndarray, scales) -> Features:
+    def features(self, J: np.ndarray, scales, empirical: bool) -> Features:
+        """The scaled, projected columns as features; without ``empirical`` the empirical block's prior weight is
+        zero (none of it can be chosen)."""
         ts, tr = scales
-        return Features(self.proj(np.column_stack([J * ts, self.R * tr])), self.starts, self.prior)
+        prior = self.prior.copy()
+        if not empirical:
+            prior[self.empirical] = 0.0
+        return Features(self.proj(np.column_stack([J * ts, self.R * tr])), self.starts, prior)
 
 
 def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callable[[str], None] | None = None,
@@ -209,13 +217,14 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     active_prev: tuple = ()
     stopped = "max_linearisations"
     b_r = np.zeros(R.shape[1])
+    empirical = False
     with pool_cm as pool:
         theta, te = _global_fit(pb, theta, te, pool, log)
         for it in range(1, settings.max_linearisations + 1):
             J = m.jacobian(theta, spread, renew, pool)
             scales = scales or _scales(pb.library, m, J, R, pb.readings)
             ts, tr = scales
-            F = pb.features(J, scales)
+            F = pb.features(J, scales, empirical)
             z = proj(y - te + J @ theta)
             fit = fit_sparse(F, z, settings.sparse(), init=fit.effects if fit is not None else None, fixed=pb.fixed)
             sigma = math.sqrt(fit.sigma2)
@@ -231,8 +240,11 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             theta, te = new, te_new
             key = (tuple(a_s), tuple(a_r))
             if key == active_prev and moved <= settings.step_tolerance * sigma:
-                stopped = "converged"
-                break
+                if empirical or not pb.empirical.any():
+                    stopped = "converged"
+                    break
+                empirical = True            # the physics has converged: now what it cannot give
+                log("the physical candidates have converged; the empirical block joins")
             active_prev = key
             renew = renew | (m.column_kinds() != "pin")
     return assemble(dataset, pb, F, fit, scales, theta, te, settings,

@@ -48,7 +48,7 @@ class CalibrationSettings:
     min_purity: float = 0.5
     empirical_weight: float = 1.0
     max_order: int | None = None
-    max_linearisations: int = 8
+    max_linearisations: int = 12
     step_tolerance: float = 0.1
     workers: int = 1
     contact: str | None = None
