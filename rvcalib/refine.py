@@ -94,8 +94,7 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
     x0 = np.clip(theta[active_s], lo, hi)
     nfev = max_nfev or 10 + 2 * active_s.size
     res = optimize.least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale=sd, max_nfev=nfev)
-    if not np.array_equal(cache.get("x"), res.x):
-        fun(res.x)
+    fun(res.x)                                  # the model's states are those of the estimate (the next Jacobian's)
     b[active_r] = cache["br"]
     if log:
         log(f"  nonlinear estimate of {active_s.size} solved and {active_r.size} reading parameters: "

@@ -1,0 +1,119 @@
+"""The loop's machinery on a linear stand-in of the reducer (tests/calib_standin.py: the real model's TE and
+Jacobian at the declared state, frozen): several effects at once with reading errors and the rig's zero per test,
+structure outside the physics, twins the data cannot split, settings. The data are made here with their own noise;
+what the physics adds beyond a linear response is the subject of tests/test_calib_loop.py."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from calib_standin import frozen_model
+from rvcalib.dataset import noise_estimate, read_dataset
+from rvcalib.loop import calibrate
+from rvcalib.readings import nuisance_columns
+from rvcalib.settings import CalibrationSettings
+from rvcalib.simulate import simulate_dataset, standard_runs
+
+pytestmark = pytest.mark.xdist_group("calib_standin")
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    """A small dataset's readings (4 runs, 60 per revolution off the grid) and the frozen model there."""
+    out = tmp_path_factory.mktemp("standin") / "ds"
+    simulate_dataset(out, standard_runs((10.0, 30.0), (1, -1)), {}, noise_arcsec=0.0, input_noise_arcsec=0.0,
+                     samples_per_rev=60, start_deg=0.37, seed=1)
+    ds = read_dataset(out)
+    return ds, frozen_model(ds)
+
+
+def _with_te(ds, te: np.ndarray):
+    """The dataset with its TE readings replaced (the input readings kept)."""
+    runs, pos = [], 0
+    for r in ds.runs:
+        t = te[pos:pos + r.n]
+        pos += r.n
+        runs.append(dataclasses.replace(r, output_deg=r.input_deg / r.ratio + t / 3600.0,
+                                        noise_arcsec=noise_estimate(t)))
+    return dataclasses.replace(ds, runs=runs)
+
+
+def _truth(fm, values: dict) -> np.ndarray:
+    names = [c.name for c in fm.candidates for _ in range(c.n_params)]
+    th = np.zeros(fm.n_params)
+    for k, v in values.items():
+        if isinstance(v, tuple):
+            i = names.index(k)
+            th[i:i + 2] = v
+        else:
+            th[names.index(k)] = v
+    return th
+
+
+def _data(ds, fm, truth: dict, extra: np.ndarray | None = None, noise: float = 0.2, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    N, _ = nuisance_columns(ds)
+    te = fm.te(_truth(fm, truth)) + N @ rng.normal(0.0, 30.0, N.shape[1]) + rng.normal(0.0, noise, N.shape[0])
+    return _with_te(ds, te + (0.0 if extra is None else extra))
+
+
+def _named(res) -> dict:
+    return {e.name: e for e in res.effects}
+
+
+def test_several_effects_at_once_named_with_intervals_that_cover(base):
+    ds, fm = base
+    truth = {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2,
+             "pin_pitch[pin=7] (+)": 0.004}
+    res = calibrate(_data(ds, fm, truth), CalibrationSettings(), model=fm)
+    got = _named(res)
+    for name, v in truth.items():
+        name = name.replace(" (+)", "")
+        assert name in got, (name, [e.line() for e in res.effects], res.groups)
+        e = got[name]
+        want = float(np.hypot(*v)) if isinstance(v, tuple) else v
+        assert e.value == pytest.approx(want, rel=0.1), e.line()
+        if not isinstance(v, tuple):
+            assert e.ci95[0] <= v <= e.ci95[1], e.line()
+    assert res.rms_after <= 1.2 * 0.2
+    assert len(res.nuisance) == 2 and all(abs(c["constant_arcsec"]) < 200 for c in res.nuisance)
+    assert res.settings["max_effects"] == 30 and res.stopped_by == "converged"
+
+
+def test_structure_outside_the_physics_is_unexplained_not_named(base):
+    ds, fm = base
+    th = np.concatenate([np.radians(r.output_deg) for r in ds.runs])
+    load = np.concatenate([np.full(r.n, r.load_Nm) for r in ds.runs])
+    extra = 0.05 * load * np.cos(7 * th + 0.4)                # order 7, proportional to the load: 0.5 / 1.5 arcsec
+    res = calibrate(_data(ds, fm, {"torsional_compliance_arcsec_per_Nm": 0.2}, extra), CalibrationSettings(),
+                    model=fm)
+    labels = [u["label"] for u in res.unexplained] + [m["name"] for g in res.groups for m in g["members"]]
+    assert "order 7 (load)" in labels, (labels, [e.line() for e in res.effects])
+    assert all(e.family in ("model",) or abs(e.value) < 0.5 for e in res.effects), [e.line() for e in res.effects]
+
+
+def test_twins_the_data_cannot_split_are_a_group_with_sizes(base):
+    """The four cams of the default layout (two cranks 180 deg apart, two discs with eccentrics 180 deg apart) give
+    the same TE up to the sign (the half-turn symmetry): the data cannot split them, so no cam phase is named; the
+    group gives each member's size (3 um, the sign its own) and probability."""
+    ds, fm = base
+    res = calibrate(_data(ds, fm, {"cam_phase[crank=0,disc=0]": 3.0, "torsional_compliance_arcsec_per_Nm": 0.2}),
+                    CalibrationSettings(), model=fm)
+    assert not any(e.key == "cam_phase" for e in res.effects), [e.line() for e in res.effects]
+    grp = [g for g in res.groups if any(m["key"] == "cam_phase" for m in g["members"])]
+    assert len(grp) == 1 and len(grp[0]["members"]) >= 2, res.groups
+    assert "cam_phase[crank=0,disc=0]" in {m["name"] for m in grp[0]["members"]}
+    for m in grp[0]["members"]:
+        assert abs(m["value"]) == pytest.approx(3.0, rel=0.1), m
+    assert sum(m["probability"] for m in grp[0]["members"]) >= 0.95
+
+
+@pytest.mark.parametrize("field,value,match", [
+    ("max_effects", 0, "max_effects = 0"), ("empirical_weight", -1.0, "empirical_weight = -1.0"),
+    ("contact", "soft", "contact = 'soft'"), ("rated_Nm", 0.0, "rated_Nm = 0.0"),
+    ("families", ("table4", "magic"), "families"), ("workers", 0, "workers = 0")])
+def test_settings_refused_naming_the_field(field, value, match):
+    with pytest.raises(ValueError, match=match):
+        CalibrationSettings(**{field: value}).validate()
