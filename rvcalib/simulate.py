@@ -85,7 +85,8 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
             out.append(d)
     model = hidden.get("model") or {}
     for key, v in model.items():
-        if key in ("pin_circle_ovality_angle_deg", "temperature_C", "cam_bearing_stiffness_N_per_um"):
+        if key in ("pin_circle_ovality_angle_deg", "temperature_C", "cam_bearing_stiffness_N_per_um") or \
+                isinstance(v, str):                       # a choice (the contact law), not an effect
             continue
         d = {"name": key, "key": key, "value": float(v), "unit": MODEL_OPTIONS[key].unit}
         if key == "pin_circle_ovality_um":
