@@ -136,23 +136,32 @@ def _add_scaled(acc: CaseDelta, delta: dict, h: float) -> None:
 def secant_columns(case_dict: dict, deltas: list, lo: list, hi: list, loads: list, angles: list, states: list,
                    law: ContactLaw | None, max_outer: int | None) -> np.ndarray:
     """Columns (TE(case (+) hi_j delta_j) - TE(case (+) lo_j delta_j)) / (hi_j - lo_j), each end solved from
-    ``states`` (``max_outer`` 1: a sensitivity solve; None: to convergence)."""
+    ``states`` (``max_outer`` 1: a sensitivity solve; None: to convergence). An end the model cannot solve (an
+    interference beyond the contact law) is moved towards the current state, a quarter at a time."""
     cols = []
-    base = None
-    for delta, a, b in zip(deltas, lo, hi):
-        ends = []
-        for h in (a, b):
-            if h == 0.0:                          # the current state itself
-                if base is None:
-                    base = np.concatenate(_solve(case_dict, loads, angles, law, x_init=states,
-                                                 max_outer=max_outer)[0])
-                ends.append(base)
-                continue
+    cache: dict = {}
+
+    def end(delta, h):
+        if h == 0.0:                              # the current state itself
+            if "base" not in cache:
+                cache["base"] = np.concatenate(_solve(case_dict, loads, angles, law, x_init=states,
+                                                      max_outer=max_outer)[0])
+            return cache["base"], h
+        for _ in range(4):
             acc = CaseDelta()
             _add_scaled(acc, delta, h)
-            te, _ = _solve(acc.to_dict(case_dict), loads, angles, law, x_init=states, max_outer=max_outer)
-            ends.append(np.concatenate(te))
-        cols.append((ends[1] - ends[0]) / (b - a))
+            try:
+                te, _ = _solve(acc.to_dict(case_dict), loads, angles, law, x_init=states, max_outer=max_outer)
+                return np.concatenate(te), h
+            except ModelEvaluationError:
+                h *= 0.25
+        return end(delta, 0.0)
+
+    for delta, a, b in zip(deltas, lo, hi):
+        (fa, a), (fb, b) = end(delta, a), end(delta, b)
+        if b == a:
+            raise ModelEvaluationError(f"no secant can be solved along {delta} from this state")
+        cols.append((fb - fa) / (b - a))
     return np.column_stack(cols)
 
 
