@@ -233,7 +233,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             b_r = fit.coef[m.n_params:] * tr
             spread, renew = _next_linearisation(fit, F, m.n_params, ts)
             new, b_r, te_new, _ = refine(m, y, proj, R, start, b_r, a_s, a_r, sd * np.concatenate(scales), sigma,
-                                         spread=spread, pool=pool, log=log)
+                                         spread=spread, pool=pool, log=log, feasible=theta)
             moved = float(np.sqrt(np.mean(proj(te_new - te) ** 2)))
             log(f"linearisation {it}: {fit.n_supported} effects supported, {a_s.size + a_r.size} parameters chosen, "
                 f"sigma {sigma:.4g} arcsec, the model TE moved {moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")

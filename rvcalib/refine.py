@@ -24,7 +24,7 @@ from rvcalib.reducer_model import ModelEvaluationError
 
 def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np.ndarray, active_s: np.ndarray,
            active_r: np.ndarray, prior_sd: np.ndarray, sigma: float, spread: np.ndarray | None = None,
-           max_nfev: int | None = None, pool=None, log=None):
+           max_nfev: int | None = None, pool=None, log=None, feasible: np.ndarray | None = None):
     """The MAP of the active parameters (see the module docstring).
 
     The active reading coefficients enter linearly: for each state of the solved ones they are the ridge solution
@@ -43,6 +43,8 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
     sigma : float, the noise standard deviation, arcsec
     spread : (p,) or None, the secants' half-widths (the model's default: the prior scales)
     max_nfev : int or None, most model evaluations (default 10 + 2 per active solved parameter)
+    feasible : (p,) or None, a state the model can solve (the current one): where the start ``theta`` cannot be
+        solved (its errors overlap parts beyond the contact law), the start moves towards it, halving the way
 
     Returns
     -------
@@ -92,6 +94,14 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
         b[active_r] = linear(proj(y - te - R @ _zero(b_r, active_r)))
         return theta, _zero(b, np.zeros(0, int)) + _only(b, active_r, b_r), te, float("nan")
     x0 = np.clip(theta[active_s], lo, hi)
+    if feasible is not None:
+        for _ in range(6):
+            if np.all(fun(x0)[:3] < 1e6):
+                break
+            theta = feasible + 0.5 * (theta - feasible)
+            x0 = np.clip(theta[active_s], lo, hi)
+        else:
+            theta, x0 = feasible.copy(), np.clip(feasible[active_s], lo, hi)
     nfev = max_nfev or 10 + 2 * active_s.size
     res = optimize.least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale=sd, max_nfev=nfev)
     fun(res.x)                                  # the model's states are those of the estimate (the next Jacobian's)
