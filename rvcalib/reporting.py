@@ -93,6 +93,19 @@ def physical_bounds(dataset: MeasuredDataset) -> dict[str, tuple[float, float, b
     return out
 
 
+def _within(value: float, bounds: tuple[float, float, bool] | None) -> bool:
+    """A finite size inside its candidate's physical bounds (a magnitude of two components bounded by each
+    component's largest bound times sqrt 2)."""
+    if not math.isfinite(value):
+        return False
+    if bounds is None:
+        return True
+    lo, hi, polar = bounds
+    if polar:
+        return abs(value) <= max(abs(lo), abs(hi)) * math.sqrt(2.0)
+    return lo <= value <= hi
+
+
 def bounded_groups(groups: list, bounds: dict) -> list:
     """The groups with every member size beyond its physical bounds written ``"unbounded"`` (a size the data
     leave free along the group, e.g. of two members only their combination is fixed, is no size)."""
@@ -100,15 +113,9 @@ def bounded_groups(groups: list, bounds: dict) -> list:
     for g in groups:
         members = []
         for m in g["members"]:
-            m = dict(m)
             v = m.get("value")
-            b = bounds.get(m.get("name"))
-            if isinstance(v, (int, float)):
-                limit = max(abs(b[0]), abs(b[1])) * (math.sqrt(2.0) if b[2] else 1.0) if b else math.inf
-                lo, hi = (-limit, limit) if b and b[2] else (b[0], b[1]) if b else (-math.inf, math.inf)
-                if not (math.isfinite(v) and lo <= v <= hi):
-                    m["value"] = "unbounded"
-            members.append(m)
+            free = isinstance(v, (int, float)) and not _within(float(v), bounds.get(m.get("name")))
+            members.append(dict(m, value="unbounded") if free else dict(m))
         out.append({**g, "members": members})
     return out
 
@@ -152,12 +159,16 @@ def residual_dataset(dataset: MeasuredDataset, residuals: list) -> MeasuredDatas
                            design=dataset.design, design_source=dataset.design_source, tests=dataset.tests)
 
 
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
 def _run_rows(dataset, cv: dict) -> list:
-    rms = lambda x: float(np.sqrt(np.mean(np.square(x))))   # noqa: E731
+    """Per run: its conditions, readings, noise and the RMS of the residual before and after (arcsec)."""
     return [{"run": r.run, "test": r.test, "load_Nm": r.load_Nm, "direction": r.direction, "samples": r.n,
              "revolutions": r.revolutions, "noise_arcsec": r.noise_arcsec,
-             "rms_before_arcsec": rms(cv["before"][k]) if cv["before"] is not None else None,
-             "rms_after_arcsec": rms(cv["after"][k])} for k, r in enumerate(dataset.runs)]
+             "rms_before_arcsec": _rms(cv["before"][k]) if cv["before"] is not None else None,
+             "rms_after_arcsec": _rms(cv["after"][k])} for k, r in enumerate(dataset.runs)]
 
 
 def report_object(result, dataset, measured: dict, datasheet: dict | None, holdout: dict | None, spectrum: dict,

@@ -48,7 +48,7 @@ def _head(obj: dict, dataset) -> list[str]:
          f"- {len(dataset.runs)} runs in {len(dataset.tests)} tests, {dataset.n_samples} readings; noise "
          f"{obj['noise_arcsec']:.4g} arcsec (second differences of the records), the estimator's "
          f"{obj['sigma_arcsec']:.4g}",
-         f"- the loop stopped by {obj['stopped_by']} after {obj['linearisations']} linearisations "
+         f"- the loop ended: {obj['stopped_by']} after {obj['linearisations']} linearisations "
          f"({obj['seconds']:.1f} s)" + ("; **every single effect allowed was used (the cap --max-effects binds)**"
                                         if obj["cap_binds"] else ""),
          "- settings: " + ", ".join(f"{k} {v}" for k, v in obj["settings"].items() if k != "families")
