@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from rvcalib import forward
 from rvcalib.datasheet import reducer_case
 from rvcalib.holdout import declared_te, model_te
 from rvcalib.library import build_library
 from rvcalib.loop import resolved_order
 from rvcalib.readings import ramp_shown
+from rvcalib.simulate import simulate_dataset
+from rvdyn.runner import Runner
 
 #: Families whose solved candidates are model options only (what the stand-in can give a column).
 FAMILIES = ("model", "measurement", "empirical")
@@ -55,3 +58,14 @@ class LinearReducer:
 
     def column_kinds(self) -> np.ndarray:
         return np.array(["derivative"] * self.n_params)
+
+
+def simulate_own_law(*args, **kwargs):
+    """:func:`rvcalib.simulate.simulate_dataset` with each case's own contact law (rvdyn's default, the physical
+    law), the law the loop's reducer model, the stand-in and the predictions solve with; the session's forward
+    runner (tests/conftest.py ``calib_forward_cache``) may hold another."""
+    prev = forward.use_runner(Runner(solver="analytic", memory_bytes=forward.CACHE_BYTES))
+    try:
+        return simulate_dataset(*args, **kwargs)
+    finally:
+        forward.use_runner(prev)
