@@ -36,13 +36,13 @@ import pandas as pd
 
 from rvcad.atomic import atomic_path
 from rvcad.errors import ERROR_TYPES, Case
+from rvdyn.te import run_te
 from rvdyn.options import MODEL_OPTIONS
 
 from rvcad.params import Design
 
-from rvcalib.causes import EQUIVALENTS
-from rvcalib.effects import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM
-from rvcalib.forward import merge_case, te_at
+from rvcalib.equivalents import EQUIVALENTS
+from rvcalib.library import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM, CaseDelta
 from rvcalib.orders import check_periodic, period_deg
 
 MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg",
@@ -264,9 +264,25 @@ def _truth_case(r: dict[str, Any], hidden: dict[str, Any], design: dict[str, Any
     for key, spec in (hidden.get("errors") or {}).items():
         for item in (spec if isinstance(spec, list) else [spec]):
             errs.append((key, item if isinstance(item, dict) else {"value": item}))
-    truth = merge_case(base, errs, dict(hidden.get("model") or {}))
+    truth = CaseDelta(items=errs).to_dict({k: v for k, v in base.items() if k != "model"})
+    model = {**(base.get("model") or {}), **dict(hidden.get("model") or {})}
+    if model:
+        truth["model"] = model
     Case.from_dict(truth)
     return truth
+
+
+def te_exact(case_dict: dict[str, Any], input_deg: np.ndarray) -> np.ndarray:
+    """The TE (arcsec) of a case solved exactly at every input angle (deg, any revolution, in the order given),
+    each angle on its own (rvdyn's analytic contacts; the case's own contact law and load): the TE repeats every
+    output revolution, so angles equal modulo one (to 1e-9 deg) are solved once."""
+    case = Case.from_dict(case_dict)
+    period = period_deg(case.design)
+    red = np.round(np.mod(np.asarray(input_deg, dtype=float), period), 9)
+    uniq, inv = np.unique(red, return_inverse=True)
+    res = run_te(case, "analytic", theta_in_deg=uniq if case.direction > 0 else uniq[::-1])
+    te = res.table["te_arcsec"].to_numpy()
+    return (te if case.direction > 0 else te[::-1])[inv]
 
 
 def _run_row(r: dict[str, Any], declared_keys: list[str], speed_rpm: float | None) -> dict[str, Any]:
@@ -312,7 +328,7 @@ class _Rig:
         M = int(math.ceil(revs * self.N - 1e-9))
         k = np.arange(M)
         th_in = self.start_deg + d * k * self.step
-        th_out = th_in / self.ratio + te_at(truth, th_in) / 3600.0  # the TE exact at every sample
+        th_out = th_in / self.ratio + te_exact(truth, th_in) / 3600.0  # the TE exact at every sample
         for h in self.harmonics:
             amp = float(h["amplitude_arcsec"]) * (load if h.get("per_Nm") else 1.0)
             te_h = amp * np.cos(int(h["order"]) * np.radians(th_out) + math.radians(float(h.get("phase_deg", 0.0))))

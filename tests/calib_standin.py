@@ -1,9 +1,17 @@
-"""A linear stand-in of the reducer model for tests of the loop's machinery: the real model's TE and Jacobian at
-the declared state, frozen (``te(theta) = te0 + J theta``), so a loop test costs one linearisation of rvdyn."""
+"""Linear stand-ins of the loop's reducer model for fast tests.
+
+* :class:`FrozenModel` (:func:`frozen_model`): the real model's TE and Jacobian at the declared state, frozen
+  (``te(theta) = te0 + J theta``), for tests of the loop's machinery: a test costs one linearisation of rvdyn.
+* :class:`LinearReducer`: TE = declared + J theta over the model options only, J from rvdyn at the declared state
+  (exact for the torsional compliance, which rvdyn adds as a wind-up -d C L), for tests of what surrounds the loop
+  (the command, the report, the prediction of left-out loads).
+"""
 from __future__ import annotations
 
 import numpy as np
 
+from rvcalib.datasheet import reducer_case
+from rvcalib.holdout import declared_te, model_te
 from rvcalib.library import build_library
 from rvcalib.loop import resolved_order
 from rvcalib.readings import ramp_shown
@@ -48,3 +56,49 @@ def frozen_model(dataset, families=None) -> FrozenModel:
     theta = np.zeros(m.n_params)
     te0 = m.te(theta)
     return FrozenModel(m, te0, m.jacobian(theta))
+
+
+#: Families whose solved candidates are model options only (what the stand-in can give a column).
+FAMILIES = ("model", "measurement", "empirical")
+
+
+class LinearReducer:
+    """The loop's forward model (``rvcalib.loop.calibrate(model=...)``) as a fixed linear map."""
+
+    def __init__(self, dataset, settings) -> None:
+        lib = build_library(dataset, settings.max_order or resolved_order(dataset), settings.families,
+                            ramp_shown(dataset)[0])
+        self.candidates = ([c for c in lib if c.solved and c.dense] + [c for c in lib if c.solved and not c.dense])
+        assert all(c.family == "model" for c in self.candidates), [c.name for c in self.candidates]
+        self.n_params = len(self.candidates)
+        self.base_case = reducer_case(dataset.runs[0].case_dict())
+        self.base = np.concatenate(declared_te(dataset))
+        cols = []
+        for c in self.candidates:
+            h = c.prior_scale
+            te = model_te(dataset, lambda r, c=c, h=h: self._case({c.key: h}, r))
+            cols.append((np.concatenate(te) - self.base) / h)
+        self.J = np.column_stack(cols)
+        self._lower = np.array([c.lower for c in self.candidates])
+        self._upper = np.array([c.upper for c in self.candidates])
+        self.groups = [self.base_case]
+        self.solves = 0
+
+    def _case(self, options: dict, run=None) -> dict:
+        case = reducer_case(run.case_dict()) if run is not None else dict(self.base_case)
+        case["model"] = {**(case.get("model") or {}), **options}
+        return case
+
+    def te(self, theta: np.ndarray) -> np.ndarray:
+        self.solves += 1
+        return self.base + self.J @ np.clip(theta, self._lower, self._upper)
+
+    def jacobian(self, theta, spread=None, renew=None, pool=None) -> np.ndarray:
+        return self.J.copy()
+
+    def case_dict(self, group, theta: np.ndarray) -> dict:
+        t = np.clip(theta, self._lower, self._upper)
+        return self._case({c.key: float(x) for c, x in zip(self.candidates, t)})
+
+    def column_kinds(self) -> np.ndarray:
+        return np.array(["derivative"] * self.n_params)
