@@ -1,22 +1,17 @@
-"""Benchmark protocol of the calibration loop: a method on a fixed set of realistic draws, scored by one rule.
+"""Benchmark protocol of the calibration loop: the loop on a fixed set of realistic draws, scored by one rule.
 
 For each seed of the set (:data:`realistic.DEV_SEEDS` or :data:`realistic.HELDOUT_SEEDS`, or a subset), it
 draws the reducer (:mod:`realistic`; cached under ``--draws``, default ``OUT/draws``, so a rerun reuses it),
-runs the method with its DEFAULT options on the dataset alone (the answer is read only to score), times
+runs the loop with its DEFAULT options on the dataset alone (the answer is read only to score), times
 it (wall and CPU seconds, the worker processes' CPU included), scores it (:mod:`score`: the pass rule and the
 interval coverage) and writes ``OUT/seed<N>.json`` (``seed, set, method, workers, wall_s, cpu_s,
 load_average, error, result, score``). A draw whose method raises is a fail, with the error printed. A
 draw already scored in ``OUT`` by the same method is reused (``--fresh`` runs it again), so an
 interrupted run resumes.
 
-Methods:
-
-* ``old``: the current loop, :func:`rvcalib.identify.calibrate` with its defaults, its result mapped to the
-  schema by :mod:`adapt_old`;
-* ``new``: ``rvcalib.loop.calibrate(dataset, settings=None).to_dict()``.
-
-``--workers 2`` gives the forward model (:mod:`rvcalib.forward`) two local processes, as ``rv-calibrate
---workers 2``.
+The loop is ``rvcalib.loop.calibrate(dataset, CalibrationSettings(workers=W)).to_dict()`` (method ``new``; a record
+of another method, from an earlier protocol run, is shown by ``--report-only``). ``--workers 2`` gives the loop's
+Jacobian two local processes, as ``rv-calibrate --workers 2``.
 
 It prints one line per draw (verdict, RMS after against the noise, compliance, named effects, coverage,
 seconds) with each named effect against its truth and the groups, then the summary: the pass count, the
@@ -24,14 +19,13 @@ pooled coverage of the named effects' 95 % intervals and the median wall and CPU
 appends to ``benchmarks/results.csv`` (:mod:`results_log`, benchmark ``bench_loop``, figures
 ``<method>_<set>_passed`` ...; ``<method>_<set>_subset_...`` for a subset of the seeds).
 
-Run: ``python benchmarks/bench_loop.py --set dev|heldout [--method old|new] [--seeds N ...] [--workers 1|2]
+Run: ``python benchmarks/bench_loop.py --set dev|heldout [--method new] [--seeds N ...] [--workers 1|2]
 [--out DIR] [--draws DIR] [--fresh] [--verbose] [--report-only]`` (``--report-only``: the table of the draws
 already run, none run, nothing recorded).
 """
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import statistics
@@ -44,20 +38,16 @@ from typing import Any, Callable
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_common import cpu_seconds, forward_workers  # noqa: E402
+from bench_common import cpu_seconds  # noqa: E402
 from rvcad.atomic import atomic_path  # noqa: E402
 from realistic import SETS, generate, seeds_of  # noqa: E402
 from score import pool, score, score_lines  # noqa: E402
 
-METHODS = ("old", "new")
+METHODS = ("new",)
 
 
 def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = None, workers: int = 1) -> dict[str, Any]:
     """One method with its default options on a dataset; the result in the schema (:mod:`score`)."""
-    if method == "old":
-        from adapt_old import old_calibrate
-
-        return old_calibrate(dataset, log=log)
     if method == "new":
         from rvcalib.loop import calibrate as calibrate_new
         from rvcalib.settings import CalibrationSettings
@@ -66,28 +56,17 @@ def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = No
     raise ValueError(f"method {method!r} is unknown; allowed: {list(METHODS)}")
 
 
-def _clear_forward_cache() -> None:
-    """Start each draw with a cold forward-model cache (the draw's truth was solved through it)."""
-    try:
-        from rvcalib.forward import clear_cache
-    except ImportError:
-        return
-    clear_cache()
-
-
 def run_draw(seed: int, set_name: str, method: str, draws: Path, workers: int,
              verbose: bool = False) -> dict[str, Any]:
     """Draw (or reuse), run and time one seed; returns the per-draw record (not yet scored)."""
     from rvcalib.dataset import read_dataset
 
     folder = generate(seed, draws)
-    _clear_forward_cache()
     result, error = None, None
     t0, c0 = time.perf_counter(), cpu_seconds()
     log = (lambda s: print(f"    [{time.perf_counter() - t0:7.1f} s] {s}", flush=True)) if verbose else None
     try:
-        with forward_workers(workers) if method == "old" else contextlib.nullcontext():
-            result = run_method(method, read_dataset(folder / "dataset"), log, workers)
+        result = run_method(method, read_dataset(folder / "dataset"), log, workers)
     except Exception as exc:  # a method that raises fails the draw; the protocol goes on
         error = f"{type(exc).__name__}: {exc}"
         traceback.print_exc()
@@ -152,13 +131,13 @@ def record_summary(method: str, set_name: str, full: bool, summ: dict[str, Any])
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", required=True, choices=sorted(SETS), help="seed set")
-    ap.add_argument("--method", default="old", choices=METHODS, help="the loop to run (default old)")
+    ap.add_argument("--method", default="new", choices=METHODS, help="the loop to run (default new)")
     ap.add_argument("--seeds", type=int, nargs="*", default=None, help="a subset of the set's seeds")
     ap.add_argument("--workers", type=int, default=1, choices=(1, 2), help="forward-model processes")
     ap.add_argument("--out", default=None, help="folder of the per-draw JSON (default ./bench-loop-METHOD-SET)")
     ap.add_argument("--draws", default=None, help="folder of the cached draws (default OUT/draws)")
     ap.add_argument("--fresh", action="store_true", help="run draws already scored in OUT again")
-    ap.add_argument("--verbose", action="store_true", help="print the method's progress (old loop)")
+    ap.add_argument("--verbose", action="store_true", help="print the method's progress")
     ap.add_argument("--report-only", action="store_true",
                     help="print the draws already run in OUT (scored again), run none and record nothing")
     args = ap.parse_args(argv)

@@ -14,14 +14,14 @@ stops. The records are development data: never copied into the project, never re
 3. The spectrum of every reading (a second import with ``--samples-per-rev 0``): the main order-locked lines
    and the fixed-frequency lines (the rig line near 490 Hz), :func:`rvcalib.spectrum.separate`.
 4. The loop (:func:`rvcalib.calibrate`) on the imported dataset with the design ``--design`` (default
-   ``benchmarks/data/rv160n_2crank.json``; ``--no-loop`` skips it).
+   ``examples/designs/rv160n.json``, three cranks; ``--no-loop`` skips it): the rig's zero of each test, what it
+   names, what stays unexplained.
 
-The design. ``benchmarks/data/rv160n_2crank.json`` holds the published RV-160N sizes (sun 22, planets 44, 40
-pins, 39 lobes, pin circle 223 mm, eccentricity 2.0 mm, module 1.5 mm) with two cranks at 0 and 180 deg (the
-model's crank count); every other size is the default design's assumption scaled by 223/128 (the pin circles'
-ratio): pin radius 5.2 mm, widths 17.4 mm, cam radius 15.7 mm, journal radius 12.2 mm, roller sizes, housing
-radius 139.4 mm. What two cranks cost: the record's sidebands 39 k +- 3 (orders 75, 153, 237, 315) are no orders
-of a two-crank design, so the spectrum reports them at a fixed frequency, and the loop has no effect for them.
+The design. ``examples/designs/rv160n.json`` holds the published RV-160N sizes (sun 22, planets 44, 40 pins, 39
+lobes, pin circle 223 mm, eccentricity 2.0 mm, module 1.5 mm) with three cranks at 0, 120 and 240 deg; its
+assumed sizes are in docs/physics.md section 14. ``benchmarks/data/rv160n_2crank.json`` is the same with two
+cranks (``--design`` it to compare): the record's sidebands 39 k +- 3 (orders 75, 153, 237, 315) are no orders of
+a two-crank design, so its spectrum reports them at a fixed frequency.
 
 Figures are appended to ``benchmarks/results.csv`` (:mod:`results_log`).
 
@@ -153,40 +153,39 @@ def spectrum_section(ds) -> list:
     return figs
 
 
-def loop_section(ds, workers: int) -> list:
-    """The loop on the imported dataset: RMS before/after against the noise, what it named."""
-    from rvcalib import calibrate, forward
+def loop_section(ds, workers: int, rated_Nm: float) -> list:
+    """The loop on the imported dataset: RMS before/after against the noise, what it named, the tests' zeros."""
+    from rvcalib import CalibrationSettings, calibrate
 
-    runner = None
-    if workers > 1:
-        from rvdyn.runner import Runner
-
-        runner = Runner(executor=workers, memory_bytes=forward.CACHE_BYTES, law=forward.forward_runner().law,
-                        warm_bytes=forward.WARM_BYTES)
-        prev = forward.use_runner(runner)
     t0 = time.perf_counter()
-    try:
-        res = calibrate(ds).to_dict()
-    finally:
-        if runner is not None:
-            forward.use_runner(prev)
-            runner.close()
+    res = calibrate(ds, CalibrationSettings(workers=workers, rated_Nm=rated_Nm),
+                    log=lambda s: print(f"    [{time.perf_counter() - t0:6.0f} s] {s}", flush=True))
     sec = time.perf_counter() - t0
-    print(f"  {sec:.0f} s; RMS before {res['rms_before_arcsec']:.2f}, after {res['rms_after_arcsec']:.2f}, noise "
-          f"{res['noise_arcsec']:.2f} arcsec; status {res['status']}")
-    for e in res["effects"]:
-        print(f"    effect {e['name']}: {e['value']:.4g} {e['unit']} [{e['ci_low']:.4g}, {e['ci_high']:.4g}]")
-    for u in res["unexplained"]:
+    print(f"  {sec:.0f} s; RMS before {res.rms_before:.2f}, after {res.rms_after:.2f} arcsec, noise "
+          f"{res.noise_arcsec:.2f} (records' own density: see the import), estimator's {res.sigma_arcsec:.2f}; "
+          f"stopped: {res.stopped_by}")
+    for e in res.effects:
+        print(f"    named {e.line()}")
+    for g in res.groups:
+        print(f"    group ({g.get('kind')}): " + ", ".join(f"{m['name']} {m['value']}" for m in g["members"][:6]))
+    for u in res.unexplained:
         print(f"    unexplained {u['label']}: {u['amplitude_arcsec']:.3g} arcsec")
-    return [("loop_rms_before", res["rms_before_arcsec"], "arcsec"), ("loop_rms_after", res["rms_after_arcsec"], "arcsec"),
-            ("loop_noise", res["noise_arcsec"], "arcsec"), ("loop_effects", len(res["effects"]), "count"),
-            ("loop_seconds", sec, "s")]
+    for t in res.nuisance:
+        print(f"    the rig's zero of test {t['test']}: {t['constant_arcsec']:+.2f} arcsec (nuisance)")
+    for n in res.notes:
+        print(f"    note: {n}")
+    names = [e.key for e in res.effects]
+    return [("loop_rms_before", res.rms_before, "arcsec"), ("loop_rms_after", res.rms_after, "arcsec"),
+            ("loop_noise", res.noise_arcsec, "arcsec"), ("loop_sigma", res.sigma_arcsec, "arcsec"),
+            ("loop_effects", len(res.effects), "count"), ("loop_seconds", sec, "s"),
+            ("loop_ramp_or_scale_named", float(any(k in ("output_encoder_scale_error", "drift_arcsec_per_rev")
+                                                   for k in names)), "bool")]
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", type=Path, default=None, help="folder of the two records (default: ../shared/...)")
-    p.add_argument("--design", type=Path, default=ROOT / "benchmarks" / "data" / "rv160n_2crank.json")
+    p.add_argument("--design", type=Path, default=ROOT / "examples" / "designs" / "rv160n.json")
     p.add_argument("--rated-Nm", dest="rated_Nm", type=float, default=1568.0,
                    help="rated output torque, N m (default 1568, the RV-160N class)")
     p.add_argument("--out", type=Path, default=None, help="folder for the figure (default: a temporary folder)")
@@ -214,7 +213,7 @@ def main() -> int:
         figs += spectrum_section(read_dataset(full))
         if not args.no_loop:
             print("4. the loop (rvcalib.calibrate) on the imported dataset")
-            figs += loop_section(ds, args.workers)
+            figs += loop_section(ds, args.workers, args.rated_Nm)
     record("real_rv160n", [(n, float(v), u) for n, v, u in figs])
     return 0
 

@@ -1,37 +1,47 @@
-"""Closing the loop with measured data: residual -> missing effect -> model update -> error before and after.
+"""Closing the loop with measured data: measured TE -> residual -> the effects the model lacks -> the updated model.
+
+The method is written up in docs/calibration.md; the command line and the report in docs/calibrate.md.
 
 Modules
 -------
-:mod:`rvcalib.orders`
-    Ratio, period, orders that matter and the screening grid, from the reducer's design.
-:mod:`rvcalib.dataset`
-    ``read_dataset(folder, design=None)`` (the reducer: ``design`` / the folder's design.json / default): runs.csv + samples.csv, validated (clear errors naming file/column/run),
-    duplicates and start-up transients dropped and reported.
-:mod:`rvcalib.forward`
-    rvdyn TE on a uniform grid per run condition, periodic interpolation to the readings, cached.
-:mod:`rvcalib.effects`
-    The candidate library: Table 4 errors (all instances), rvdyn model options, encoder eccentricities.
-:mod:`rvcalib.residual`
-    Residual diagnostics: RMS, peak, order spectrum, direction/load dependence, Ljung-Box whiteness.
-:mod:`rvcalib.identify`
-    ``calibrate(dataset)``: the loop, run in stages: :mod:`rvcalib.model` (run conditions, model TE
-    at the readings), :mod:`rvcalib.screening` (signatures, ranking, harmonic competitors),
-    :mod:`rvcalib.fitting` (nonlinear refits, confidence intervals), :mod:`rvcalib.selection`
-    (the policy: F test + BIC, encompassing test, backward elimination, alternatives),
-    :mod:`rvcalib.results` (typed candidate records, the result); :mod:`rvcalib.lsq` the numerics.
+:mod:`rvcalib.dataset`, :mod:`rvcalib.testgroups`
+    ``read_dataset(folder, design=None)``: runs.csv + samples.csv validated (errors name the file, column and run),
+    the tests (one homing of the rig each) the runs belong to.
+:mod:`rvcalib.rigimport`, :mod:`rvcalib.rigfilter`, :mod:`rvcalib.cli_import`
+    ``rv-calibrate import``: a test rig's records (output angle and TE per direction) into a dataset.
+:mod:`rvcalib.rigtable`, :mod:`rvcalib.spectrum`
+    What the rig shows before any model: the per-test table, the measured datasheet, the orders and the
+    fixed-frequency lines.
+:mod:`rvcalib.library`, :mod:`rvcalib.readings`
+    The candidates as data (unit, bounds, prior scale) and the analytic columns of the reading errors and the
+    empirical block.
+:mod:`rvcalib.reducer_model`
+    The reducer's TE at every reading for a state of the candidates, and its columns (rvdyn).
+:mod:`rvcalib.sparse`
+    The estimator: the sum of single effects over grouped features (plain numpy).
+:mod:`rvcalib.refine`
+    The nonlinear estimate of the chosen effects through the reducer model.
+:mod:`rvcalib.loop`, :mod:`rvcalib.settings`, :mod:`rvcalib.result`
+    ``calibrate(dataset, settings)``: the iteration, its settings, what it reports.
+:mod:`rvcalib.datasheet`, :mod:`rvcalib.equivalents`, :mod:`rvcalib.holdout`
+    The datasheet as declared and as calibrated, the physical parameters behind what is named, the prediction of
+    loads left out of the fit.
+:mod:`rvcalib.report`, :mod:`rvcalib.reportmd`, :mod:`rvcalib.figures`, :mod:`rvcalib.cli`
+    report.md, result.json and figures; ``rv-calibrate DATASET --out DIR``.
 :mod:`rvcalib.simulate`
-    ``simulate_dataset(...)``: measured-like datasets with hidden effects (answer file kept apart).
-:mod:`rvcalib.report`, :mod:`rvcalib.cli`
-    Markdown/PNG/JSON report; ``rv-calibrate DATASET --out DIR [--reducer DESIGN.json] [--json] [--steps N]``.
+    ``simulate_dataset(...)``: measured-like datasets with hidden effects (the answer kept apart).
 
 Example
 -------
 >>> from rvcalib import read_dataset, calibrate            # doctest: +SKIP
->>> res = calibrate(read_dataset("measured/"), )   # doctest: +SKIP
->>> res.rms_before, res.rms_after, [e.name for e in res.effects]   # doctest: +SKIP
+>>> res = calibrate(read_dataset("measured/"))             # doctest: +SKIP
+>>> res.rms_before, res.rms_after, [e.line() for e in res.effects]   # doctest: +SKIP
 """
 from rvcalib.dataset import MeasuredDataset, RunRecord, read_dataset
-from rvcalib.identify import CalibrationResult, calibrate
+from rvcalib.loop import calibrate
+from rvcalib.result import CalibrationResult
+from rvcalib.settings import CalibrationSettings
 from rvcalib.simulate import simulate_dataset
 
-__all__ = ["MeasuredDataset", "RunRecord", "read_dataset", "CalibrationResult", "calibrate", "simulate_dataset"]
+__all__ = ["MeasuredDataset", "RunRecord", "read_dataset", "CalibrationResult", "CalibrationSettings", "calibrate",
+           "simulate_dataset"]

@@ -1,378 +1,250 @@
-"""Report of a calibration: Markdown, PNG figures and the JSON object, written atomically.
+"""The report of a calibration: ``report.md``, ``result.json`` and the figures, written atomically.
 
-:func:`write_report` writes into ``out_dir``:
+:func:`write_report` writes into ``out_dir`` (each file through :func:`rvcad.atomic.atomic_path`, with the
+permissions of a normal new file; ``report.md`` last, so a complete report.md means a complete report):
 
-* ``report.md``: verdict, effects found (value, unit, 95 % interval, meaning, tests,
-  indistinguishable alternatives), what is unexplained, per-run residual statistics before and
-  after (RMS, peak, Ljung-Box p, the reducer's key orders: 1, Zc, Zp, their doubles, the input orders and
-  neighbours), direction and load
-  dependence, the iteration log, the data notes and the method;
-* ``residual_before_after.png``: the residual of every run against output angle, before (declared
-  model) and after;
-* ``order_spectrum.png``: the amplitude of each order per output revolution, before and after;
-* ``result.json``: the ``--json`` object.
+* ``te_per_run.png``, ``residuals.png``, ``residual_spectrum.png`` (:mod:`rvcalib.figures`) and
+  ``test_means.png`` (:func:`rvcalib.rigtable.plot_test_means`);
+* ``result.json``: the object ``rv-calibrate --json`` prints (:func:`report_object`);
+* ``report.md``: the verdict; the reducer and its ratio; what the rig shows before any model (the per-test table,
+  how it changes with load, the measured datasheet); the named effects with their 95 % intervals and their
+  physical equivalents; the groups the data cannot split, each member's size and probability; the unexplained
+  structure; the tests' constants (nuisance); the datasheet of the reducer as declared and as calibrated; the
+  prediction of each load left out of the fit; the lines of the residual's spectrum (fixed-frequency lines not
+  claimed for the reducer); per-run figures; notes; the method in a few lines (docs/calibration.md is the
+  method).
 
-Every file is first written to a temporary folder inside ``out_dir`` and then moved into place
-with ``os.replace``; ``report.md`` goes last, so a complete report.md means a complete report.
+Everything follows the dataset's reducer: its ratio N in every formula (``output_deg - input_deg / N``).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from rvcalib.effects import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM
-from rvcalib.orders import key_orders, orders_that_matter
-from rvcalib.results import CalibrationResult
-MAX_PANELS = 12
+from rvcad.atomic import atomic_path
+from rvcalib.dataset import MeasuredDataset
+from rvcalib.datasheet import rated_torque
+from rvcalib.equivalents import result_equivalents
+from rvcalib.figures import plot_residual_spectrum, plot_residuals, plot_te
+from rvcalib.library import PHYSICAL, build_library
+from rvcalib.reportmd import markdown
+from rvcalib.rigtable import load_changes, measured_datasheet, plot_test_means, test_table
+from rvcalib.spectrum import order_spectrum, separate
+
+FIGURES = ("te_per_run.png", "residuals.png", "residual_spectrum.png", "test_means.png")
 
 
-def _json_default(o: Any) -> Any:
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
-def _clean(o: Any) -> Any:
-    """Replace NaN/inf by None (strict JSON)."""
-    if isinstance(o, float):
-        return o if math.isfinite(o) else None
+def clean(o: Any) -> Any:
+    """A JSON-ready copy: NaN and infinity as None, numpy scalars and arrays as Python numbers and lists."""
     if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
+        return {str(k): clean(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    if isinstance(o, np.floating):
-        return _clean(float(o))
+        return [clean(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return clean(o.tolist())
+    if isinstance(o, (np.bool_, bool)):
+        return bool(o)
     if isinstance(o, np.integer):
         return int(o)
-    if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
+    if isinstance(o, (float, np.floating)):
+        return float(o) if math.isfinite(o) else None
+    if isinstance(o, Path):
+        return str(o)
     return o
 
 
-def result_json(result: CalibrationResult, figures: list[str] | None = None, report: str | None = None) -> str:
-    """The ``--json`` object as a string (NaN written as null)."""
-    d = result.to_dict()
-    if figures is not None:
-        d["figures"] = figures
-    if report is not None:
-        d["report"] = report
-    return json.dumps(_clean(d), indent=2, default=_json_default)
+def verdict(result) -> str:
+    """One line: the status, the RMS before and after against the noise."""
+    ratio = result.rms_after / result.noise_arcsec if result.noise_arcsec > 0 else math.inf
+    return (f"{result.status}: residual RMS {result.rms_before:.4g} -> {result.rms_after:.4g} arcsec against a noise "
+            f"of {result.noise_arcsec:.4g} arcsec ({ratio:.3g} x the noise; {result.status!r} means within 1.2 x)")
 
 
-def _fmt(v: float | None, nd: int = 4) -> str:
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return "-"
-    return f"{v:.{nd}g}"
-
-
-def _fig_residuals(result: CalibrationResult, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    runs = result.dataset.runs[:MAX_PANELS]
-    n = len(runs)
-    fig, axes = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.8), sharex=True, squeeze=False)
-    for ax, run, rb, ra in zip(axes[:, 0], runs, result.residual_before, result.residual_after):
-        x = (run.input_deg - run.input_deg[0]) * run.direction / run.ratio
-        ax.plot(x, rb, color="0.6", lw=0.8, label="before (declared model)")
-        ax.plot(x, ra, color="C0", lw=0.8, label="after")
-        ax.axhline(0.0, color="k", lw=0.4)
-        ax.set_ylabel("arcsec")
-        ax.set_title(f"run {run.run}: load {run.load_Nm:g} N m, direction {run.direction:+d}", fontsize=9)
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[-1, 0].set_xlabel("output angle travelled (deg)")
-    title = "Residual = measured TE - model TE"
-    if len(result.dataset.runs) > MAX_PANELS:
-        title += f" (first {MAX_PANELS} of {len(result.dataset.runs)} runs)"
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def _fig_spectrum(result: CalibrationResult, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    sb, sa = result.before.spectrum, result.after.spectrum
-    k = np.arange(min(sb.size, sa.size))
-    fig, ax = plt.subplots(figsize=(9, 3.6))
-    ax.vlines(k - 0.15, 0, np.abs(sb[: k.size]), color="0.6", lw=1.5, label="before (declared model)")
-    ax.vlines(k + 0.15, 0, np.abs(sa[: k.size]), color="C0", lw=1.5, label="after")
-    marks = orders_that_matter(result.dataset.design)
-    for o in marks:
-        if o < k.size:
-            ax.axvline(o, color="C3", lw=0.5, ls=":")
-    ax.set_yscale("log")
-    ax.set_ylim(bottom=max(1e-4, 0.3 * float(np.min(np.abs(sa[1:k.size]) + 1e-12))))
-    ax.set_xlabel("order (cycles per output revolution); dotted: " + ", ".join(map(str, marks)))
-    ax.set_ylabel("amplitude (arcsec)")
-    ax.set_title("Order spectrum of the residual (sample-weighted mean over runs; order 0 = |mean|)", fontsize=10)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def markdown(result: CalibrationResult, figures: list[str]) -> str:
-    """The Markdown report."""
-    ds = result.dataset
-    L: list[str] = []
-    L.append(f"# rv-calibrate report: `{ds.path}`")
-    L.append("")
-    L.append(f"**{result.verdict}**")
-    L.append("")
-    red = ds.reducer()
-    L.append(f"- reducer: ratio {red['ratio']:g} (Z1 {red['z_sun']}, Z2 {red['z_planet']}, {red['z_pins']} pins, "
-             f"{red['z_disc']} lobes, pin circle {red['pin_circle_diameter_mm']:g} mm); design from "
-             f"{'the default (paper) design' if red['source'] == 'default' else red['source']}")
-    L.append(f"- status: `{result.status}`")
-    L.append(f"- residual RMS before (declared errors only): {result.rms_before:.4g} arcsec; after: "
-             f"{result.rms_after:.4g} arcsec (physical and measurement effects only: {result.after_physical.rms:.4g})")
-    L.append(f"- noise estimate (second differences of the final residual): {result.noise_arcsec:.4g} arcsec; "
-             f"final residual white (Ljung-Box): {'yes' if result.after.white else 'no'}")
-    L.append(f"- {len(ds.runs)} runs, {ds.n_samples} samples, screening grid {result.steps} points per output "
-             "revolution (the fits and the residuals solve the model at every reading), "
-             f"{result.seconds:.1f} s ({result.solver_stats.get('solves', 0)} rvdyn solves)")
-    L.append("")
-    L.append("## Effects found")
-    L.append("")
-    if result.effects:
-        L.append("| effect | value | unit | 95 % interval | angle (deg) | explained | F | p | dBIC | "
-                 "indistinguishable from |")
-        L.append("|---|---|---|---|---|---|---|---|---|---|")
-        for e in result.effects:
-            alts = ", ".join(f"`{a['name']}` {a['value']:.4g} {a['unit']} (RMS {a['rms_after_arcsec']:.3g})"
-                             for a in e.alternatives[:6]) + (" ..." if len(e.alternatives) > 6 else "")
-            if e.implied_total is not None:
-                alts += f"; declared {e.declared_value:.5g} {e.unit}, implied total {e.implied_total:.5g} {e.unit}"
-            bnd = f" (at the {e.at_bound} bound: one-sided)" if e.at_bound else ""
-            L.append(f"| `{e.name}` ({e.family}) | {e.value:.5g} | {e.unit} | [{e.ci_low:.5g}, {e.ci_high:.5g}]{bnd} | "
-                     f"{_fmt(e.angle_deg)} | {e.explained_fraction:.3f} | {_fmt(e.F)} | {_fmt(e.p_value, 3)} | "
-                     f"{_fmt(e.delta_bic)} | {alts or '-'} |")
-        L.append("")
-        for e in result.effects:
-            L.append(f"- `{e.name}`: {e.meaning}")
-            for q in e.equivalents:
-                implied = (f" (design value implied: {q['implied_design_value']:.5g} {q['unit']})"
-                           if "implied_design_value" in q else "")
-                L.append(f"  - the same TE as `{q['parameter']}` = {q['value']:+.5g} {q['unit']} [{q['ci_low']:.5g}, "
-                         f"{q['ci_high']:.5g}]{implied}: {q['meaning']}; the data cannot tell the two apart")
-        L.append("")
-        L.append("Values of two-component effects are magnitudes; their direction is the angle. The interval is "
-                 "the Jacobian interval of the joint nonlinear fit (t quantile), widened for lag-1 residual "
-                 "autocorrelation. \"Indistinguishable\" candidates reproduce the fitted signature within the noise "
-                 "(chi-square 95 %): the data cannot tell them apart (e.g. pins 20 apart, or the cam of crank 0 on "
-                 "disc 1 and of crank 1 on disc 0: the TE of this two-disc design repeats under a half-turn).")
-    else:
-        L.append("None: no candidate effect passed the F test (Bonferroni) and the BIC.")
-    L.append("")
-    L.append("## Unexplained (outside the library)")
-    L.append("")
-    if result.unexplained:
-        L.append("| term | order | amplitude (arcsec) | phase (deg) | explained | what it can be |")
-        L.append("|---|---|---|---|---|---|")
-        for u in result.unexplained:
-            what = (u.note or "-") + "".join(f"; or `{q['parameter']}` = {q['value']:+.5g} {q['unit']} ({q['meaning']})"
-                                             for q in u.equivalents)
-            L.append(f"| {u.label} | {u.order} | {abs(u.amplitude_arcsec):.4g} | {_fmt(u.phase_deg)} | "
-                     f"{u.explained_fraction:.3f} | {what} |")
-        L.append("")
-        L.append("These are labelled empirical terms (``A cos(k theta_out + phase)``, common to all runs): no physical "
-                 "or measurement candidate explained this part of the residual better than a pure harmonic, so it "
-                 "is not attributed to a physical effect.")
-    else:
-        L.append("Nothing was absorbed by empirical terms.")
-    if not result.after.white:
-        L.append("")
-        L.append("The final residual is not white: dominant orders per run: " + "; ".join(
-            f"run {r.run}: " + ", ".join(f"{k} ({a:.3g})" for k, a in r.dominant) for r in result.after.runs))
-    L.append("")
-    dsh = result.datasheet
-    if dsh.get("calibrated") or dsh.get("error"):
-        L.append("## Datasheet as calibrated")
-        L.append("")
-        if dsh.get("error"):
-            L.append(f"Not computed: {dsh['error']}.")
-        else:
-            m, c = dsh["model"], dsh["calibrated"]
-            ci = dsh.get("rigidity_ci")
-            L.append(f"`rvdyn stiffness` of the reducer as declared and as calibrated (`calibrated_case` in the JSON: "
-                     f"every physical effect found), rated torque {c['rated_torque_Nm']:g} N m:")
-            L.append("")
-            L.append("| figure | declared | calibrated |")
-            L.append("|---|---|---|")
-            for k, lab in (("torsional_rigidity_Nm_per_arcmin", "torsional rigidity (N m/arcmin)"),
-                           ("lost_motion_arcmin", "lost motion (arcmin)"), ("backlash_arcmin", "backlash (arcmin)"),
-                           ("hysteresis_loss_arcmin", "hysteresis loss (arcmin)")):
-                extra = f" [{ci[0]:.4g}, {ci[1]:.4g}]" if ci and k.startswith("torsional") else ""
-                L.append(f"| {lab} | {m[k]:.4g} | {c[k]:.4g}{extra} |")
-            L.append("")
-            L.append(f"{dsh['note']}.")
-        L.append("")
-    L.append("## Identifiability groups and recommended runs")
-    L.append("")
-    if result.stopped_by and not result.stopped_by.startswith("nothing"):
-        L.append(f"**Stopped early:** {result.stopped_by}.")
-        L.append("")
-    if not result.groups:
-        L.append("No group: every effect found is the only candidate that fits as well.")
-    for i, g in enumerate(result.groups):
-        mem = "; ".join(f"`{m['name']}` {m['value']:.4g}"
-                        + (f" or {m['value_other_fit']:.4g}" if m.get("value_other_fit") is not None else "")
-                        + f" {m['unit']}"
-                        + (f" (RMS {m['rms_after_arcsec']:.3g})" if m.get("rms_after_arcsec") is not None else "")
-                        for m in g["members"])
-        L.append(f"- group {i} ({g['kind']}): {mem}. {g.get('note', '')}")
-    for rec in result.recommended_runs:
-        if rec.get("run"):
-            L.append(f"- to split group {rec['group']}: run at {rec['run']['load_Nm']:g} N m, direction "
-                     f"{rec['run']['direction']:+d} ({rec['criterion']}; log det gain {rec['log_det_gain']:.3g})")
-        else:
-            L.append(f"- group {rec['group']}: {rec.get('reason', 'no run recommended')}")
-    L.append("")
-    L.append("## Figures")
-    L.append("")
-    for f in figures:
-        L.append(f"![{f}]({f})")
-        L.append("")
-    L.append("## Runs")
-    L.append("")
-    L.append("| run | load (N m) | dir | samples | dropped | RMS before | RMS after | peak before | peak after | "
-             "mean before | mean after | LB p before | LB p after |")
-    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for run, b, a in zip(ds.runs, result.before.runs, result.after.runs):
-        dr = ", ".join(f"{k} {v}" for k, v in run.dropped.items() if v) or "-"
-        L.append(f"| {run.run} | {run.load_Nm:g} | {run.direction:+d} | {run.n} | {dr} | {b.rms:.4g} | {a.rms:.4g} | "
-                 f"{b.peak:.4g} | {a.peak:.4g} | {b.mean:.4g} | {a.mean:.4g} | {_fmt(b.ljung_box_p, 3)} | "
-                 f"{_fmt(a.ljung_box_p, 3)} |")
-    L.append("")
-    L.append("Residuals in arcsec. LB p: Ljung-Box p-value (small = not white).")
-    L.append("")
-    L.append("### Order amplitudes (arcsec; order 0 is the mean)")
-    L.append("")
-    show = key_orders(ds.design)
-    L.append("| run | | " + " | ".join(str(o) for o in show) + " |")
-    L.append("|---|---|" + "---|" * len(show))
-    for run, b, a in zip(ds.runs, result.before.runs, result.after.runs):
-        for tag, d in (("before", b), ("after", a)):
-            cells = []
-            for o in show:
-                v = d.orders.get(o)
-                if o > 0 and o >= d.nyquist_order:
-                    cells.append("*")
-                else:
-                    cells.append("-" if v is None or not math.isfinite(v) else f"{v:.3g}")
-            L.append(f"| {run.run} | {tag} | " + " | ".join(cells) + " |")
-    L.append("")
-    L.append("`*`: at or above half the samples per output revolution: not resolved by the sampling (aliased).")
-    L.append("")
-    L.append("### Direction and load dependence of the run means")
-    L.append("")
-    for tag, dep in (("before", result.before.dependence), ("after", result.after.dependence)):
-        L.append(f"- {tag}: offset {_fmt(dep.get('offset_arcsec'))} arcsec, direction term "
-                 f"{_fmt(dep.get('direction_arcsec'))} arcsec, direction x load term "
-                 f"{_fmt(dep.get('direction_load_arcsec_per_Nm'))} arcsec/(N m)")
-    L.append(f"- {result.before.dependence.get('note', '')}")
-    L.append("")
-    L.append("## Iterations")
-    L.append("")
-    for it in result.iterations:
-        L.append(f"### Iteration {it['iteration']}: {it.get('decision', '')}")
-        L.append("")
-        if "ranking" in it:
-            L.append("Screening (explained fraction of the coarse residual; with its best partner):")
-            L.append("")
-            for d in it["ranking"][:6]:
-                pe = d.get("pair_explained_fraction")
-                pair = f", with `{d['partner']}` {pe:.3f}" if d.get("partner") and pe is not None else ""
-                L.append(f"- `{d['name']}` {d['explained_fraction']:.3f}{pair}")
-            if it.get("validated"):
-                L.append("")
-                L.append("Validated through the nonlinear model: " + ", ".join(
-                    f"`{d['name']}` {d['explained_fraction']:.3f}" for d in it["validated"]))
-            hb = it.get("harmonic_best")
-            if hb:
-                L.append("")
-                L.append(f"Best harmonic-only model: {hb['label']} explains {hb['explained_fraction']:.3f} "
-                         f"(p {hb['p']:.3g}).")
-            pb = it.get("physical_best")
-            if pb:
-                L.append(f"Best physical candidate: `{pb['name']}` explains {pb['explained_fraction']:.3f} "
-                         f"(F {pb['F']:.4g}, p {pb['p']:.3g}, dBIC {pb['delta_bic']:.4g}); threshold p "
-                         f"{it['threshold_p']:.3g} (0.01 / {it['hypotheses']} hypotheses).")
-            if it.get("encompassing"):
-                enc = it["encompassing"]
-                L.append(f"Encompassing test: the physical candidate adds to the harmonic p "
-                         f"{enc['physical_adds_to_harmonic_p']:.3g}; the harmonic adds to it p "
-                         f"{enc['harmonic_adds_to_physical_p']:.3g}.")
-            if it.get("full"):
-                f = it["full"]
-                L.append(f"On all samples: F {f['F']:.4g}, p {f['p']:.3g}, dBIC {f['delta_bic']:.4g}.")
-        L.append("")
-    L.append("## Data notes")
-    L.append("")
-    for n in result.notes or ["none"]:
-        L.append(f"- {n}")
-    L.append("")
-    L.append("## Method")
-    L.append("")
-    L.append(
-        "Measured TE = output_deg - input_deg/121 (arcsec); model TE = rvdyn quasi-static TE (analytic contacts) of "
-        "each run's declared errors, load and direction, solved exactly at every measured input angle (modulo one "
-        "output revolution; no interpolation). Screening uses a uniform grid of one output revolution. Candidates: every Table 4 error and instance, the rvdyn model "
-        "options (torsional compliance, output friction, cam-bearing clearance, thermal growth where the "
-        "temperature varies, pin-circle ovality) and encoder eccentricities (assumed scale radii: output "
-        f"{OUTPUT_ENCODER_RADIUS_MM:g} mm, input {INPUT_ENCODER_RADIUS_MM:g} mm; the eccentricity scales with the "
-        "assumed radius). Each iteration screens every candidate's rvdyn signature against the residual, "
-        "validates the leading ones through the nonlinear model, adds the best if it passes the F test "
-        "(Bonferroni over all candidates and harmonic orders) and lowers the BIC, and only if it explains "
-        "what the best harmonic-only model cannot; otherwise the structure is reported as unexplained. All "
-        "parameters are then refitted jointly through rvdyn (scipy least_squares) and effects that became "
-        "insignificant are removed.")
-    L.append("")
-    return "\n".join(L)
-
-
-def write_report(result: CalibrationResult, out_dir: str | Path) -> dict[str, Any]:
-    """Write the report files atomically into ``out_dir``.
+def measured_figures(dataset: MeasuredDataset, rated_Nm: float | None = None) -> dict:
+    """What the rig shows before any model (:mod:`rvcalib.rigtable`), JSON-ready.
 
     Returns
     -------
     dict
-        ``report`` (path of report.md), ``json`` (result.json), ``figures`` (PNG paths).
+        ``tests`` (:func:`rvcalib.rigtable.test_table` rows), ``main_orders``, ``load_changes`` (rows),
+        ``datasheet`` (:func:`rvcalib.rigtable.measured_datasheet` at the rated torque of
+        :func:`rvcalib.datasheet.rated_torque`), ``rated_source`` and ``spectrum_statements``.
+    """
+    table = test_table(dataset)
+    rated, source = rated_torque(dataset.design, rated_Nm)
+    return clean({"tests": table.to_dict(orient="records"), "main_orders": table.attrs.get("main_orders", []),
+                  "load_changes": load_changes(table).to_dict(orient="records"),
+                  "datasheet": measured_datasheet(dataset, rated, table=table), "rated_source": source,
+                  "spectrum_statements": table.attrs["spectrum"]["statements"]})
+
+
+def physical_bounds(dataset: MeasuredDataset) -> dict[str, tuple[float, float, bool]]:
+    """Per physical effect name: its physical bounds (the union of a pin-wise error's two sides) and whether it
+    is reported as a magnitude (two components)."""
+    out: dict[str, tuple[float, float, bool]] = {}
+    for c in build_library(dataset, 1, PHYSICAL, True):
+        lo, hi, _ = out.get(c.effect_name, (c.lower, c.upper, c.polar))
+        out[c.effect_name] = (min(lo, c.lower), max(hi, c.upper), c.polar)
+    return out
+
+
+def _within(value: float, bounds: tuple[float, float, bool] | None) -> bool:
+    """A finite size inside its candidate's physical bounds (a magnitude of two components bounded by each
+    component's largest bound times sqrt 2)."""
+    if not math.isfinite(value):
+        return False
+    if bounds is None:
+        return True
+    lo, hi, polar = bounds
+    if polar:
+        return abs(value) <= max(abs(lo), abs(hi)) * math.sqrt(2.0)
+    return lo <= value <= hi
+
+
+def bounded_groups(groups: list, bounds: dict) -> list:
+    """The groups with every member size beyond its physical bounds written ``"unbounded"`` (a size the data
+    leave free along the group, e.g. of two members only their combination is fixed, is no size)."""
+    out = []
+    for g in groups:
+        members = []
+        for m in g["members"]:
+            v = m.get("value")
+            free = isinstance(v, (int, float)) and not _within(float(v), bounds.get(m.get("name")))
+            members.append(dict(m, value="unbounded") if free else dict(m))
+        out.append({**g, "members": members})
+    return out
+
+
+def _constants(dataset, values: dict, fallback: dict | None = None) -> np.ndarray:
+    """Per run, its test's constant from ``values`` (test -> arcsec)."""
+    return np.array([values.get(r.test, (fallback or {}).get(r.test, 0.0)) for r in dataset.runs])
+
+
+def _test_means(dataset, per_run: list) -> dict:
+    """Each test's mean of per-run arrays over its readings."""
+    acc: dict[str, list] = {}
+    for r, x in zip(dataset.runs, per_run):
+        acc.setdefault(r.test, []).append(np.asarray(x, dtype=float))
+    return {t: float(np.concatenate(v).mean()) for t, v in acc.items()}
+
+
+def curves(result, dataset, declared: list | None) -> dict:
+    """Per run (arcsec): ``measured`` (the TE less its test's constant after), ``calibrated`` (the calibrated model
+    with its reading and empirical terms, the same level), ``declared`` (the declared model at that level, or
+    None), ``before`` and ``after`` (residuals, each test's own constant removed)."""
+    y = [r.te_arcsec for r in dataset.runs]
+    after = [np.asarray(a, dtype=float) for a in result.residuals]
+    c_after = _constants(dataset, {n["test"]: n["constant_arcsec"] for n in result.nuisance},
+                         _test_means(dataset, [a - b for a, b in zip(y, after)]))
+    out = {"measured": [a - c for a, c in zip(y, c_after)], "after": after, "declared": None, "before": None}
+    out["calibrated"] = [m - r for m, r in zip(out["measured"], after)]
+    if declared is not None:
+        c_before = _constants(dataset, _test_means(dataset, [a - d for a, d in zip(y, declared)]))
+        out["before"] = [a - d - c for a, d, c in zip(y, declared, c_before)]
+        out["declared"] = [d + cb - ca for d, cb, ca in zip(declared, c_before, c_after)]
+    return out
+
+
+def residual_dataset(dataset: MeasuredDataset, residuals: list) -> MeasuredDataset:
+    """The dataset whose runs' TE is the given residual (the output readings kept, the input readings moved), for
+    the spectrum of the residual."""
+    runs = [dataclasses.replace(r, input_deg=r.ratio * (r.output_deg - np.asarray(x) / 3600.0), notes=[])
+            for r, x in zip(dataset.runs, residuals)]
+    return MeasuredDataset(path=dataset.path, runs=runs, declared_keys=list(dataset.declared_keys),
+                           design=dataset.design, design_source=dataset.design_source, tests=dataset.tests)
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def _run_rows(dataset, cv: dict) -> list:
+    """Per run: its conditions, readings, noise and the RMS of the residual before and after (arcsec)."""
+    return [{"run": r.run, "test": r.test, "load_Nm": r.load_Nm, "direction": r.direction, "samples": r.n,
+             "revolutions": r.revolutions, "noise_arcsec": r.noise_arcsec,
+             "rms_before_arcsec": _rms(cv["before"][k]) if cv["before"] is not None else None,
+             "rms_after_arcsec": _rms(cv["after"][k])} for k, r in enumerate(dataset.runs)]
+
+
+def report_object(result, dataset, measured: dict, datasheet: dict | None, holdout: dict | None, spectrum: dict,
+                  equivalents: dict, runs: list, paths: dict) -> dict:
+    """The ``--json`` object: the result's ``to_dict()`` (its groups' sizes beyond physical bounds written
+    ``"unbounded"``) and ``verdict``, ``ratio``, ``report``, ``figures``, ``measured``, ``datasheet``, ``holdout``,
+    ``equivalents``, ``residual_spectrum``, ``runs``."""
+    d = result.to_dict()
+    d["groups"] = bounded_groups(d["groups"], physical_bounds(dataset))
+    equivalents = dict(equivalents, groups=[[q if m["value"] != "unbounded" else [] for m, q in zip(g["members"], qs)]
+                                            for g, qs in zip(d["groups"], equivalents.get("groups", []))])
+    d.update({"verdict": verdict(result), "ratio": dataset.ratio, "report": paths.get("report"),
+              "figures": paths.get("figures", []), "measured": measured, "datasheet": datasheet, "holdout": holdout,
+              "equivalents": equivalents, "residual_spectrum": spectrum, "runs": runs})
+    return clean(d)
+
+
+def _spectrum(dataset, after: list) -> tuple[list, dict]:
+    rd = residual_dataset(dataset, after)
+    sep = separate(rd)
+    keep = ("method", "nyquist_order", "order_locked", "fixed_frequency", "ambiguous", "statements")
+    return [order_spectrum(r) for r in rd.runs], clean({k: sep[k] for k in keep})
+
+
+def _write_text(path: Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def write_report(result, dataset: MeasuredDataset, out_dir: str | Path, measured: dict | None = None,
+                 datasheet: dict | None = None, holdout: dict | None = None, declared: list | None = None,
+                 equivalents: dict | None = None) -> dict:
+    """Write report.md, result.json and the figures into ``out_dir`` (module docstring).
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    dataset : MeasuredDataset
+        The dataset calibrated (the result's residuals are per run of it).
+    measured : dict or None
+        :func:`measured_figures` (default: made here, at the settings' rated torque).
+    datasheet : dict or None
+        :func:`rvcalib.datasheet.reducer_datasheet` (None: the section says it was not computed, or that the
+        design needs a rated torque).
+    holdout : dict or None
+        :func:`rvcalib.holdout.holdout_loads` (None: not run).
+    declared : list of ndarray or None
+        The declared model's TE per run (:func:`rvcalib.holdout.declared_te`), for the residual before; None
+        leaves it out of the figures.
+    equivalents : dict or None
+        :func:`rvcalib.equivalents.result_equivalents` (default: made here, without the friction reading).
+
+    Returns
+    -------
+    dict
+        ``report`` (report.md), ``json`` (result.json), ``figures`` (PNG paths) and ``object`` (the JSON object).
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
-        raise ValueError(f"--out '{out}' exists and is not a folder")
+        raise ValueError(f"--out {str(out)!r} is an existing file, not a folder; allowed: a folder (created if "
+                         "missing)")
     out.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".rv-calibrate-", dir=out))
-    try:
-        figs = ["residual_before_after.png", "order_spectrum.png"]
-        _fig_residuals(result, tmp / figs[0])
-        _fig_spectrum(result, tmp / figs[1])
-        (tmp / "result.json").write_text(result_json(result, figs, "report.md"), encoding="utf-8")
-        (tmp / "report.md").write_text(markdown(result, figs), encoding="utf-8")
-        for name in figs + ["result.json", "report.md"]:
-            os.replace(tmp / name, out / name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return {"report": str(out / "report.md"), "json": str(out / "result.json"),
-            "figures": [str(out / f) for f in figs]}
+    if measured is None:
+        measured = measured_figures(dataset, (result.settings or {}).get("rated_Nm"))
+    if equivalents is None:
+        equivalents = result_equivalents(result, dataset.design)
+    cv = curves(result, dataset, declared)
+    spectra, spectrum = _spectrum(dataset, cv["after"])
+    figs = [out / f for f in FIGURES]
+    plot_te(dataset, cv["measured"], cv["calibrated"], cv["declared"], figs[0])
+    plot_residuals(dataset, cv["before"], cv["after"], figs[1])
+    plot_residual_spectrum(spectra, spectrum, dataset.ratio, figs[2])
+    plot_test_means(dataset, figs[3])
+    paths = {"report": str(out / "report.md"), "json": str(out / "result.json"), "figures": [str(f) for f in figs]}
+    runs = clean(_run_rows(dataset, cv))
+    obj = report_object(result, dataset, measured, datasheet, holdout, spectrum, clean(equivalents), runs, paths)
+    _write_text(out / "result.json", json.dumps(obj, indent=2))
+    _write_text(out / "report.md", markdown(obj, dataset))
+    return {**paths, "object": obj}

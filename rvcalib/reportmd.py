@@ -1,4 +1,4 @@
-"""The text of ``report.md``, written from the report's JSON object (:func:`rvcalib.reporting.report_object`), so
+"""The text of ``report.md``, written from the report's JSON object (:func:`rvcalib.report.report_object`), so
 the text and the JSON say the same: a group member beyond its physical bounds is ``unbounded`` in both.
 
 Each section is one function of the object; :func:`markdown` joins them. Every formula uses the dataset's ratio.

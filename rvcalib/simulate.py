@@ -12,7 +12,7 @@ What the "rig" does, per run:
    hidden errors and model options (TE is periodic in one output revolution).
 2. Encoders: the input reading is ``theta_in + (eps_in / R_in) sin(theta_in + phi_in) + noise``,
    the output reading ``theta_out + (eps_out / R_out) sin(theta_out + phi_out) + noise`` (radii of
-   :mod:`rvcalib.effects`), Gaussian noise in arcsec of each encoder.
+   :mod:`rvcalib.library`), Gaussian noise in arcsec of each encoder.
 3. Hidden effects outside the library: harmonics of the output angle added to the output reading
    (``amplitude * cos(k theta_out + phase)``, arcsec).
 4. A start-up transient ``A exp(-i / tau)`` (arcsec, sample i) added to the output reading of the
@@ -134,7 +134,7 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         ``output_encoder_scale_ppm``: the output reading is ``theta_out (1 + s)``),
         ``"design"`` (design fields of the reducer as built that the dataset's design does not hold, e.g. an
         undeclared profile modification ``{"profile_equidistant_mm": 0.004}``; expected as the library effect that
-        gives the same TE, :mod:`rvcalib.causes`)
+        gives the same TE, :mod:`rvcalib.equivalents`)
         and ``"harmonics"`` (list of ``{"order", "amplitude_arcsec", "phase_deg", "per_Nm"}``, outside
         the library; with ``"per_Nm": true`` the amplitude is per N m of the run's load).
     noise_arcsec : float
@@ -145,7 +145,7 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
         Samples per output revolution (any count >= 8; the rig's sampling, not a model grid).
     start_deg : float
         Input angle of the first sample, deg. Any start other than 0 puts the samples off every
-        screening grid, as on a real rig.
+        model grid, as on a real rig.
     revolutions : float
         Output revolutions recorded per run (>= 1).
     transient : dict or None

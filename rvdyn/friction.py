@@ -4,7 +4,7 @@ The TE solver has no friction from the coefficients (``model.pin_friction_coeffi
 ``model.bearing_friction_coefficient``; the stiffness sweep uses them for its micro-slips, docs/physics.md
 section 9). This module gives the friction torque they make when the reducer turns, from the equilibrium's
 forces and the kinematics, so that a load-proportional effect found in measured TE can be read as friction
-(rvcalib.causes).
+(rvcalib.equivalents).
 
 **Kinematics.** A disc rotates with the carrier (its cranks are parallel links: ``omega_disc = omega_out``) and
 translates on its eccentric circle; relative to the housing its instantaneous centre of rotation is the pitch

@@ -28,39 +28,16 @@ def paper_data() -> Path:
 #: Session fixtures that solve many cases: every module using one runs on the same worker, so each is made once.
 SHARED_SESSION_FIXTURES = ("small_study", "doe_reference")
 #: Modules whose tests are handed out one by one (or by their own ``xdist_group`` mark) instead of as a
-#: module: their scenarios are independent and long, and the solves they share (the screening of the
-#: loop's run conditions) come from the forward runner's disk cache (:func:`calib_forward_cache`).
-SPLIT_MODULES = ("test_calib_loop", "test_calib_failure_modes")
+#: module: their scenarios are independent and long.
+SPLIT_MODULES = ("test_calib_loop",)
 #: Units handed out first, in this order (groups, modules or test names), longest first: pytest-xdist's
 #: loadgroup scheduler hands each worker its next unit while it still has up to two tests pending, so a long
 #: unit late in the queue would leave the other worker idle at the end. The order holds only without xdist's
-#: reordering of the units by their number of tests (switched off in :func:`pytest_configure`). Measured with
-#: it (2026-11-23, whole suite, load ~5 from other jobs): workers at 269 and 255 CPU-s (this process and its
-#: reaped children), finishing 17 s apart; without it 251 and 258, the loop's single-pin scenario last. The rest follow in collection order
-#: (all below ~5 CPU-s). CPU-s of each unit (this process and its reaped children, per test, with a CPU-time
-#: plugin) measured on this 2-core machine under ``-n 2 --dist loadgroup`` at load 3-4 (2026-11-23; shared
-#: fixtures counted once): study ~70 (small_study 36, the executor comparison ~15, the stack-up tests 16),
-#: rvcad export 33 (group build123d, with rvcad build: one import of build123d, ~6.5 CPU-s), fcl against
-#: analytic 20 (26 tests), stack-up Monte Carlo 17 (~11 with 12 closed-form draws), rvcad parts 11, rvcad errors 10, rvdyn physics 9, stack-up
-#: on other reducers 8, stiffness 7, fcl contacts 7. The loop's scenarios (measured before, ``-n 0`` one module
-#: at a time): the single-pin/off-grid scenario 57 (with the screening of the loop's three run conditions,
-#: ~18), calib-declared 55 (13 + 42; the declared model's own screening), screening grid 29, scale error 26 (7
-#: with the screening on disk), calib groups 14, two-effect scenario 14, joint 13, the sibling refit under the
-#: physical law (test_calib_physical) 23 (alone, its module with its imports; 58 at 200 readings per
-#: revolution), ratio-81 12, the zero-offset scenario 8.5. The study runs alone on one worker while the
-#: single-pin/off-grid scenario makes the screening of the loop's three run conditions (280 points) as it
-#: starts and the declared pair screens its declared model, so every later scenario on either worker reads that
-#: screening from disk (:func:`calib_forward_cache`).
-HEAVY_FIRST = ("study", "calib-pin-offgrid", "calib-declared", "build123d",
-               "test_screening_grid_does_not_alias_whatever_the_steps", "test_fcl_vs_analytic", "test_stackup_mc",
-               "test_calib_groups", "test_two_effects_at_once", "test_calib_joint", "test_calib_physical",
-               "test_calib_design", "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
-               "test_scale_error_is_a_ramp_term_and_nothing_else", "test_stackup_reducer", "test_rvdyn_stiffness",
-               "test_fcl_contacts", "test_encoder_zero_offset_is_not_disguised_as_physics",
-               "test_direction_dependent_effect", "calib-order3", "test_load_dependent_effect",
-               "test_a_drift_in_time_is_a_drift_term_not_a_scale_error", "test_stackup_failures",
-               "test_rsm_plots", "test_output_encoder_eccentricity_named_in_20_of_20_noise_seeds",
-               "test_fuzz_loaders")
+#: reordering of the units by their number of tests (switched off in :func:`pytest_configure`).
+HEAVY_FIRST = ("study", "calib_loop", "build123d", "calib_standin", "test_fcl_vs_analytic", "test_stackup_mc",
+               "test_calib_cli", "test_calib_holdout", "test_rvcad_parts", "test_rvcad_errors", "test_rvdyn_physics",
+               "test_stackup_reducer", "test_rvdyn_stiffness", "test_fcl_contacts", "test_stackup_failures",
+               "test_rsm_plots", "test_fuzz_loaders")
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -105,32 +82,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         seen.setdefault(name, i)
         keys[it.nodeid] = (first.get(name, len(first)), seen[name], i)
     items.sort(key=lambda it: keys[it.nodeid])
-
-
-@pytest.fixture(scope="session")
-def calib_forward_cache(tmp_path_factory) -> Path:
-    """rvcalib's forward model for the session: rvdyn's runner with the in-memory cache and the warm
-    starts of the default one (:data:`rvcalib.forward.WARM_BYTES`: each solve starts from the newest
-    state of its neighbourhood, equal to the cold solve within the solver tolerance) and a disk cache
-    shared by the pytest-xdist workers (entries are written atomically; a solve one worker made is read
-    by the other). Returns the cache folder.
-
-    The runner names its contact law: the paper's impact law (``ContactLaw()``). These tests check the
-    loop's identification logic on data whose truth and model are solved on this one runner, so one law
-    serves both; the impact law costs about a third of rvdyn's default physical law per revolution.
-    ``rv-calibrate --workers/--cache`` keeps the forward runner's law."""
-    import os
-
-    from rvcalib import forward
-    from rvdyn.contacts import ContactLaw
-    from rvdyn.runner import Runner
-
-    base = tmp_path_factory.getbasetemp()
-    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "rvcalib-forward-cache"
-    prev = forward.use_runner(Runner(cache=root, memory_bytes=forward.CACHE_BYTES, warm_bytes=forward.WARM_BYTES,
-                                     law=ContactLaw()))
-    yield root
-    forward.use_runner(prev)
 
 
 # ---------------------------------------------------------------------------------------------- shared study runs

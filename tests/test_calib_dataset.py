@@ -8,13 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rvcad.memo import LRUMemo
 from rvcalib.cli import main
 from rvcad.params import Design
 from rvcalib.dataset import noise_estimate, read_dataset
-from rvcalib.effects import OUTPUT_ENCODER_RADIUS_MM, build_library
-from rvcalib.forward import merge_case
-from rvcalib.orders import key_orders, min_screen_grid, orders_that_matter, period_deg, screen_grid
+from rvcalib.orders import base_orders, period_deg
 
 RATIO = Design().ratio
 PERIOD_DEG = period_deg(Design())
@@ -164,10 +161,7 @@ def test_cli_bad_input_exit_2(tmp_path, capsys):
     assert main([str(tmp_path / "missing"), "--out", str(tmp_path / "out")]) == 2
     capsys.readouterr()
     ok = write(tmp_path / "ok", *good(tmp_path))
-    (tmp_path / "a-file").write_text("x")
-    for opt, bad in (("--steps", "0"), ("--steps", "2000000"), ("--screen-points", "120"), ("--max-terms", "0"),
-                     ("--workers", "0"), ("--cache", str(tmp_path / "a-file")), ("--rated-Nm", "0"),
-                     ("--rated-Nm", "nan")):
+    for opt, bad in (("--max-effects", "0"), ("--workers", "0"), ("--rated-Nm", "0"), ("--rated-Nm", "nan")):
         assert main([str(ok), "--out", str(tmp_path / "out"), opt, bad]) == 2
         err = capsys.readouterr().err.strip()
         assert opt.lstrip("-").replace("-", "_") in err.replace("-", "_") and len(err.splitlines()) == 1
@@ -180,66 +174,10 @@ def test_noise_estimate():
     assert abs(noise_estimate(x) - 0.2) < 0.02
 
 
-@pytest.mark.parametrize("design, ratio, grid", [({}, 121, 280), ({"z_sun": 18, "z_planet": 36}, 81, 200),
-                                                 ({"z_pins": 30, "z_disc": 29}, 91, 210)])
-def test_orders_and_screening_grid_come_from_the_design(design, ratio, grid):
-    """The orders that matter (1, Zc, Zp, doubles, input orders N-1..N+1) and the smallest screening
-    grid that resolves them: a multiple of Zp above twice the highest order (N + 2)."""
+@pytest.mark.parametrize("design, ratio", [({}, 121), ({"z_sun": 18, "z_planet": 36}, 81),
+                                           ({"z_pins": 30, "z_disc": 29}, 91)])
+def test_ratio_and_base_orders_come_from_the_design(design, ratio):
     d = Design.from_dict(design)
     assert round(d.ratio, 9) == ratio and period_deg(d) == pytest.approx(ratio * 360.0)
-    zp, zc = d.z_pins, d.z_disc
-    assert orders_that_matter(d) == sorted({1, zc, zp, 2 * zc, 2 * zp, ratio - 1, ratio, ratio + 1})
-    assert {0, 1, 2, 3, ratio + 2} <= set(key_orders(d))
-    assert min_screen_grid(d) == grid and grid % zp == 0 and grid // 2 > ratio + 1
-    for steps in (200, 360, 1000, 14400):
-        m, note = screen_grid(d, steps)
-        assert m % zp == 0 and m // 2 > ratio + 1   # every request ends on a grid that resolves the orders
-        assert (note == "") == (m == steps)
-    with pytest.raises(ValueError, match="screen_points 120 cannot resolve"):
-        screen_grid(d, screen_points=120)
-
-
-def test_merge_case_and_library():
-    base = {"errors": {"pin_pitch": 0.01, "pin_radius": [0.0] * 40}, "load_Nm": 10, "direction": 1}
-    d = merge_case(base, [("pin_pitch", {"value": 0.02, "pin": 3}), ("pin_radius", {"value": 2.0, "pin": 5})],
-                   {"friction_torque_Nm": 3.0})
-    assert d["errors"]["pin_pitch"] == [{"value": 0.01}, {"value": 0.02, "pin": 3}]
-    assert d["errors"]["pin_radius"][5] == 2.0 and base["errors"]["pin_radius"][5] == 0.0
-    assert d["model"] == {"friction_torque_Nm": 3.0}
-    lib = build_library()
-    names = [e.name for e in lib]
-    assert len(names) == len(set(names))
-    for n in ("pin_pitch[pin=39]", "cam_eccentricity[crank=1,disc=0]", "disc_hole_eccentricity[disc=1,hole=1]",
-              "sun_eccentricity", "pin_circle_offset", "torsional_compliance_arcsec_per_Nm", "friction_torque_Nm",
-              "cam_bearing_clearance_um", "pin_circle_ovality_um", "output_encoder_eccentricity",
-              "input_encoder_eccentricity", "pin_radius", "pin_circle_diameter[pin=3]"):
-        assert n in names
-    assert all(e.unit and e.meaning for e in lib)
-    oe = lib.by_name("output_encoder_eccentricity")
-    amp = oe.basis(np.zeros(1), np.array([90.0]))[0] @ np.array([5.0, 0.0])
-    assert math.isclose(amp, 5e-3 / OUTPUT_ENCODER_RADIUS_MM * 206264.806, rel_tol=1e-6)
-    ov = lib.by_name("pin_circle_ovality_um")
-    opts = ov.model_options(np.array([0.0, 10.0]))
-    assert math.isclose(opts["pin_circle_ovality_um"], 10.0) and math.isclose(opts["pin_circle_ovality_angle_deg"], 45.0)
-    with pytest.raises(ValueError, match="not in the candidate library"):
-        lib.by_name("nothing")
-
-
-def test_a_case_validated_once_is_taken_from_the_memo_and_a_refused_one_is_refused_every_time(monkeypatch):
-    """rvcalib.forward.validated_case keeps the validated cases by their JSON text: an equal case JSON (keys in any
-    order) gives the same Case, another value another Case, a refused case its ModelEvaluationError naming the
-    field on every call, and the memo holds at most CASE_MEMO_SIZE cases."""
-    from rvcalib import forward
-
-    monkeypatch.setattr(forward, "case_memo", LRUMemo(3))
-    a = forward.validated_case({"errors": {"sun_eccentricity": 1.0}, "load_Nm": 10.0})
-    assert forward.validated_case({"load_Nm": 10.0, "errors": {"sun_eccentricity": 1.0}}) is a
-    b = forward.validated_case({"errors": {"sun_eccentricity": 2.0}, "load_Nm": 10.0})
-    assert b is not a and b.errors[0].value == 2.0 and a.errors[0].value == 1.0
-    for _ in range(2):
-        with pytest.raises(forward.ModelEvaluationError, match="sun_eccentricity"):
-            forward.validated_case({"errors": {"sun_eccentricity": "x"}})
-    for v in (3.0, 4.0, 5.0):
-        forward.validated_case({"errors": {"sun_eccentricity": v}})
-    assert len(forward.case_memo) == 3
-    assert forward.validated_case({"errors": {"sun_eccentricity": 1.0}, "load_Nm": 10.0}) is not a   # pushed out
+    assert base_orders(d) == {"output": 1, "lobe": d.z_disc, "pin": d.z_pins, "sun": ratio - 1, "input": ratio,
+                              "stage I mesh": d.z_sun * (ratio - 1)}

@@ -288,8 +288,8 @@ def test_private_use_finder(tmp_path):
                      "from rvcad import parts\n"
                      "r._hidden(); parts._Gear; export_case.__doc__; other._x\n"
                      "monkeypatch.setattr(r, '_RUNNER', None); getattr(parts, 'public'); setattr(other, '_y', 1)\n"
-                     "monkeypatch.setattr('rvcalib.forward._RUNNER', None); monkeypatch.setattr('os.path._x', 1)\n")
-    assert _private_uses(probe) == ["rvcad.export._atomic_write", "rvcad.parts._Gear", "rvcalib.forward._RUNNER",
+                     "monkeypatch.setattr('rvcalib.reducer_model._solve', None); monkeypatch.setattr('os.path._x', 1)\n")
+    assert _private_uses(probe) == ["rvcad.export._atomic_write", "rvcad.parts._Gear", "rvcalib.reducer_model._solve",
                                     "rvdyn.runner._RUNNER", "rvdyn.runner._hidden"]
 
 

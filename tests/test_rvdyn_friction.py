@@ -7,7 +7,7 @@ import pytest
 
 from rvcad.errors import Case
 from rvcad.geometry import ReducerGeometry
-from rvcalib.causes import compliance_equivalents
+from rvcalib.equivalents import compliance_equivalents
 from rvdyn.friction import FrictionArms, friction_arms
 from rvdyn.solver import QuasiStaticSolver
 from rvdyn.te import make_contacts

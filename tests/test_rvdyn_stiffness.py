@@ -54,7 +54,7 @@ def test_figures_and_budget_are_the_curve(sweeps) -> None:
 def test_a_lumped_compliance_is_a_budget_part_and_adds_in_series_to_the_secant(sweeps) -> None:
     """``model.torsional_compliance_arcsec_per_Nm`` C: its wind-up C T_rated is a part of the budget (the parts
     still add up to the wind-up), and without friction the b/a secant meets the series law
-    ``1/k = 1/k_0 + C/60`` exactly (C adds C b to the span a); rvcalib.causes reads a compliance found so."""
+    ``1/k = 1/k_0 + C/60`` exactly (C adds C b to the span a); rvcalib.datasheet reads a compliance found so."""
     c, f0 = sweeps["compliance"].figures, sweeps["frictionless"].figures
     assert c["budget"]["torsional_compliance"] == pytest.approx(0.25 * DEFAULT_RATED_NM, rel=1e-12)
     assert "torsional_compliance" not in f0["budget"]

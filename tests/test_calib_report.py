@@ -1,4 +1,4 @@
-"""The report of a calibration (rvcalib.reporting, rvcalib.reportmd, rvcalib.figures), its datasheet refusal and
+"""The report of a calibration (rvcalib.report, rvcalib.reportmd, rvcalib.figures), its datasheet refusal and
 equivalents, on a CalibrationResult built by hand for a ratio-81 reducer whose readings the test writes itself."""
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ import pytest
 from rig_records import R81, cos_orders, write_dataset
 from rvcad.atomic import current_umask
 from rvcad.params import Design
-from rvcalib.command import summary
+from rvcalib.cli import summary
 from rvcalib.dataset import read_dataset
 from rvcalib.datasheet import rated_torque, reducer_datasheet
 from rvcalib.equivalents import result_equivalents, rotation_per_offset_deg
-from rvcalib.reporting import bounded_groups, physical_bounds, write_report
+from rvcalib.report import bounded_groups, physical_bounds, write_report
 from rvcalib.reportmd import markdown
 from rvcalib.result import CalibrationResult, NamedEffect
 from rvcalib.settings import CalibrationSettings

@@ -1,4 +1,4 @@
-"""rv-calibrate's command line (rvcalib.command): options refused by name, the import subcommand, and the whole
+"""rv-calibrate's command line (rvcalib.cli): options refused by name, the import subcommand, and the whole
 command on simulated datasets with the loop's forward model replaced by a linear stand-in (tests/calib_standin.py)."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from calib_standin import FAMILIES, LinearReducer, simulate_own_law
 from rig_records import R81
-from rvcalib.command import build_parser, main, run, settings_from, summary
+from rvcalib.cli import build_parser, main, run, settings_from, summary
 from rvcalib.dataset import read_dataset
 from rvcalib.holdout import declared_te
 from rvcalib.settings import CalibrationSettings
