@@ -11,8 +11,8 @@ reducer model through rvdyn (:mod:`rvcalib.reducer_model`); the method is writte
 4. The linearised data ``z = y - f(theta) + J theta``, ``z = [J R] b + e``: the sparse estimator's posterior
    over ``b`` (every candidate at once; the prior scale of each is its tolerance class).
 5. The chosen parameters (the always-estimated block, and the candidates of pure credible sets) are estimated
-   through the reducer model itself (their nonlinear MAP, :mod:`rvcalib.refine`); the others stay at their
-   posterior means.
+   through the reducer model itself (their nonlinear MAP, :mod:`rvcalib.refine`, started where they are: a damped
+   search from the current state); the others leave the model (zero).
 6. Repeat from 3 until the chosen set no longer changes and the model TE moves by less than ``step_tolerance``
    times the noise (or ``max_linearisations``). The empirical block joins only once the physical candidates have
    converged: what the physics cannot give is judged against the best physical model, not against a
@@ -229,8 +229,9 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             fit = fit_sparse(F, z, settings.sparse(), init=fit.effects if fit is not None else None, fixed=pb.fixed)
             sigma = math.sqrt(fit.sigma2)
             a_s, a_r, sd = _active(fit, F, m.n_params, settings, pb.fixed)
-            start = fit.coef[:m.n_params] * ts
-            b_r = fit.coef[m.n_params:] * tr
+            start = np.zeros(m.n_params)          # the chosen effects from where they are; the others out
+            start[a_s] = theta[a_s]
+            b_r = np.zeros(R.shape[1])
             spread, renew = _next_linearisation(fit, F, m.n_params, ts)
             new, b_r, te_new, _ = refine(m, y, proj, R, start, b_r, a_s, a_r, sd * np.concatenate(scales), sigma,
                                          spread=spread, pool=pool, log=log, feasible=theta)

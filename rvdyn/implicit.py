@@ -1,4 +1,4 @@
-"""Jacobians of the transmission error along directions in case space (issue 45: the columns of a whole library of
+"""Jacobians of the transmission error along directions in case space (the columns of a whole library of
 parameters at a state from one factorisation per row), by implicit differentiation of the quasi-static equilibrium
 (:mod:`rvdyn.adjoint`; docs/physics.md, "Implicit differentiation of the equilibrium").
 

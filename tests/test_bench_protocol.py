@@ -1,4 +1,4 @@
-"""The calibration benchmark protocol (benchmarks/realistic.py, score.py, adapt_old.py, bench_loop.py) and the
+"""The calibration benchmark protocol (benchmarks/realistic.py, score.py, bench_loop.py) and the
 simulator's rig zero per test: fast, no calibration run."""
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-import adapt_old  # noqa: E402
 import bench_loop  # noqa: E402
 import realistic  # noqa: E402
 import score as sc  # noqa: E402
@@ -227,38 +226,6 @@ def test_parse_name():
 
 
 # ---------------------------------------------------------------------------------------------- adapter
-def _fitted(name, value, lo, hi, angle=None, params=None, se=1.0, family="table4", unit="um"):
-    return SimpleNamespace(name=name, key=sc.parse_name(name)[0], family=family, unit=unit, value=value, ci_low=lo,
-                           ci_high=hi, angle_deg=angle, params=params or {"value": value}, std_err=se)
-
-
-def test_old_result_maps_onto_the_schema():
-    p = np.array([3.0, 4.0])
-    C = np.array([[2.0, 0.5], [0.5, 1.0]])
-    half = 2.5
-    g = p / 5.0                                                        # radial direction
-    polar = _fitted("planet_eccentricity[crank=1]", 5.0, 5.0 - half, 5.0 + half, 53.13,
-                    {"x": 3.0, "y": 4.0}, se=float(np.sqrt(g @ C @ g)))  # the loop's radial standard error
-    other = _fitted("sun_eccentricity", 5.0, 3.0, 7.0, 53.13, {"x": 3.0, "y": 4.0}, se=1.0)
-    res = SimpleNamespace(rms_before=9.0, rms_after=0.2, noise_arcsec=0.19, seconds=3.0, stopped_by="term limit",
-                          status="explained", verdict="v", notes=[],
-                          effects=[_fitted("cam_phase[crank=1,disc=0]", 2.0, 1.0, 3.0), polar, other],
-                          groups=[{"kind": "unsplit", "found": "a", "members": [
-                              {"name": "pin_radius", "value": 1.0, "unit": "um"},
-                              {"name": "unexplained constant offset", "value": 2.0, "unit": "arcsec"}]}],
-                          unexplained=[SimpleNamespace(to_dict=lambda: {"label": "x"})])
-    d = adapt_old.from_old(res, covs={polar.name: (p, C), other.name: (p + 1.0, C)})
-    e0, e1, e2 = d["effects"]
-    assert e0["instance"] == {"crank": 1, "disc": 0} and e0["ci95"] == [1.0, 3.0] and e0["cov"] is None
-    assert e1["components"] == [3.0, 4.0] and e1["instance"] == {"crank": 1}
-    assert np.sqrt(g @ np.array(e1["cov"]) @ g) * sc.Z95 == pytest.approx(half)   # radial variance -> interval
-    assert np.array(e1["cov"]) / np.array(e1["cov"])[1, 1] == pytest.approx(C)    # shape of the loop's cov
-    assert np.array(e2["cov"]) == pytest.approx(np.eye(2) * (2.0 / sc.Z95) ** 2)   # isotropic
-    assert [m["probability"] for m in d["groups"][0]["members"]] == [None, None]
-    assert d["groups"][0]["kind"] == "unsplit" and d["settings"] == adapt_old.OLD_DEFAULTS
-    assert (d["rms_after"], d["stopped_by"], d["unexplained"]) == (0.2, "term limit", [{"label": "x"}])
-
-
 # ---------------------------------------------------------------------------------------------- bench_loop
 def test_bench_loop_fails_a_raising_method_and_resumes(tmp_path, monkeypatch, capsys):
     ds = tmp_path / "draws" / "seed101"
@@ -266,7 +233,7 @@ def test_bench_loop_fails_a_raising_method_and_resumes(tmp_path, monkeypatch, ca
                           hidden={"model": {"torsional_compliance_arcsec_per_Nm": 0.2}})
     calls, recorded = [], []
 
-    def boom(method, dataset, log=None):
+    def boom(method, dataset, log=None, workers=1):
         calls.append(method)
         raise RuntimeError("no convergence")
     monkeypatch.setattr(bench_loop, "generate", lambda seed, root: ds)
@@ -276,15 +243,15 @@ def test_bench_loop_fails_a_raising_method_and_resumes(tmp_path, monkeypatch, ca
     assert bench_loop.main(argv) == 1
     rec = json.loads((tmp_path / "out" / "seed101.json").read_text())
     assert rec["error"] == "RuntimeError: no convergence" and not rec["score"]["passed"]
-    assert recorded[-1][:3] == ("old", "dev", False) and recorded[-1][3]["raised"] == 1
+    assert recorded[-1][:3] == ("new", "dev", False) and recorded[-1][3]["raised"] == 1
     out = capsys.readouterr().out
-    assert "seed 101: FAIL (raised)" in out and "SUMMARY old dev: 0/1 pass (1 raised)" in out
+    assert "seed 101: FAIL (raised)" in out and "SUMMARY new dev: 0/1 pass (1 raised)" in out
     bench_loop.main(argv)                                              # reused, not run again
-    assert calls == ["old"] and len(recorded) == 2
+    assert calls == ["new"] and len(recorded) == 2
     bench_loop.main(argv + ["--report-only"])                          # printed, not recorded
-    assert calls == ["old"] and len(recorded) == 2
+    assert calls == ["new"] and len(recorded) == 2
     assert bench_loop.main(["--set", "dev", "--out", str(tmp_path / "empty"), "--report-only"]) == 1
-    assert calls == ["old"] and "no draw run yet" in capsys.readouterr().out
+    assert calls == ["new"] and "no draw run yet" in capsys.readouterr().out
     bench_loop.main(argv + ["--fresh"])
-    assert calls == ["old", "old"]
+    assert calls == ["new", "new"]
     assert json.loads(ap.read_text())["test_offsets"] == {}

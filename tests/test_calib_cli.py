@@ -8,7 +8,8 @@ import re
 import numpy as np
 import pytest
 
-from calib_standin import FAMILIES, LinearReducer, simulate_own_law
+from calib_standin import FAMILIES, LinearReducer
+from rvcalib.simulate import simulate_dataset
 from rig_records import R81
 from rvcalib.cli import build_parser, main, run, settings_from, summary
 from rvcalib.dataset import read_dataset
@@ -87,7 +88,7 @@ def test_the_options_make_one_settings_object(tmp_path):
 @pytest.fixture(scope="module")
 def sim81(tmp_path_factory):
     folder = tmp_path_factory.mktemp("r81") / "ds"
-    simulate_own_law(folder, RUNS, HIDDEN, samples_per_rev=60, seed=3, test_offsets=OFFSETS, design=dict(R81))
+    simulate_dataset(folder, RUNS, HIDDEN, samples_per_rev=60, seed=3, test_offsets=OFFSETS, design=dict(R81))
     return read_dataset(folder)
 
 
@@ -134,7 +135,7 @@ def test_the_command_with_held_out_loads_and_the_datasheet(tmp_path):
     noise (with the unexplained order 3 carried over; without it the reducer alone leaves its RMS), and the
     datasheet at rvdyn's default rated torque, softer by the compliance found (series law within 2 %)."""
     folder = tmp_path / "ds"
-    simulate_own_law(folder, RUNS, HIDDEN, samples_per_rev=60, seed=3, test_offsets=OFFSETS)
+    simulate_dataset(folder, RUNS, HIDDEN, samples_per_rev=60, seed=3, test_offsets=OFFSETS)
     ds = read_dataset(folder)
     obj = run(ds, SETTINGS, tmp_path / "out", holdout=True, model_for=lambda d: LinearReducer(d, SETTINGS))["object"]
     rows = obj["holdout"]["rows"]

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from calib_standin import simulate_own_law
+from rvcalib.simulate import simulate_dataset
 from rig_records import cos_orders, write_dataset
 from rvcalib.dataset import read_dataset
 from rvcalib.holdout import holdout_loads, predicted_te, rms_without_constants, subset, unexplained_te
@@ -67,7 +67,7 @@ def test_one_load_has_nothing_to_leave_out(ds):
 @pytest.fixture(scope="module")
 def sim(tmp_path_factory):
     folder = tmp_path_factory.mktemp("sim") / "ds"
-    ans = simulate_own_law(folder, RUNS, {"model": {"torsional_compliance_arcsec_per_Nm": 0.2},
+    ans = simulate_dataset(folder, RUNS, {"model": {"torsional_compliance_arcsec_per_Nm": 0.2},
                                           "measurement": {"output_encoder_eccentricity_um": 8.0,
                                                           "output_encoder_phase_deg": 30.0}},
                            samples_per_rev=60, seed=4, test_offsets={"10Nm": 3.0, "30Nm": -2.0})
@@ -114,7 +114,7 @@ def test_the_table_of_loads_left_out(sim):
 
 def test_runs_that_declare_other_errors_are_not_predicted(tmp_path):
     runs = [dict(r, declared={"sun_eccentricity": 5.0} if r["load_Nm"] == 30.0 else {}) for r in RUNS]
-    simulate_own_law(tmp_path / "ds", runs, samples_per_rev=40, seed=1)
+    simulate_dataset(tmp_path / "ds", runs, samples_per_rev=40, seed=1)
     h = holdout_loads(read_dataset(tmp_path / "ds"), fit=lambda *a: pytest.fail("not fitted"))
     assert all(r["status"].startswith("not predicted: its runs declare other errors") for r in h["rows"])
     assert all(r["rms_declared_arcsec"] is None for r in h["rows"])
