@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_common import cpu_seconds  # noqa: E402
 from results_log import record, slug  # noqa: E402
-from rvcalib.dataset import read_dataset  # noqa: E402
+from rvrig.dataset import read_dataset  # noqa: E402
 from rvcalib.loop import calibrate  # noqa: E402
 from rvcalib.settings import CalibrationSettings  # noqa: E402
 from rvcalib.simulate import simulate_dataset  # noqa: E402

@@ -59,7 +59,7 @@ def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = No
 def run_draw(seed: int, set_name: str, method: str, draws: Path, workers: int,
              verbose: bool = False) -> dict[str, Any]:
     """Draw (or reuse), run and time one seed; returns the per-draw record (not yet scored)."""
-    from rvcalib.dataset import read_dataset
+    from rvrig.dataset import read_dataset
 
     folder = generate(seed, draws)
     result, error = None, None

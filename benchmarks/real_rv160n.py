@@ -8,11 +8,11 @@ stops. The records are development data: never copied into the project, never re
    load, the secant torsional rigidity ``1800 / ((BF(1800) - BF(0)) / 2)`` N m/arcmin and the light-load play
    ``BF(0)`` arcmin.
 2. ``rv-calibrate import`` of both records into a temporary dataset (default readings per revolution), the
-   per-test table (:func:`rvcalib.rigtable.test_table`), how it changes with load, the measured datasheet
+   per-test table (:func:`rvrig.rigtable.test_table`), how it changes with load, the measured datasheet
    (``--rated-Nm``, default 1568 N m: the RV-160N class) against the figures by hand, and the figure of the
    mean TE per direction against load.
 3. The spectrum of every reading (a second import with ``--samples-per-rev 0``): the main order-locked lines
-   and the fixed-frequency lines (the rig line near 490 Hz), :func:`rvcalib.spectrum.separate`.
+   and the fixed-frequency lines (the rig line near 490 Hz), :func:`rvrig.spectrum.separate`.
 4. The loop (:func:`rvcalib.calibrate`) on the imported dataset with the design ``--design`` (default
    ``examples/designs/rv160n.json``, three cranks; ``--no-loop`` skips it): the rig's zero of each test, what it
    names, what stays unexplained.
@@ -45,9 +45,9 @@ sys.path.insert(0, str(ROOT))
 
 from results_log import record  # noqa: E402
 from rvcalib.cli import main as rv_calibrate  # noqa: E402
-from rvcalib.dataset import read_dataset  # noqa: E402
-from rvcalib.rigtable import load_changes, measured_datasheet, plot_test_means, test_table  # noqa: E402
-from rvcalib.spectrum import separate  # noqa: E402
+from rvrig.dataset import read_dataset  # noqa: E402
+from rvrig.rigtable import load_changes, measured_datasheet, plot_test_means, test_table  # noqa: E402
+from rvrig.spectrum import separate  # noqa: E402
 
 FILES = ("1800.0rpm0.0Nm25.0deg.csv", "1800.0rpm1800.0Nm25.0deg.csv")
 LOADS = (0.0, 1800.0)

@@ -180,7 +180,7 @@ class ErrorInstance:
     angle_deg: float = 0.0
 
 
-#: Largest load magnitude of a case, N m: the dataset reader's bound (``rvcalib.dataset.MAX_LOAD_NM``);
+#: Largest load magnitude of a case, N m: the dataset reader's bound (``rvrig.dataset.MAX_LOAD_NM``);
 #: the largest RV reducers are rated below 10 kN m, so a larger number is a unit slip (N mm).
 MAX_LOAD_NM = 20000.0
 #: Largest |angle_deg| of an error's direction, degrees (one turn either way).

@@ -4,14 +4,9 @@ The method is written up in docs/calibration.md; the command line and the report
 
 Modules
 -------
-:mod:`rvcalib.dataset`, :mod:`rvcalib.testgroups`
-    ``read_dataset(folder, design=None)``: runs.csv + samples.csv validated (errors name the file, column and run),
-    the tests (one homing of the rig each) the runs belong to.
-:mod:`rvcalib.rigimport`, :mod:`rvcalib.rigfilter`, :mod:`rvcalib.cli_import`
-    ``rv-calibrate import``: a test rig's records (output angle and TE per direction) into a dataset.
-:mod:`rvcalib.rigtable`, :mod:`rvcalib.spectrum`
-    What the rig shows before any model: the per-test table, the measured datasheet, the orders and the
-    fixed-frequency lines.
+The measured records themselves (the dataset format, importing a rig's files, the per-test table, the spectrum) are
+:mod:`rvrig`; ``read_dataset`` is re-exported here.
+
 :mod:`rvcalib.library`, :mod:`rvcalib.readings`
     The candidates as data (unit, bounds, prior scale) and the analytic columns of the reading errors and the
     empirical block.
@@ -37,7 +32,7 @@ Example
 >>> res = calibrate(read_dataset("measured/"))             # doctest: +SKIP
 >>> res.rms_before, res.rms_after, [e.line() for e in res.effects]   # doctest: +SKIP
 """
-from rvcalib.dataset import MeasuredDataset, RunRecord, read_dataset
+from rvrig.dataset import MeasuredDataset, RunRecord, read_dataset
 from rvcalib.loop import calibrate
 from rvcalib.result import CalibrationResult
 from rvcalib.settings import CalibrationSettings

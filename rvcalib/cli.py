@@ -1,9 +1,9 @@
 """``rv-calibrate DATASET --out DIR [options]``: calibrate the reducer model on measured TE and report it;
-``rv-calibrate import FILES... --out DATASET_DIR ...``: turn TE rig records into a dataset (:mod:`rvcalib.cli_import`).
+``rv-calibrate import FILES... --out DATASET_DIR ...``: turn TE rig records into a dataset (:mod:`rvrig.cli_import`).
 
 Reads the dataset folder (``runs.csv``, ``samples.csv``, optionally ``design.json``; ``--reducer`` names the design
-when the folder does not; :mod:`rvcalib.dataset`), shows what the rig measured before any model
-(:mod:`rvcalib.rigtable`), runs the loop (:func:`rvcalib.loop.calibrate` with one
+when the folder does not; :mod:`rvrig.dataset`), shows what the rig measured before any model
+(:mod:`rvrig.rigtable`), runs the loop (:func:`rvcalib.loop.calibrate` with one
 :class:`rvcalib.settings.CalibrationSettings` made from the options), computes the datasheet of the reducer as
 declared and as calibrated (:mod:`rvcalib.datasheet`), optionally predicts each load left out of the fit
 (``--holdout-loads``, :mod:`rvcalib.holdout`), writes the report (:mod:`rvcalib.report`) into ``--out`` and prints
@@ -219,14 +219,14 @@ def summary(obj: dict) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status (module docstring).
 
-    ``rv-calibrate import ...`` is :mod:`rvcalib.cli_import`'s."""
+    ``rv-calibrate import ...`` is :mod:`rvrig.cli_import`'s."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "import":
-        from rvcalib.cli_import import main as import_main
+        from rvrig.cli_import import main as import_main
 
         return import_main(argv[1:])
     args = build_parser().parse_args(argv)
-    from rvcalib.dataset import read_dataset
+    from rvrig.dataset import read_dataset
 
     try:
         settings = settings_from(args)

@@ -4,7 +4,7 @@
   calibrated model's (thin lines; each test's constant, the rig's zero, taken off so the curves share a level);
 * :func:`plot_residuals`: per run, the residual before (declared model) and after (calibrated), over its first
   output revolution;
-* :func:`plot_residual_spectrum`: the order spectrum of the residual after (:mod:`rvcalib.spectrum`), each run a
+* :func:`plot_residual_spectrum`: the order spectrum of the residual after (:mod:`rvrig.spectrum`), each run a
   thin line, the lines found marked: locked to an order of the reducer, or at a fixed frequency (the rig's, not
   claimed for the reducer).
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from rvcad.atomic import atomic_path
-from rvcalib.spectrum import threshold
+from rvrig.spectrum import threshold
 
 #: Most runs drawn in a figure of one panel per run.
 MAX_PANELS = 12
@@ -123,9 +123,9 @@ def plot_residual_spectrum(spectra: list, lines: dict, ratio: float, path: str |
     Parameters
     ----------
     spectra : list of OrderSpectrum
-        One per run (:func:`rvcalib.spectrum.order_spectrum` of the residual).
+        One per run (:func:`rvrig.spectrum.order_spectrum` of the residual).
     lines : dict
-        :func:`rvcalib.spectrum.separate` of the residual: ``order_locked`` and ``fixed_frequency`` lines.
+        :func:`rvrig.spectrum.separate` of the residual: ``order_locked`` and ``fixed_frequency`` lines.
     ratio : float
         The reducer's ratio (the input order, in the title).
     """

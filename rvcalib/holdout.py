@@ -30,12 +30,12 @@ from typing import Any, Callable
 import numpy as np
 
 from rvcad.validation import one_line
-from rvcalib.dataset import MeasuredDataset, RunRecord
+from rvrig.dataset import MeasuredDataset, RunRecord
 from rvcalib.datasheet import reducer_case
 from rvcalib.library import Candidate
 from rvcalib.readings import reading_columns
 from rvcalib.reducer_model import _solve
-from rvcalib.testgroups import TestGroups
+from rvrig.testgroups import TestGroups
 
 #: The RMS of a prediction within this factor of the noise counts as at the noise (as the result's status).
 AT_NOISE = 1.2

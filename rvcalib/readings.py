@@ -64,7 +64,7 @@ def _empirical(cand, dataset) -> np.ndarray:
 
 
 def test_ids(dataset) -> list[str]:
-    """The test (one homing of the rig) of each run (:attr:`rvcalib.dataset.MeasuredDataset.tests`)."""
+    """The test (one homing of the rig) of each run (:attr:`rvrig.dataset.MeasuredDataset.tests`)."""
     return [dataset.tests.of_run[r.run] for r in dataset.runs]
 
 

@@ -4,7 +4,7 @@
 permissions of a normal new file; ``report.md`` last, so a complete report.md means a complete report):
 
 * ``te_per_run.png``, ``residuals.png``, ``residual_spectrum.png`` (:mod:`rvcalib.figures`) and
-  ``test_means.png`` (:func:`rvcalib.rigtable.plot_test_means`);
+  ``test_means.png`` (:func:`rvrig.rigtable.plot_test_means`);
 * ``result.json``: the object ``rv-calibrate --json`` prints (:func:`report_object`);
 * ``report.md``: the verdict; the reducer and its ratio; what the rig shows before any model (the per-test table,
   how it changes with load, the measured datasheet); the named effects with their 95 % intervals and their
@@ -27,14 +27,14 @@ from typing import Any
 import numpy as np
 
 from rvcad.atomic import atomic_path
-from rvcalib.dataset import MeasuredDataset
+from rvrig.dataset import MeasuredDataset
 from rvcalib.datasheet import rated_torque
 from rvcalib.equivalents import result_equivalents
 from rvcalib.figures import plot_residual_spectrum, plot_residuals, plot_te
 from rvcalib.library import PHYSICAL, build_library
 from rvcalib.reportmd import markdown
-from rvcalib.rigtable import load_changes, measured_datasheet, plot_test_means, test_table
-from rvcalib.spectrum import order_spectrum, separate
+from rvrig.rigtable import load_changes, measured_datasheet, plot_test_means, test_table
+from rvrig.spectrum import order_spectrum, separate
 
 FIGURES = ("te_per_run.png", "residuals.png", "residual_spectrum.png", "test_means.png")
 
@@ -66,13 +66,13 @@ def verdict(result) -> str:
 
 
 def measured_figures(dataset: MeasuredDataset, rated_Nm: float | None = None) -> dict:
-    """What the rig shows before any model (:mod:`rvcalib.rigtable`), JSON-ready.
+    """What the rig shows before any model (:mod:`rvrig.rigtable`), JSON-ready.
 
     Returns
     -------
     dict
-        ``tests`` (:func:`rvcalib.rigtable.test_table` rows), ``main_orders``, ``load_changes`` (rows),
-        ``datasheet`` (:func:`rvcalib.rigtable.measured_datasheet` at the rated torque of
+        ``tests`` (:func:`rvrig.rigtable.test_table` rows), ``main_orders``, ``load_changes`` (rows),
+        ``datasheet`` (:func:`rvrig.rigtable.measured_datasheet` at the rated torque of
         :func:`rvcalib.datasheet.rated_torque`), ``rated_source`` and ``spectrum_statements``.
     """
     table = test_table(dataset)

@@ -43,7 +43,7 @@ from rvcad.params import Design
 
 from rvcalib.equivalents import EQUIVALENTS
 from rvcalib.library import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM, CaseDelta
-from rvcalib.orders import check_periodic, period_deg
+from rvrig.orders import check_periodic, period_deg
 
 MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg",
                     "input_encoder_eccentricity_um", "input_encoder_phase_deg", "output_encoder_scale_ppm")

@@ -19,7 +19,7 @@ import realistic  # noqa: E402
 import score as sc  # noqa: E402
 from rvcad.errors import ERROR_TYPES  # noqa: E402
 from rvcad.params import Design  # noqa: E402
-from rvcalib.dataset import read_dataset  # noqa: E402
+from rvrig.dataset import read_dataset  # noqa: E402
 from rvcalib.simulate import simulate_dataset  # noqa: E402
 
 RUNS = [{"run": "a", "load_Nm": 10.0, "direction": 1, "test": "T1"},

@@ -12,7 +12,7 @@ from calib_standin import FAMILIES, LinearReducer
 from rvcalib.simulate import simulate_dataset
 from rig_records import R81
 from rvcalib.cli import build_parser, main, run, settings_from, summary
-from rvcalib.dataset import read_dataset
+from rvrig.dataset import read_dataset
 from rvcalib.holdout import declared_te
 from rvcalib.settings import CalibrationSettings
 

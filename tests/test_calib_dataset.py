@@ -10,8 +10,8 @@ import pytest
 
 from rvcalib.cli import main
 from rvcad.params import Design
-from rvcalib.dataset import noise_estimate, read_dataset
-from rvcalib.orders import base_orders, period_deg
+from rvrig.dataset import noise_estimate, read_dataset
+from rvrig.orders import base_orders, period_deg
 
 RATIO = Design().ratio
 PERIOD_DEG = period_deg(Design())

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import pytest
 
 from rig_records import R81, cos_orders, write_dataset
-from rvcalib.dataset import read_dataset
+from rvrig.dataset import read_dataset
 from rvcalib.datasheet import reducer_datasheet
 from rvcalib.result import NamedEffect
 

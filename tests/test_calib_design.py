@@ -9,7 +9,7 @@ import shutil
 import pytest
 
 from rvcalib.cli import main
-from rvcalib.dataset import read_dataset
+from rvrig.dataset import read_dataset
 from rvcalib.simulate import simulate_dataset
 
 DESIGN81 = {"z_sun": 18, "z_planet": 36}

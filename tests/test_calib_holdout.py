@@ -11,7 +11,7 @@ import pytest
 
 from rvcalib.simulate import simulate_dataset
 from rig_records import cos_orders, write_dataset
-from rvcalib.dataset import read_dataset
+from rvrig.dataset import read_dataset
 from rvcalib.holdout import holdout_loads, predicted_te, rms_without_constants, subset, unexplained_te
 from rvcalib.library import build_library
 from rvcalib.readings import reading_columns

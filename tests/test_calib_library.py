@@ -25,8 +25,9 @@ def _run(run, load, direction, out_deg, te_arcsec, design=Design(), test=None):
 
 
 def _dataset(runs, design=Design(), tests=None):
+    of_run = tests or {r.run: f"{r.load_Nm:g}Nm" for r in runs}
     return SimpleNamespace(runs=runs, design=design, declared_keys=[], temperatures_vary=False,
-                           ratio=float(design.ratio), tests=tests)
+                           ratio=float(design.ratio), tests=SimpleNamespace(of_run=of_run))
 
 
 def _four_runs(design=Design(), n=100):
@@ -39,15 +40,20 @@ def _four_runs(design=Design(), n=100):
 def test_library_holds_every_instance(design, cranks, pins):
     lib = build_library(_four_runs(design), max_order=20)
     names = [c.name for c in lib]
-    assert f"pin_pitch[pin={pins - 1}]" in names and "pin_pitch" not in names      # pin pitch: single pins only
-    assert "pin_radius" in names and f"pin_radius[pin={pins - 1}]" in names
+    # a single pin's error: its positive and its negative values, each a candidate; pin pitch has single pins only
+    assert {f"pin_pitch[pin={pins - 1}] (+)", f"pin_pitch[pin={pins - 1}] (-)"} <= set(names)
+    assert "pin_pitch" not in names
+    assert lib.by_name(f"pin_pitch[pin={pins - 1}] (-)").effect_name == f"pin_pitch[pin={pins - 1}]"
+    assert lib.by_name(f"pin_pitch[pin={pins - 1}] (-)").upper == 0.0
+    # all the pins' radius and circle diameter and the compliance: always estimated
+    assert {c.name for c in lib if c.dense} == {"pin_radius", "pin_circle_diameter", "torsional_compliance_arcsec_per_Nm"}
     assert f"cam_phase[crank={cranks - 1},disc=1]" in names
     assert f"disc_hole_eccentricity[disc=1,hole={cranks - 1}]" in names
     assert f"pin_form_radial[k={pins // 2}]" in names and "pin_form_radial[k=1]" not in names
     n_t4 = sum(1 for c in lib if c.family == "table4")
-    # sun 1, planet 2, cam phase 4, cam ecc 4, carrier 2, disc hole 4, offset 1, diameter 1 + Zp, radius 1 + Zp,
-    # disc phase 2, pitch Zp
-    assert n_t4 == 1 + cranks + 2 * 2 * cranks + cranks + 2 * cranks + 1 + 3 * pins + 2 + 2
+    # sun 1, planet cranks, cam phase and ecc 2 cranks each, carrier cranks, disc hole 2 cranks, offset 1,
+    # diameter 1 + 2 Zp, radius 1 + 2 Zp, disc phase 2, pitch 2 Zp
+    assert n_t4 == 1 + cranks + 2 * 2 * cranks + cranks + 2 * cranks + 1 + 2 + 6 * pins + 2
     assert "order 20 (direction)" in names and "order 21 (common)" not in names
 
 
@@ -59,7 +65,7 @@ def test_prior_scales_and_weights():
     by = {c.name: wi for c, wi in zip(lib, w)}
     # every type has weight one shared by its instances; pin-wise radius: half to all pins, half to the singles
     assert sum(v for k, v in by.items() if k.startswith("cam_phase")) == pytest.approx(1.0)
-    assert by["pin_radius"] == pytest.approx(0.5) and by["pin_radius[pin=3]"] == pytest.approx(0.5 / 40)
+    assert by["pin_radius[pin=3] (+)"] == by["pin_radius[pin=3] (-)"] == pytest.approx(0.5 / 40 / 2)
     assert sum(v for k, v in by.items() if lib.by_name(k).family == "empirical") == pytest.approx(1.0)
     # the form modes' scale: a pin-wise class sigma spread over Zp / 2 modes of two components
     f = lib.by_name("pin_form_radial[k=3]")
@@ -69,7 +75,7 @@ def test_prior_scales_and_weights():
 def test_case_delta_adds_instances_and_pinwise_lists():
     lib = build_library(_four_runs(), max_order=5)
     acc = CaseDelta()
-    lib.by_name("pin_pitch[pin=3]").add_to(acc, np.array([0.01]))
+    lib.by_name("pin_pitch[pin=3] (+)").add_to(acc, np.array([0.01]))
     lib.by_name("pin_form_pitch[k=2]").add_to(acc, np.array([0.002, 0.0]))
     lib.by_name("planet_eccentricity[crank=1]").add_to(acc, np.array([3.0, 4.0]))
     lib.by_name("torsional_compliance_arcsec_per_Nm").add_to(acc, np.array([0.2]))
@@ -106,7 +112,7 @@ def test_nuisance_columns_one_constant_per_load_by_default_or_per_test():
     N, tests = nuisance_columns(ds)
     assert N.shape == (400, 2) and len(tests) == 2
     assert np.all(N[:100, 0] == 1) and np.all(N[100:200, 0] == 1) and np.all(N[200:, 1] == 1)
-    ds.tests = {"r0": "a", "r1": "b", "r2": "a", "r3": "b"}
+    ds.tests = SimpleNamespace(of_run={"r0": "a", "r1": "b", "r2": "a", "r3": "b"})
     N, tests = nuisance_columns(ds)
     assert tests == ["a", "b"] and np.all(N[200:300, 0] == 1)
 

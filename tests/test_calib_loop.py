@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from rvcalib.dataset import read_dataset
+from rvrig.dataset import read_dataset
 from rvcalib.loop import calibrate
 from rvcalib.settings import CalibrationSettings
 from rvcalib.simulate import simulate_dataset, standard_runs

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from calib_standin import frozen_model
-from rvcalib.dataset import noise_estimate, read_dataset
+from rvrig.dataset import noise_estimate, read_dataset
 from rvcalib.loop import calibrate
 from rvcalib.readings import nuisance_columns
 from rvcalib.settings import CalibrationSettings

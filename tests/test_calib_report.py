@@ -14,7 +14,7 @@ from rig_records import R81, cos_orders, write_dataset
 from rvcad.atomic import current_umask
 from rvcad.params import Design
 from rvcalib.cli import summary
-from rvcalib.dataset import read_dataset
+from rvrig.dataset import read_dataset
 from rvcalib.datasheet import rated_torque, reducer_datasheet
 from rvcalib.equivalents import result_equivalents, rotation_per_offset_deg
 from rvcalib.report import bounded_groups, physical_bounds, write_report
@@ -24,7 +24,7 @@ from rvcalib.settings import CalibrationSettings
 
 #: A group size of the kind the data leave free (only the combination of two members is fixed).
 HUGE = -3.56e9
-#: An order the ratio-81 design does not have (rvcalib.spectrum.reducer_orders): a line at it is the rig's.
+#: An order the ratio-81 design does not have (rvrig.spectrum.reducer_orders): a line at it is the rig's.
 RIG_ORDER = 17
 
 

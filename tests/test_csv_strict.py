@@ -16,7 +16,7 @@ import rsm
 from rsm.cli import main as rsm_main
 from rsm.csvio import read_csv_strict
 from rvcad.validation import DatasetError, TableError
-from rvcalib.dataset import read_dataset
+from rvrig.dataset import read_dataset
 from rvpaper import DATA_DIR as PAPER_DATA
 from rvstudy.factors import load_factors
 

@@ -214,7 +214,7 @@ def dataset_texts(draw) -> tuple[str, str]:
 @fuzz(60)
 @given(texts=dataset_texts())
 def test_fuzz_measured_dataset(scratch: Path, texts: tuple[str, str]) -> None:
-    from rvcalib.dataset import read_dataset
+    from rvrig.dataset import read_dataset
 
     root = scratch / "ds"
     root.mkdir(exist_ok=True)

@@ -1,7 +1,8 @@
 """Package layering: no import circle, and no package reaching up to a layer above it at import time.
 
 Layers, bottom up: ``rvpaper`` (data) and ``rsm`` (statistics) -> ``rvcad`` (geometry) -> ``rvdyn``
-(solver, runner) -> ``rvcalib`` (loop on measured data) and ``rvstudy`` (the study); a command line
+(solver, runner) and ``rvrig`` (measured records) -> ``rvcalib`` (loop on measured data) and ``rvstudy`` (the
+study); a command line
 may sit above its package's library (``rvcad export --pose solved`` uses rvdyn). ``rvdyn`` does not
 import matplotlib at module level (plots import it inside the function that draws).
 """
@@ -18,14 +19,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("rvpaper", "rsm", "rvcad", "rvdyn", "rvcalib", "rvstudy")
+PACKAGES = ("rvpaper", "rsm", "rvcad", "rvdyn", "rvrig", "rvcalib", "rvstudy")
 
 #: package -> top-level packages it must not load at import time (its own modules, all of them imported).
 FORBIDDEN = {
-    "rvpaper": {"rsm", "rvcad", "rvdyn", "rvcalib", "rvstudy", "matplotlib"},
-    "rsm": {"rvpaper", "rvcad", "rvdyn", "rvcalib", "rvstudy"},
-    "rvcad": {"rvcalib", "rvstudy", "matplotlib"},
-    "rvdyn": {"rvcalib", "rvstudy", "matplotlib"},
+    "rvpaper": {"rsm", "rvcad", "rvdyn", "rvrig", "rvcalib", "rvstudy", "matplotlib"},
+    "rsm": {"rvpaper", "rvcad", "rvdyn", "rvrig", "rvcalib", "rvstudy"},
+    "rvcad": {"rvrig", "rvcalib", "rvstudy", "matplotlib"},
+    "rvdyn": {"rvrig", "rvcalib", "rvstudy", "matplotlib"},
+    "rvrig": {"rvdyn", "rvcalib", "rvstudy", "matplotlib"},
     "rvcalib": {"rvstudy"},
 }
 #: Also forbidden, but to the package's library modules only: its command line (``cli``, ``__main__``)

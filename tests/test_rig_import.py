@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 from rvcalib.cli import main
-from rvcalib.dataset import read_dataset
-from rvcalib.rigfilter import antialias_filter, decimate, default_samples_per_rev
-from rvcalib.rigimport import import_rig, parse_conditions, read_rig_file
+from rvrig.dataset import read_dataset
+from rvrig.rigfilter import antialias_filter, decimate, default_samples_per_rev
+from rvrig.rigimport import import_rig, parse_conditions, read_rig_file
 
 #: A ratio-81 design (the dataset reader converts the readings with the design's ratio).
 R81 = {"z_sun": 18, "z_planet": 36}
@@ -111,7 +111,7 @@ def spectrum_amplitude(x: np.ndarray, k: int) -> float:
 def test_averaging_down_does_not_fold_an_order_above_the_new_nyquist_back():
     n, k_new = 4000, 256                  # new Nyquist order 128: order 300 would alias to 300 - 256 = 44
     th = np.arange(n) * 360.0 / n
-    from rvcalib.rigimport import RigRecord
+    from rvrig.rigimport import RigRecord
 
     te = te_arcsec(th, {5: 1.0, 300: 10.0}) * ARCSEC
     rec = RigRecord(direction=1, output_deg=th, te_deg=te, time_s=np.arange(n) / 4000.0, slot=np.arange(n),

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from rig_records import cos_orders, write_dataset
-from rvcalib.dataset import read_dataset
-from rvcalib.spectrum import find_lines, order_spectrum, reducer_orders, separate
+from rvrig.dataset import read_dataset
+from rvrig.spectrum import find_lines, order_spectrum, reducer_orders, separate
 from rvcad.params import Design
 
 FIXED_HZ = 150.0

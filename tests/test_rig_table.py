@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from rig_records import cos_orders, write_dataset
-from rvcalib.dataset import read_dataset
-from rvcalib.rigtable import load_changes, measured_datasheet, plot_test_means, test_table
+from rvrig.dataset import read_dataset
+from rvrig.rigtable import load_changes, measured_datasheet, plot_test_means, test_table
 
 B, C = 40.0, 0.1                       # arcsec, arcsec per N m
 RIGIDITY = 60.0 / C                    # N m/arcmin

@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rvcalib.dataset import read_dataset
-from rvcalib.orders import period_deg
+from rvrig.dataset import read_dataset
+from rvrig.orders import period_deg
 from rvcad.params import Design
 
 PERIOD = period_deg(Design())

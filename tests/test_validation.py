@@ -329,7 +329,7 @@ def test_levels_table_values_within_the_case_bounds(tmp_path: Path) -> None:
 
 
 def test_dataset_errors_are_dataset_errors(tmp_path: Path) -> None:
-    from rvcalib.dataset import read_dataset
+    from rvrig.dataset import read_dataset
 
     (tmp_path / "runs.csv").write_text("run,load_Nm,direction\na,20,2\n")
     (tmp_path / "samples.csv").write_text("run,input_deg,output_deg\na,0,0\n")

@@ -8,7 +8,7 @@ shares one unknown constant. :func:`group_tests` gives each run its test:
 * one test per (load, speed, temperature): the runs a rig measures in one go, forward and backward,
   after one homing. Runs without a speed or temperature column are grouped by what is given.
 
-The estimator gives each test its own constant; the per-test table (:mod:`rvcalib.rigtable`) takes
+The estimator gives each test its own constant; the per-test table (:mod:`rvrig.rigtable`) takes
 differences only within a test (backward minus forward), where the constant cancels.
 """
 from __future__ import annotations

@@ -32,8 +32,8 @@ import numpy as np
 from scipy import interpolate, ndimage
 
 from rvcad.params import Design
-from rvcalib.dataset import MeasuredDataset, RunRecord
-from rvcalib.orders import base_orders
+from rvrig.dataset import MeasuredDataset, RunRecord
+from rvrig.orders import base_orders
 
 #: Chance of one false line in a spectrum (see the module docstring).
 P_FALSE = 0.01

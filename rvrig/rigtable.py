@@ -3,7 +3,7 @@
 :func:`test_table`: one row per test and load (the runs of one homing at one load, speed and
 temperature): the mean TE per direction (over whole output revolutions, evenly in angle), backward
 minus forward (B - F: the rig's zero of the test cancels), peak-to-peak per direction, and the main
-orders of the reducer (:func:`rvcalib.spectrum.separate`) with amplitude and phase per direction.
+orders of the reducer (:func:`rvrig.spectrum.separate`) with amplitude and phase per direction.
 :func:`load_changes`: how each of these changes between the lowest and the highest load.
 
 :func:`measured_datasheet`: the maker's figures as far as the loads allow (docs/physics.md section 15):
@@ -31,8 +31,8 @@ import numpy as np
 import pandas as pd
 
 from rvcad.atomic import atomic_path
-from rvcalib.dataset import MeasuredDataset, RunRecord
-from rvcalib.spectrum import OrderSpectrum, order_spectrum, separate
+from rvrig.dataset import MeasuredDataset, RunRecord
+from rvrig.spectrum import OrderSpectrum, order_spectrum, separate
 
 #: Main orders listed per test.
 N_ORDERS = 6
@@ -67,7 +67,7 @@ def test_table(dataset: MeasuredDataset, n_orders: int = N_ORDERS) -> pd.DataFra
         ``bw_minus_fw_arcsec``, ``pp_fw_arcsec``, ``pp_bw_arcsec``, ``noise_arcsec``, and for each main
         order k ``order{k}_amp_{fw,bw}_arcsec``, ``order{k}_phase_{fw,bw}_deg`` (``A cos(k theta + phi)``,
         theta the output angle reading). ``attrs["main_orders"]``: the orders with their labels;
-        ``attrs["spectrum"]``: :func:`rvcalib.spectrum.separate`'s result. A direction missing from a
+        ``attrs["spectrum"]``: :func:`rvrig.spectrum.separate`'s result. A direction missing from a
         row gives NaN.
     """
     sep = separate(dataset)

@@ -28,7 +28,7 @@ the message says that the ratio does not match the default.
 
 Angles are absolute encoder readings, but a rig zeroes its TE at a homing position before each test:
 the runs of one test share one unknown constant (the rig's zero, a nuisance). ``MeasuredDataset.tests``
-(:mod:`rvcalib.testgroups`) says which runs form a test: the optional ``test`` column of ``runs.csv``,
+(:mod:`rvrig.testgroups`) says which runs form a test: the optional ``test`` column of ``runs.csv``,
 else one test per load, speed and temperature.
 """
 from __future__ import annotations
@@ -45,8 +45,8 @@ from rvcad.errors import ERROR_TYPES, Case
 from rvcad.params import Design
 from rvcad.validation import DatasetError, read_json_file
 
-from rvcalib.orders import check_periodic, period_deg
-from rvcalib.testgroups import TestGroups, group_tests
+from rvrig.orders import check_periodic, period_deg
+from rvrig.testgroups import TestGroups, group_tests
 
 ARCSEC_PER_DEG = 3600.0
 
@@ -96,7 +96,7 @@ class RunRecord:
     design : Design
         The reducer measured (its ratio converts the readings to TE).
     test : str
-        Id of the test (one homing of the rig) the run belongs to (:mod:`rvcalib.testgroups`).
+        Id of the test (one homing of the rig) the run belongs to (:mod:`rvrig.testgroups`).
     """
 
     run: str

@@ -1,4 +1,4 @@
-"""Averaging a dense rig record down without aliasing (:func:`decimate`, used by :mod:`rvcalib.rigimport`).
+"""Averaging a dense rig record down without aliasing (:func:`decimate`, used by :mod:`rvrig.rigimport`).
 
 A record denser than ``samples_per_rev`` readings per output revolution is low-passed
 by a linear-phase FIR filter (Kaiser window, :data:`STOP_ATTENUATION_DB` per pass, applied forward
@@ -20,7 +20,7 @@ from scipy import interpolate, signal
 from rvcad.validation import DatasetError
 
 if TYPE_CHECKING:
-    from rvcalib.rigimport import RigRecord
+    from rvrig.rigimport import RigRecord
 
 #: End of the filter's pass band as a fraction of the new Nyquist order (the stop band starts at it).
 PASS_FRACTION = 0.8

@@ -1,7 +1,7 @@
 """``rv-calibrate import FILES... --out DATASET_DIR [--load-Nm L] [--speed-rpm S] [--temperature-C T]
 [--ratio N | --reducer DESIGN.json] [--samples-per-rev K] [--sample-rate-Hz F] [--test ID] [--json]``.
 
-Turns a TE rig's files (output angle and TE per direction, sampled in time; :mod:`rvcalib.rigimport`,
+Turns a TE rig's files (output angle and TE per direction, sampled in time; :mod:`rvrig.rigimport`,
 docs/rig-data.md) into a dataset folder ``rv-calibrate`` reads. Prints what it wrote and which conditions
 came from the file names, or with ``--json`` the import record (also written to ``DATASET_DIR/import.json``).
 Bad input: one line on stderr naming the file, column or option, exit status 2.
@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rvcad import validation as v
-from rvcalib.rigimport import DEFAULT_SAMPLE_RATE_HZ, import_rig
+from rvrig.rigimport import DEFAULT_SAMPLE_RATE_HZ, import_rig
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -6,7 +6,7 @@ revolution the input (sun) turns N times, the sun relative to the carrier N - 1 
 cranks relative to the carrier ``Zp`` times in the paper's convention (40 by default); the disc
 lobes pass the pins ``Zc`` times. TE is periodic in one output revolution when N is an integer (it
 is then an integer number of input turns), which the loop needs: its records and empirical terms are all
-per output revolution. :func:`base_orders` names the reducer's base orders (:mod:`rvcalib.spectrum` builds their
+per output revolution. :func:`base_orders` names the reducer's base orders (:mod:`rvrig.spectrum` builds their
 harmonics and crank-count sidebands).
 """
 from __future__ import annotations

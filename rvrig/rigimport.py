@@ -13,12 +13,12 @@ and -1, one test per file) and ``samples.csv`` with ``input_deg = N (output_deg 
 
 Gaps. A step between two readings of more than 1.5 sample spacings (in time where the file has times,
 else in position, as a rig sampling at a fixed rate at constant speed moves one spacing per reading)
-is a gap: the readings missing are counted and reported. Gaps of up to :data:`rvcalib.rigfilter.FILL_SPACINGS`
+is a gap: the readings missing are counted and reported. Gaps of up to :data:`rvrig.rigfilter.FILL_SPACINGS`
 spacings are filled by linear interpolation before the low-pass only (no filled reading is written); a
 longer gap splits the record into segments, each filtered on its own, and no reading is written inside it.
 Without a time column, the times after a gap are shifted by the readings missing.
 
-Averaging down (:mod:`rvcalib.rigfilter`): a record denser than ``samples_per_rev`` readings per output
+Averaging down (:mod:`rvrig.rigfilter`): a record denser than ``samples_per_rev`` readings per output
 revolution is low-passed and evaluated on an even grid of output angle, no order above the new Nyquist
 order folding back.
 """
@@ -37,8 +37,8 @@ from rsm.csvio import read_csv_strict
 from rvcad.atomic import atomic_path, remove_stale_temps
 from rvcad.params import Design
 from rvcad.validation import DatasetError, OptionError
-from rvcalib.dataset import load_design, noise_estimate
-from rvcalib.rigfilter import FILL_SPACINGS, decimate, default_samples_per_rev
+from rvrig.dataset import load_design, noise_estimate
+from rvrig.rigfilter import FILL_SPACINGS, decimate, default_samples_per_rev
 
 #: Accepted names of the four columns, per direction: (output angle names, TE name).
 LAYOUT = {+1: (("Poisition_Output_Reducer_Fw", "Position_Output_Reducer_Fw"), "Transmission_Error_Fw"),
@@ -311,7 +311,7 @@ def import_rig(files: "list[str | Path]", out: str | Path, *, ratio: float | Non
         ``dataset`` (folder), ``ratio``, ``samples_per_rev``, ``files`` (per file: ``file``, ``test``,
         conditions, ``conditions_from``, ``runs``: per run ``run``, ``direction``, ``readings``,
         ``revolutions``, ``speed_rpm_from_readings``, ``noise_arcsec_readings`` (the noise of the readings as read,
-        :func:`rvcalib.dataset.noise_estimate`: at the rig's density the TE is smooth from one reading to
+        :func:`rvrig.dataset.noise_estimate`: at the rig's density the TE is smooth from one reading to
         the next; after averaging down the same estimate also takes in the orders near the new band's end),
         ``samples``, ``samples_per_rev``, ``gaps``, ``time_from``, ``filter``), ``notes``.
     """
