@@ -58,8 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, metavar="N",
                    help="processes for the model's Jacobian columns (default 2; 1 = this process; the same numbers "
                         "whatever the count)")
-    p.add_argument("--max-effects", dest="max_effects", type=int, default=CalibrationSettings.max_effects,
-                   metavar="L", help=f"most single effects of the estimator, a cap the result says when it binds "
+    p.add_argument("--max-effects", "--max-terms", dest="max_effects", type=int, default=CalibrationSettings.max_effects,
+                   metavar="L", help=f"most single effects of the estimator (--max-terms is the same), a cap the result says when it binds "
                                      f"(default {CalibrationSettings.max_effects})")
     p.add_argument("--max-order", dest="max_order", type=int, default=None, metavar="K",
                    help="highest order of the empirical terms (default: the highest the readings resolve)")

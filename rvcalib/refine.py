@@ -102,6 +102,8 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
             x0 = np.clip(theta[active_s], lo, hi)
         else:
             theta, x0 = feasible.copy(), np.clip(feasible[active_s], lo, hi)
+    if np.any((x0 <= lo) | (x0 >= hi)):
+        x0 = _gauss_newton_start(fun, jac, x0, lo, hi, sd)
     nfev = max_nfev or 10 + 2 * active_s.size
     res = optimize.least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale=sd, max_nfev=nfev)
     fun(res.x)                                  # the model's states are those of the estimate (the next Jacobian's)
@@ -110,6 +112,23 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
         log(f"  nonlinear estimate of {active_s.size} solved and {active_r.size} reading parameters: "
             f"{res.nfev} evaluations, objective {2 * res.cost:.1f} ({res.message})")
     return state(res.x), b, cache["te"], float(2 * res.cost)
+
+
+def _gauss_newton_start(fun, jac, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """The start of the trust-region search from a start on a bound: the linearised MAP from ``x0`` (one Gauss-Newton step), kept strictly
+    inside the bounds (a thousandth of a prior scale from each), where it lowers the objective; else ``x0``.
+
+    The trust-region reflective method makes little or no progress from a start on a bound (a clearance or a
+    compliance at zero) whose gradient points inwards; the Gauss-Newton step moves it off at once."""
+    f0 = fun(x0)
+    J = jac(x0)
+    try:
+        x1 = x0 - np.linalg.lstsq(J, f0, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return x0
+    pad = 1e-3 * sd
+    x1 = np.clip(x1, np.minimum(lo + pad, hi), np.maximum(hi - pad, lo))
+    return x1 if np.sum(fun(x1) ** 2) < np.sum(f0 ** 2) else x0
 
 
 def _zero(b: np.ndarray, idx: np.ndarray) -> np.ndarray:

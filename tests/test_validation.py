@@ -395,11 +395,11 @@ def test_rv_calibrate_refusals(tmp_path: Path, capsys: pytest.CaptureFixture) ->
     from rvcalib.cli import main
 
     out = tmp_path / "o"
-    for argv, needle in ((["--max-terms", "0"], "--max-terms 0 is out of range; allowed: an integer in [1, 40]"),
-                         (["--screen-points", "0"], "--screen-points 0 is out of range; allowed: an integer in [81, "),
-                         (["--steps", "1000000"], "--steps 1000000 is out of range"),
-                         (["--steps", "100"], "--steps 100 is not a multiple of 40"),
-                         (["--alpha", "nan"], "--alpha nan is not finite")):
+    for argv, needle in ((["--max-terms", "0"], "--max-effects 0 is out of range; allowed: an integer in [1, 1000]"),
+                         (["--max-order", "-3"], "--max-order -3 is out of range; allowed: an integer in [1, 5000]"),
+                         (["--workers", "64"], "--workers 64 is out of range; allowed: an integer in [1, 32]"),
+                         (["--rated-Nm", "inf"], "--rated-Nm inf is not finite"),
+                         (["--empirical-weight", "nan"], "--empirical-weight nan is not finite")):
         _one_line_exit_2(capsys, main([str(tmp_path / "dataset"), "--out", str(out), *argv]), needle)
     assert not out.exists()
 
