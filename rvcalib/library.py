@@ -265,6 +265,11 @@ class Library:
         return np.array([c.share * (empirical_weight if c.family == "empirical" else 1.0) for c in self.candidates])
 
 
+#: Table 4 errors that move the whole pin ring against the discs: like the ring's fit, they lift some pins off
+#: and press others, so the TE's response is kinked at the tolerance scale (a secant, not a derivative).
+RING_MOTIONS = frozenset({"pin_circle_offset"})
+
+
 def _name(key: str, inst: dict) -> str:
     return key + ("[" + ",".join(f"{k}={v}" for k, v in inst.items()) + "]" if inst else "")
 
@@ -293,7 +298,7 @@ def _table4(design: Design, declared: set) -> list:
             where = " (all pins)" if et.pinwise and not inst else ""
             if not et.pinwise:
                 out.append(Candidate(_name(key, inst), key, "table4", et.unit, meaning, comps, scale, -b, b,
-                                     tuple(inst.items()), key, share))
+                                     tuple(inst.items()), key, share, kink=key in RING_MOTIONS))
                 continue
             if not inst:                                  # the ring's fit: always estimated
                 out.append(Candidate(key, key, "table4", et.unit, meaning + where, comps, scale, -b, b, (), key, share,

@@ -11,8 +11,8 @@ reducer model through rvdyn (:mod:`rvcalib.reducer_model`); the method is writte
 4. The linearised data ``z = y - f(theta) + J theta``, ``z = [J R] b + e``: the sparse estimator's posterior
    over ``b`` (every candidate at once; the prior scale of each is its tolerance class).
 5. The chosen parameters (the always-estimated block, and the candidates of pure credible sets) are estimated
-   through the reducer model itself (their nonlinear MAP, :mod:`rvcalib.refine`, started where they are: a damped
-   search from the current state); the others leave the model (zero).
+   through the reducer model itself (their nonlinear MAP, :mod:`rvcalib.refine`, started from where they are or
+   from the linearised estimate, whichever fits better); the others leave the model (zero).
 6. Repeat from 3 until the chosen set no longer changes and the model TE moves by less than ``step_tolerance``
    times the noise (or ``max_linearisations``). The empirical block joins only once the physical candidates have
    converged: what the physics cannot give is judged against the best physical model, not against a
@@ -38,6 +38,7 @@ from rvcalib.result import CalibrationResult, assemble
 from rvcalib.settings import CalibrationSettings
 from rvcalib.refine import refine
 from rvcalib.sparse import Features, credible_sets, fit_sparse
+from rvcalib.twins import swap_twins
 
 
 def resolved_order(dataset) -> int:
@@ -213,7 +214,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     log(f"library: {len(pb.library)} candidates ({m.n_params} solved parameters, {R.shape[1]} reading columns); "
         f"residual RMS {rms_before:.4g} arcsec")
     pool_cm = ProcessPoolExecutor(settings.workers) if settings.workers > 1 else nullcontext()
-    fit = F = scales = spread = renew = None
+    fit = F = scales = spread = renew = X0 = None
     active_prev: tuple = ()
     stopped = "max_linearisations"
     b_r = np.zeros(R.shape[1])
@@ -225,16 +226,17 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             scales = scales or _scales(pb.library, m, J, R, pb.readings)
             ts, tr = scales
             F = pb.features(J, scales, empirical)
+            X0 = F.X if X0 is None else X0
             z = proj(y - te + J @ theta)
             fit = fit_sparse(F, z, settings.sparse(), init=fit.effects if fit is not None else None, fixed=pb.fixed)
             sigma = math.sqrt(fit.sigma2)
             a_s, a_r, sd = _active(fit, F, m.n_params, settings, pb.fixed)
-            start = np.zeros(m.n_params)          # the chosen effects from where they are; the others out
-            start[a_s] = theta[a_s]
+            here, linear = np.zeros(m.n_params), np.zeros(m.n_params)   # the chosen effects in, the others out
+            here[a_s], linear[a_s] = theta[a_s], fit.coef[:m.n_params][a_s] * ts[a_s]
             b_r = np.zeros(R.shape[1])
             spread, renew = _next_linearisation(fit, F, m.n_params, ts)
-            new, b_r, te_new, _ = refine(m, y, proj, R, start, b_r, a_s, a_r, sd * np.concatenate(scales), sigma,
-                                         spread=spread, pool=pool, log=log, feasible=theta)
+            new, b_r, te_new, _ = refine(m, y, proj, R, here, b_r, a_s, a_r, sd * np.concatenate(scales), sigma,
+                                         spread=spread, pool=pool, log=log, feasible=theta, alternative=linear)
             moved = float(np.sqrt(np.mean(proj(te_new - te) ** 2)))
             log(f"linearisation {it}: {fit.n_supported} effects supported, {a_s.size + a_r.size} parameters chosen, "
                 f"sigma {sigma:.4g} arcsec, the model TE moved {moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")
@@ -248,8 +250,9 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
                 log("the physical candidates have converged; the empirical block joins")
             active_prev = key
             renew = renew | (m.column_kinds() != "pin")
+        twins = swap_twins(pb, X0, theta, math.sqrt(fit.sigma2), a_s, a_r)
     return assemble(dataset, pb, F, fit, scales, theta, te, settings,
                     {"rms_before": rms_before, "stopped_by": stopped, "ramp_lines": pb.ramp_lines, "b_r": b_r,
-                     "active_s": a_s, "active_r": a_r, "prior_sd": sd,
+                     "active_s": a_s, "active_r": a_r, "prior_sd": sd, "twins": twins,
                      "seconds": time.perf_counter() - t0, "linearisations": it, "max_order": pb.max_order,
                      "solves": getattr(m, "solves", 0)})

@@ -24,7 +24,8 @@ from rvcalib.reducer_model import ModelEvaluationError
 
 def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np.ndarray, active_s: np.ndarray,
            active_r: np.ndarray, prior_sd: np.ndarray, sigma: float, spread: np.ndarray | None = None,
-           max_nfev: int | None = None, pool=None, log=None, feasible: np.ndarray | None = None):
+           max_nfev: int | None = None, pool=None, log=None, feasible: np.ndarray | None = None,
+           alternative: np.ndarray | None = None):
     """The MAP of the active parameters (see the module docstring).
 
     The active reading coefficients enter linearly: for each state of the solved ones they are the ridge solution
@@ -45,6 +46,8 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
     max_nfev : int or None, most model evaluations (default 10 + 2 per active solved parameter)
     feasible : (p,) or None, a state the model can solve (the current one): where the start ``theta`` cannot be
         solved (its errors overlap parts beyond the contact law), the start moves towards it, halving the way
+    alternative : (p,) or None, a second start (the linearised estimate); the search starts from whichever of the
+        two has the lower objective
 
     Returns
     -------
@@ -93,15 +96,11 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
         te = model.te(theta)
         b[active_r] = linear(proj(y - te - R @ _zero(b_r, active_r)))
         return theta, _zero(b, np.zeros(0, int)) + _only(b, active_r, b_r), te, float("nan")
-    x0 = np.clip(theta[active_s], lo, hi)
-    if feasible is not None:
-        for _ in range(6):
-            if np.all(fun(x0)[:3] < 1e6):
-                break
-            theta = feasible + 0.5 * (theta - feasible)
-            x0 = np.clip(theta[active_s], lo, hi)
-        else:
-            theta, x0 = feasible.copy(), np.clip(feasible[active_s], lo, hi)
+    x0 = _solvable(fun, theta, active_s, lo, hi, feasible)
+    if alternative is not None:
+        x1 = _solvable(fun, alternative, active_s, lo, hi, feasible)
+        if not np.array_equal(x1, x0) and np.sum(fun(x1) ** 2) < np.sum(fun(x0) ** 2):
+            x0 = x1
     if np.any((x0 <= lo) | (x0 >= hi)):
         x0 = _gauss_newton_start(fun, jac, x0, lo, hi, sd)
     nfev = max_nfev or 10 + 2 * active_s.size
@@ -112,6 +111,21 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
         log(f"  nonlinear estimate of {active_s.size} solved and {active_r.size} reading parameters: "
             f"{res.nfev} evaluations, objective {2 * res.cost:.1f} ({res.message})")
     return state(res.x), b, cache["te"], float(2 * res.cost)
+
+
+def _solvable(fun, theta: np.ndarray, active_s: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+              feasible: np.ndarray | None) -> np.ndarray:
+    """The active parameters of ``theta`` within their bounds, moved towards ``feasible`` (halving the way, at most
+    six times, then ``feasible`` itself) while the model cannot solve them."""
+    x0 = np.clip(theta[active_s], lo, hi)
+    if feasible is None:
+        return x0
+    for _ in range(6):
+        if np.all(fun(x0)[:3] < 1e6):
+            return x0
+        theta = feasible + 0.5 * (theta - feasible)
+        x0 = np.clip(theta[active_s], lo, hi)
+    return np.clip(feasible[active_s], lo, hi)
 
 
 def _gauss_newton_start(fun, jac, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, sd: np.ndarray) -> np.ndarray:

@@ -46,7 +46,8 @@ def _head(obj: dict, dataset) -> list[str]:
          f"- reducer: {reducer_line(obj['reducer'])}",
          f"- measured TE of a reading: {te_formula(obj['ratio'])}, {obj['ratio']:g} the ratio of this reducer",
          f"- {len(dataset.runs)} runs in {len(dataset.tests)} tests, {dataset.n_samples} readings; noise "
-         f"{obj['noise_arcsec']:.4g} arcsec (second differences of the records), the estimator's "
+         f"{obj['noise_arcsec']:.4g} arcsec (second differences of the records or of the residual, the smaller), the "
+         f"estimator's "
          f"{obj['sigma_arcsec']:.4g}",
          f"- the loop ended: {obj['stopped_by']} after {obj['linearisations']} linearisations "
          f"({obj['seconds']:.1f} s)" + ("; **every single effect allowed was used (the cap --max-effects binds)**"
@@ -135,6 +136,8 @@ def _groups(obj: dict) -> list[str]:
     for i, g in enumerate(obj["groups"]):
         L.append(f"Group {i + 1} ({g.get('kind', 'physical')}; coverage {num(g.get('coverage'), 3)}, purity "
                  f"{num(g.get('purity'), 3)}):")
+        if g.get("reason"):
+            L.append(f"Why a group: {g['reason']}.")
         L.append("")
         L += _table(["member", "size", "unit", "angle (deg)", "probability"],
                     [[f"`{m['name']}`", num(m["value"], 5), m["unit"], num(m.get("angle_deg")),
@@ -163,7 +166,7 @@ def _unexplained(obj: dict) -> list[str]:
     if obj["diffuse"]:
         L.append("")
         L.append(f"{len(obj['diffuse'])} effect(s) of the fit are diffuse (members that do not explain the same "
-                 "signal) and name nothing.")
+                 "signal, or a size whose 95 % interval includes zero) and name nothing.")
     return L + [""]
 
 

@@ -23,6 +23,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from rvcalib.sparse import credible_sets
+from rvrig.dataset import noise_estimate
 
 
 @dataclass
@@ -170,6 +171,19 @@ def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float, laplace: 
     return _effect(c, a_tot, m * tau, S * np.outer(tau, tau), level)
 
 
+def _twin_group(eff: NamedEffect, cands: list, f: int, twins: list, level: float) -> dict:
+    """A named effect that a swap cannot tell from its twins, as a group: each member with the effect's size and
+    its probability of being the one, exp(-Delta chi^2 / 2) normalised (equal prior odds)."""
+    pairs = [(cands[f], 0.0)] + [(cands[g], d) for g, d in twins]
+    w = np.exp(-0.5 * np.array([d for _, d in pairs]))
+    members = [{"name": c.effect_name, "key": c.key, "family": c.family, "instance": dict(c.instance),
+                "unit": c.unit, "value": eff.value, "angle_deg": eff.angle_deg, "probability": float(p),
+                "delta_chi2": d} for (c, d), p in zip(pairs, w / w.sum())]
+    return {"kind": "physical", "coverage": level, "purity": None, "ci95": eff.ci95,
+            "reason": "each fits the data as well in the others' place (delta chi2 below chi2(1) at 95 %)",
+            "members": members}
+
+
 def _unexplained(members: list, cands: list) -> dict:
     ms = [m for m in members if m["family"] == "empirical"]
     c = next(c for c in cands if c.effect_name == ms[0]["name"])
@@ -217,7 +231,7 @@ def read_dense(fc: list, e, F, tau: np.ndarray, level: float, laplace: Laplace |
 
 
 def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed: tuple,
-                   laplace: Laplace | None = None) -> tuple:
+                   laplace: Laplace | None = None, twins: dict | None = None) -> tuple:
     """Named effects, groups, unexplained structure and diffuse sets from a fit (see the module docstring)."""
     level = settings.coverage
     named, groups, unexplained, diffuse = [], [], [], []
@@ -235,19 +249,37 @@ def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed
         info = {"members": members, "coverage": cs.coverage, "purity": cs.purity, "log_bf": cs.log_bf}
         if not cs.pure(settings.sparse()):
             if all(d["members"] != members for d in diffuse):
-                diffuse.append(info)
+                diffuse.append(dict(info, reason="its members do not explain the same signal"))
             continue
         fams = {cands[f].family for f in cs.features}
         if cs.size == 1 and cands[cs.features[0]].physical:
             f = cs.features[0]
             if all(e.name != cands[f].effect_name for e in named):
-                named.append(_named(cands[f], fit.effects, f, F, tau[F.starts[f]:F.starts[f + 1]], level, laplace))
+                eff = _named(cands[f], fit.effects, f, F, tau[F.starts[f]:F.starts[f + 1]], level, laplace)
+                if not (eff.ci95[0] > 0 or eff.ci95[1] < 0):   # the data cannot tell its size from zero
+                    diffuse.append(dict(info, reason="its 95 % interval includes zero"))
+                elif (twins or {}).get(f):      # another candidate fits as well in its place (rvcalib.twins)
+                    groups.append(_twin_group(eff, cands, f, twins[f], level))
+                else:
+                    named.append(eff)
         elif fams == {"empirical"}:
             unexplained.append(_unexplained(members, cands))
         else:
             info["kind"] = "physical" if "empirical" not in fams else "physical or unexplained"
             groups.append(info)
     return named, groups, unexplained, diffuse
+
+
+def _noise(dataset, r: np.ndarray, offs: np.ndarray) -> float:
+    """The noise the verdict compares with, arcsec: the smaller of two upper bounds on white reading noise, the
+    second differences of the records (:func:`rvrig.dataset.noise_estimate`, pooled over the runs) and the same
+    estimate on the residual after the fit. A sharp signature the records hold (one pin's error sampled a few times
+    per pin pitch) inflates the first; what the model explains leaves the second."""
+    w = np.diff(offs).astype(float)
+    s = np.array([noise_estimate(r[offs[i]:offs[i + 1]]) for i in range(len(w))])
+    ok = np.isfinite(s)
+    resid = float(np.sqrt(np.sum(w[ok] * s[ok] ** 2) / np.sum(w[ok]))) if ok.any() else float("inf")
+    return min(float(dataset.noise_arcsec()), resid)
 
 
 def assemble(dataset, pb, F, fit, scales, theta, te, settings, info: dict) -> CalibrationResult:
@@ -257,7 +289,8 @@ def assemble(dataset, pb, F, fit, scales, theta, te, settings, info: dict) -> Ca
     idx = np.concatenate([info["active_s"], n_s + info["active_r"]]).astype(int)
     laplace = Laplace(F.X, idx, info["prior_sd"], fit.sigma2, np.concatenate([theta, info["b_r"]]), tau) \
         if idx.size else None
-    named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed, laplace)
+    named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed, laplace,
+                                                         info.get("twins"))
     resid = pb.y - te - pb.R @ info["b_r"]
     consts = pb.proj.constants(resid)
     r = pb.proj(resid)
@@ -268,7 +301,7 @@ def assemble(dataset, pb, F, fit, scales, theta, te, settings, info: dict) -> Ca
         effects=named, groups=groups, unexplained=unexplained, diffuse=diffuse,
         nuisance=[{"test": t, "constant_arcsec": float(c)} for t, c in zip(pb.tests, consts)],
         rms_before=info["rms_before"], rms_after=float(np.sqrt(np.mean(r ** 2))),
-        noise_arcsec=float(dataset.noise_arcsec()), sigma_arcsec=float(math.sqrt(fit.sigma2)),
+        noise_arcsec=_noise(dataset, r, offs), sigma_arcsec=float(math.sqrt(fit.sigma2)),
         stopped_by=info["stopped_by"], cap_binds=fit.n_supported - len(pb.fixed) >= settings.max_effects,
         seconds=float(info["seconds"]), linearisations=info["linearisations"], settings=settings.to_dict(),
         notes=list(pb.library.notes) + list(info["ramp_lines"]), reducer=dataset.reducer(), calibrated_case=case,
