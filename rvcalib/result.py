@@ -216,8 +216,10 @@ def read_dense(fc: list, e, F, tau: np.ndarray, level: float, laplace: Laplace |
                 for k, o in ((i, j), (j, i)):
                     a, b = spans[k].start, spans[o].start
                     alone = m[a] - S[a, b] / S[b, b] * m[b]      # its posterior mean were the other zero
+                    inside = fc[k].lower <= alone <= fc[k].upper
                     members.append({"name": fc[k].effect_name, "key": fc[k].key, "family": fc[k].family,
-                                    "instance": dict(fc[k].instance), "unit": fc[k].unit, "value": float(alone),
+                                    "instance": dict(fc[k].instance), "unit": fc[k].unit,
+                                    "value": float(alone) if inside else "unbounded",
                                     "angle_deg": None, "probability": 1.0})
                 groups.append({"kind": "physical", "coverage": level, "purity": float(abs(corr[a, b])),
                                "members": members})

@@ -1,0 +1,68 @@
+"""The swap test (rvcalib.twins) on a small nonlinear stand-in: two candidates that give the same TE are twins,
+one whose TE differs by more than the noise allows is not, and the reading coefficients are refitted in a swap."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from rvcalib.loop import Projector
+from rvcalib.twins import DELTA_CHI2, swap_twins
+
+N = 200
+PHI = np.linspace(0.0, 2.0 * np.pi, N, endpoint=False)
+
+
+class KinkedModel:
+    """te(theta) = sum_j shape_j * max(theta_j, 0): a pin that acts only when pushed in (a kink at zero)."""
+
+    def __init__(self, shapes: np.ndarray) -> None:
+        self.shapes = shapes
+        self.n_params = shapes.shape[1]
+        self._lower = np.zeros(self.n_params)
+        self._upper = np.full(self.n_params, 10.0)
+        self.calls = 0
+
+    def te(self, theta: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        return self.shapes @ np.maximum(theta, 0.0)
+
+
+def _problem(shapes: np.ndarray, theta_true: np.ndarray, sigma: float, R: np.ndarray | None = None,
+             b_true: np.ndarray | None = None, seed: int = 5):
+    rng = np.random.default_rng(seed)
+    model = KinkedModel(shapes)
+    R = np.zeros((N, 0)) if R is None else R
+    y = model.te(theta_true) + (R @ b_true if b_true is not None else 0.0) + rng.normal(0.0, sigma, N) + 3.0
+    p = shapes.shape[1]
+    return SimpleNamespace(model=model, y=y, proj=Projector(np.ones((N, 1))), R=R,
+                           feature_cands=[[f"c{j}"] for j in range(p + R.shape[1])],
+                           starts=np.arange(p + R.shape[1] + 1), fixed=())
+
+
+def test_two_candidates_with_the_same_te_are_twins_and_a_different_one_is_not():
+    a = np.cos(3 * PHI) + 0.3 * np.sin(7 * PHI)
+    near = a + 0.02 * np.cos(11 * PHI)              # alike to 0.99 in shape, but told apart by 400 readings
+    shapes = np.column_stack([a, a, near, np.sin(2 * PHI)])
+    pb = _problem(shapes, np.array([2.0, 0.0, 0.0, 0.0]), sigma=0.05)
+    X0 = pb.proj(shapes)
+    got = swap_twins(pb, X0, np.array([2.0, 0.0, 0.0, 0.0]), 0.05, np.array([0]), np.zeros(0, int))
+    assert list(got) == [0]
+    assert [g for g, _ in got[0]] == [1]                    # the exact twin; not the near one, not the other order
+    assert got[0][0][1] == pytest.approx(0.0, abs=1e-9)
+    chi_near = float(np.sum(pb.proj(0.02 * 2.0 * np.cos(11 * PHI)) ** 2)) / 0.05 ** 2
+    assert chi_near > DELTA_CHI2                            # why the near one is not a twin: it fits worse
+
+
+def test_a_swap_refits_the_reading_coefficients_and_leaves_the_model_at_the_estimate():
+    a = np.cos(3 * PHI)
+    shapes = np.column_stack([a, a + 0.1 * np.sin(PHI)])    # differ by an order-1 term a reading column holds
+    R = np.column_stack([np.sin(PHI)])
+    pb = _problem(shapes, np.array([1.0, 0.0]), sigma=0.05, R=R, b_true=np.array([0.8]))
+    theta = np.array([1.0, 0.0])
+    got = swap_twins(pb, pb.proj(np.column_stack([shapes, R])), theta, 0.05, np.array([0]), np.array([0]))
+    assert [g for g, _ in got[0]] == [1]                    # the reading coefficient takes the difference
+    assert np.allclose(pb.model.te(theta), shapes @ theta)
+    plain = _problem(shapes, theta, sigma=0.05)             # no reading column: the order-1 term tells them apart
+    assert swap_twins(plain, plain.proj(shapes), theta, 0.05, np.array([0]), np.zeros(0, int)) == {}
