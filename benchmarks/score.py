@@ -117,8 +117,10 @@ def truths(answer: dict[str, Any]) -> dict[tuple[str, tuple], Truth]:
 def components_of(e: dict[str, Any]) -> np.ndarray | None:
     """A named effect's two components (``components``, else ``value`` along ``angle_deg``); None for a
     one-component effect."""
-    if e.get("components") is not None:
+    if e.get("components") is not None and len(e["components"]) == 2:
         return np.asarray(e["components"], dtype=float)
+    if e.get("components") is not None:
+        return None
     if e.get("angle_deg") is None:
         return None
     a = math.radians(float(e["angle_deg"]))
