@@ -72,6 +72,8 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
         return th
 
     def fun(x):
+        if np.array_equal(cache.get("x"), x):      # the model's last solve: its states are this x's
+            return cache["f"].copy()
         th = state(x)
         try:
             te = model.te(th)
@@ -79,8 +81,9 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
             return np.full(y.size + x.size + active_r.size, 1e6)
         r = proj(y - te - R @ _zero(b_r, active_r))
         br = linear(r)
-        cache["x"], cache["te"], cache["br"] = x.copy(), te, br
-        return np.concatenate([(r - Ra @ br) / sigma, x / sd, br * np.sqrt(ra_prior)])
+        f = np.concatenate([(r - Ra @ br) / sigma, x / sd, br * np.sqrt(ra_prior)])
+        cache["x"], cache["te"], cache["br"], cache["f"] = x.copy(), te, br, f
+        return f.copy()
 
     def jac(x):
         if not np.array_equal(cache.get("x"), x):
@@ -129,8 +132,9 @@ def _solvable(fun, theta: np.ndarray, active_s: np.ndarray, lo: np.ndarray, hi: 
 
 
 def _gauss_newton_start(fun, jac, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, sd: np.ndarray) -> np.ndarray:
-    """The start of the trust-region search from a start on a bound: the linearised MAP from ``x0`` (one Gauss-Newton step), kept strictly
-    inside the bounds (a thousandth of a prior scale from each), where it lowers the objective; else ``x0``.
+    """The start of the trust-region search from a start on a bound: the linearised MAP from ``x0`` (one
+    Gauss-Newton step), kept strictly inside the bounds (a thousandth of a prior scale from each), where it lowers
+    the objective; else ``x0``.
 
     The trust-region reflective method makes little or no progress from a start on a bound (a clearance or a
     compliance at zero) whose gradient points inwards; the Gauss-Newton step moves it off at once."""

@@ -60,7 +60,8 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
 
     single = [f for f in range(len(pb.feature_cands))
               if pb.starts[f + 1] - pb.starts[f] == 1 and pb.starts[f] < n and f not in pb.fixed]
-    chosen = [f for f in single if pb.starts[f] in set(active_s.tolist())]
+    on = set(active_s.tolist())
+    chosen = [f for f in single if pb.starts[f] in on]
     if not chosen:
         return {}
     C = X0 / np.maximum(np.linalg.norm(X0, axis=0), 1e-300)
@@ -68,7 +69,7 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
     out: dict[int, list[tuple[int, float]]] = {}
     for f in chosen:
         j = pb.starts[f]
-        others = [g for g in single if g != f and pb.starts[g] not in set(active_s.tolist())]
+        others = [g for g in single if g != f and pb.starts[g] not in on]
         r = np.array([abs(C[:, j] @ C[:, pb.starts[g]]) for g in others])
         near = [others[k] for k in np.argsort(-r)[:MOST] if r[k] >= SCREEN]
         found = []
