@@ -21,6 +21,7 @@ import argparse
 import json
 import math
 import numbers
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NoReturn
@@ -355,6 +356,17 @@ def output_dir(path: str | Path, name: str = "--out") -> Path:
 def one_line(exc: BaseException) -> str:
     """The message of an exception on one line (newlines folded), for the command lines' stderr."""
     return " ".join(str(exc).split())
+
+
+def refuse(prog: str, exc: Exception) -> int:
+    """Print a bad input (a ``ValueError``, or an ``OSError`` naming its file) as one line of stderr,
+    ``PROG: error: MESSAGE``, and return the command lines' exit status for it, 2."""
+    if isinstance(exc, OSError):
+        msg = f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": ")
+    else:
+        msg = one_line(exc)
+    print(f"{prog}: error: {msg}", file=sys.stderr)
+    return 2
 
 
 class ArgumentParser(argparse.ArgumentParser):

@@ -231,12 +231,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         settings = settings_from(args)
         ds = read_dataset(args.dataset, design=args.reducer)
-    except ValueError as exc:
-        print(f"rv-calibrate: error: {v.one_line(exc)}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"rv-calibrate: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
-        return 2
+    except (ValueError, OSError) as exc:
+        return v.refuse("rv-calibrate", exc)
     log = (lambda s: print(f"rv-calibrate: {s}", file=sys.stderr, flush=True)) if args.verbose else None
     try:
         paths = run(ds, settings, args.out, args.holdout_loads, log)

@@ -215,12 +215,8 @@ def main(argv: list[str] | None = None) -> int:
             _check_stiffness_options(args)
             return _stiffness(args)
         return _te(args)
-    except ValueError as exc:
-        print(f"rvdyn: error: {v.one_line(exc)}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"rvdyn: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
-        return 2
+    except (ValueError, OSError) as exc:
+        return v.refuse("rvdyn", exc)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -89,11 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         res = import_rig(args.files, out, ratio=args.ratio, design=args.reducer, load_Nm=args.load_Nm,
                          speed_rpm=args.speed_rpm, temperature_C=args.temperature_C,
                          samples_per_rev=args.samples_per_rev, sample_rate_Hz=args.sample_rate_Hz, test=args.test)
-    except ValueError as exc:
-        print(f"rv-calibrate import: error: {v.one_line(exc)}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"rv-calibrate import: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
-        return 2
+    except (ValueError, OSError) as exc:
+        return v.refuse("rv-calibrate import", exc)
     print(json.dumps(res, indent=2, default=float) if args.json else summary(res))
     return 0

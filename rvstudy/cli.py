@@ -252,12 +252,8 @@ def main(argv: list[str] | None = None) -> int:
     except SchedulerError as exc:
         print(f"rv-stackup: error: --scheduler {exc.address!r}: {exc.reason}", file=sys.stderr)
         return 2
-    except ValueError as exc:
-        print(f"rv-stackup: error: {v.one_line(exc)}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"rv-stackup: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
-        return 2
+    except (ValueError, OSError) as exc:
+        return v.refuse("rv-stackup", exc)
     except KeyboardInterrupt:
         print("rv-stackup: interrupted; finished cases are in the cache, rerun the same command to resume",
               file=sys.stderr)
