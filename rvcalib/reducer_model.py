@@ -7,14 +7,17 @@ the same errors form one case; its conditions (load, direction, readings) are so
 :func:`rvdyn.te.run_te_many` (analytic contacts, the case's contact law: rvdyn's default, the physical law, unless
 the settings say otherwise), exactly at every reading's input angle (modulo one output revolution: the TE repeats
 every revolution). The converged states of the last solve start the next one (a warm start: the same equilibrium
-within the solver tolerance).
+within the solver tolerance). A condition at load 0 N m is rvdyn's rigid single-flank limit (the reducer turned
+without load), which only :func:`rvdyn.te.run_te` solves: those conditions are solved one at a time, always to
+convergence.
 
 The Jacobian's columns are the TE change per unit parameter at the current state, by the kind of response:
 
 * smooth parameters (the eccentricities, phases and holes of Table 4, the model options without a kink): the
   derivative, from ``jacobian_fn`` (default :func:`implicit_jacobian`, rvdyn's implicit differentiation of the
   equilibrium; :func:`sensitivity_jacobian`, one-sided differences each solved by one linearisation from the
-  current state, is the alternative);
+  current state, is the alternative); at the rigid limit, where rvdyn has no implicit derivative, the rows of the
+  conditions at load 0 are central differences of converged solves (:func:`rigid_columns`);
 * a single pin's pitch, radius or radial position: the TE of a zero-backlash ring responds to one pin with a kink
   (a pin pushed into the loaded flank takes load, one pulled away lifts off), so the column is the central secant
   over the parameter's current spread (statistical linearisation: the best straight line over the values the
@@ -44,9 +47,12 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from rvcad.errors import Case
+from rvcad.geometry import ReducerGeometry
 from rvdyn.contacts import ContactLaw
 from rvdyn.implicit import te_jacobian
-from rvdyn.te import run_te_many
+from rvdyn.options import parse_model
+from rvdyn.solver import InterferenceError
+from rvdyn.te import run_te, run_te_many
 
 from rvcalib.library import CaseDelta
 
@@ -67,23 +73,149 @@ class ModelEvaluationError(ValueError):
     convergence)."""
 
 
+def _rigid(load_Nm: float) -> bool:
+    """Whether a condition's load (N m) is rvdyn's rigid single-flank limit (load 0)."""
+    return float(load_Nm) == 0.0
+
+
 def _solve(case_dict: dict, loads: list, angles: list, law: ContactLaw | None, x_init: list | None = None,
            max_outer: int | None = None) -> tuple[list, list]:
-    """TE (arcsec) per condition and the converged states; ModelEvaluationError naming the failure."""
+    """TE per condition and the converged states.
+
+    Parameters
+    ----------
+    case_dict : dict
+        The case (case JSON).
+    loads : list of (float, int)
+        ``(load_Nm, direction)`` per condition: output load, N m (>= 0), and direction +1 or -1.
+    angles : list of arrays
+        Input angles per condition, deg, in the order of motion.
+    law : ContactLaw or None
+        The contact law (None: the case's).
+    x_init : list of arrays or None
+        Start states per condition (``TEResult.state`` of a nearby case at the same angles).
+    max_outer : int or None
+        Outer iterations of the warm-started conditions at load > 0 (1: a sensitivity solve; None: converged).
+
+    Returns
+    -------
+    te : list of arrays
+        TE per condition, arcsec.
+    states : list of arrays
+        The solved states per condition.
+
+    Notes
+    -----
+    The conditions at load > 0 are solved together (:func:`rvdyn.te.run_te_many`). Load 0 is rvdyn's rigid
+    single-flank limit, which only :func:`rvdyn.te.run_te` solves: those conditions are solved one at a time, each
+    to convergence from its start whatever ``max_outer`` says (measured on the paper's design: one linearisation
+    of the rigid penalty contacts misses up to 20 % of a cam-bearing clearance's TE change, and a converged warm
+    solve costs about as much). A condition that cannot be solved raises ModelEvaluationError naming its load and
+    direction.
+    """
     case = Case.from_dict(case_dict)
-    res = run_te_many(case, "analytic", loads=loads, theta_in_deg=angles, law=law, errors="return",
-                      x_init=x_init, max_outer=max_outer)
+    geom = ReducerGeometry(case)
+    starts = [None] * len(loads) if x_init is None else list(x_init)
+    res: list = [None] * len(loads)
+    loaded = [i for i, (L, _) in enumerate(loads) if not _rigid(L)]
+    if loaded:
+        got = run_te_many(case, "analytic", loads=[loads[i] for i in loaded], law=law, geom=geom, errors="return",
+                          theta_in_deg=[angles[i] for i in loaded], max_outer=max_outer,
+                          x_init=None if x_init is None else [starts[i] for i in loaded])
+        for i, r in zip(loaded, got):
+            res[i] = r
+    for i, (L, d) in enumerate(loads):
+        if _rigid(L):
+            try:
+                res[i] = run_te(case, "analytic", load_Nm=0.0, direction=d, law=law, geom=geom,
+                                theta_in_deg=angles[i], x_init=starts[i])
+            except (InterferenceError, RuntimeError) as exc:
+                res[i] = exc
     for r, (L, d) in zip(res, loads):
         if isinstance(r, Exception):
             raise ModelEvaluationError(f"the model cannot be solved at load {L:g} N m, direction {d:+d}: {r}")
     return [r.table["te_arcsec"].to_numpy() for r in res], [r.state for r in res]
 
 
+def _by_load(loads: list, angles: list, states: list, loaded_rows, rigid_rows) -> np.ndarray:
+    """Jacobian rows of the conditions at load > 0 from ``loaded_rows(loads, angles, states)`` and of those at load
+    0 (the rigid limit) from ``rigid_rows(loads, angles, states)``, each called on its conditions only (``states``
+    None: None), stacked back in the conditions' order; rows = the conditions' readings stacked."""
+    rows = np.cumsum([0] + [len(a) for a in angles])
+    out = None
+    for fn, rigid in ((loaded_rows, False), (rigid_rows, True)):
+        idx = [i for i, (L, _) in enumerate(loads) if _rigid(L) == rigid]
+        if not idx:
+            continue
+        blk = fn([loads[i] for i in idx], [angles[i] for i in idx],
+                 None if states is None else [states[i] for i in idx])
+        out = np.zeros((rows[-1], blk.shape[1])) if out is None else out
+        cuts = np.cumsum([0] + [len(angles[i]) for i in idx])
+        for k, i in enumerate(idx):
+            out[rows[i]:rows[i + 1]] = blk[cuts[k]:cuts[k + 1]]
+    return out
+
+
+def rigid_columns(case_dict: dict, deltas: list, loads: list, angles: list, states: list,
+                  law: ContactLaw | None, steps: list) -> np.ndarray:
+    """Columns d TE / d t of ``case (+) t delta`` at the rigid limit (load 0 N m), where rvdyn has no implicit
+    derivative: central differences of converged solves.
+
+    Parameters
+    ----------
+    case_dict : dict
+        The case at the current state (case JSON).
+    deltas : list of dict
+        Directions in case space (:meth:`rvcalib.library.Candidate.deltas`), per unit of each parameter.
+    loads : list of (float, int)
+        ``(load_Nm, direction)`` per condition, load 0 N m.
+    angles : list of arrays
+        Input angles per condition, deg, in the order of motion.
+    states : list of arrays
+        The current state's solved states per condition (warm starts).
+    law : ContactLaw or None
+        The contact law (None: the case's).
+    steps : list of float
+        Half-width of each column's difference, units of its parameter.
+
+    Returns
+    -------
+    (n, len(deltas)) array
+        TE change per unit parameter, arcsec per unit; rows = the conditions' readings stacked.
+
+    Notes
+    -----
+    Each column is :func:`secant_columns` over ``t = -steps[j] .. +steps[j]``, each end solved to convergence from
+    ``states``: an end the rigid limit cannot hold (an interference) is moved towards the current state a quarter at
+    a time, and an end outside a model option's range is the current state (a one-sided difference at the
+    option's bound).
+    """
+    lo = [-h if _valid_end(case_dict, d, -h) else 0.0 for d, h in zip(deltas, steps)]
+    hi = [h if _valid_end(case_dict, d, h) else 0.0 for d, h in zip(deltas, steps)]
+    return secant_columns(case_dict, deltas, lo, hi, loads, angles, states, law, None)
+
+
+def _valid_end(case_dict: dict, delta: dict, h: float) -> bool:
+    """Whether ``case (+) h delta`` has every model option inside its range."""
+    acc = CaseDelta()
+    _add_scaled(acc, delta, h)
+    try:
+        parse_model(acc.to_dict(case_dict).get("model"))
+    except ValueError:
+        return False
+    return True
+
+
 def sensitivity_jacobian(case_dict: dict, deltas: list, loads: list, angles: list, states: list,
                          law: ContactLaw | None, steps: list) -> np.ndarray:
     """Columns d TE / d t of ``case (+) t delta`` by one-sided differences of step ``steps[j]``, each perturbed case
     solved by one linearisation from ``states`` (rvdyn's sensitivity solve, ``max_outer=1``); rows = the
-    conditions' readings stacked."""
+    conditions' readings stacked. The rows of the conditions at load 0 (the rigid limit) are
+    :func:`rigid_columns`'."""
+    if any(_rigid(L) for L, _ in loads):
+        return _by_load(loads, angles, states,
+                        lambda *c: sensitivity_jacobian(case_dict, deltas, *c, law, steps),
+                        lambda *c: rigid_columns(case_dict, deltas, *c, law, steps))
     base, _ = _solve(case_dict, loads, angles, law, x_init=states, max_outer=1)
     base = np.concatenate(base)
     cols = []
@@ -99,7 +231,13 @@ def implicit_jacobian(case_dict: dict, deltas: list, loads: list, angles: list, 
                       law: ContactLaw | None, steps: list) -> np.ndarray:
     """Columns d TE / d t of ``case (+) t delta`` by implicit differentiation of the equilibrium at ``states``
     (:func:`rvdyn.implicit.te_jacobian`: one factorisation per reading, no solve per column); each direction is
-    scaled by its step (a tenth of the prior scale) for the geometry's differences and the column scaled back."""
+    scaled by its step (a tenth of the prior scale) for the geometry's differences and the column scaled back. The
+    rows of the conditions at load 0 (the rigid limit, which rvdyn does not differentiate) are
+    :func:`rigid_columns`'."""
+    if any(_rigid(L) for L, _ in loads):
+        return _by_load(loads, angles, states,
+                        lambda *c: implicit_jacobian(case_dict, deltas, *c, law, steps),
+                        lambda *c: rigid_columns(case_dict, deltas, *c, law, steps))
     scaled = []
     for delta, h in zip(deltas, steps):
         acc = CaseDelta()
@@ -137,7 +275,14 @@ def secant_columns(case_dict: dict, deltas: list, lo: list, hi: list, loads: lis
                    law: ContactLaw | None, max_outer: int | None) -> np.ndarray:
     """Columns (TE(case (+) hi_j delta_j) - TE(case (+) lo_j delta_j)) / (hi_j - lo_j), each end solved from
     ``states`` (``max_outer`` 1: a sensitivity solve; None: to convergence). An end the model cannot solve (an
-    interference beyond the contact law) is moved towards the current state, a quarter at a time."""
+    interference beyond the contact law) is moved towards the current state, a quarter at a time. With conditions
+    both at load 0 (the rigid limit) and above, each set's rows are solved on their own (:func:`_by_load`), so an
+    end only the rigid limit cannot hold does not shorten the secant of the other rows."""
+    rigid = [_rigid(L) for L, _ in loads]
+    if any(rigid) and not all(rigid):
+        def part(*c):
+            return secant_columns(case_dict, deltas, lo, hi, *c, law, max_outer)
+        return _by_load(loads, angles, states, part, part)
     cols = []
     cache: dict = {}
 
