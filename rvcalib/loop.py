@@ -12,17 +12,23 @@ reducer model through rvdyn (:mod:`rvcalib.reducer_model`); the method is writte
    over ``b`` (every candidate at once; the prior scale of each is its tolerance class).
 5. The chosen parameters (the always-estimated block, and the candidates of pure credible sets) are estimated
    through the reducer model itself (their nonlinear MAP, :mod:`rvcalib.refine`, started from where they are or
-   from the linearised estimate, whichever fits better); the others leave the model (zero).
-6. Repeat from 3 until the chosen set no longer changes and the model TE moves by less than ``step_tolerance``
-   times the noise (or ``max_linearisations``). The empirical block joins only once the physical candidates have
-   converged: what the physics cannot give is judged against the best physical model, not against a
-   linearisation far from it. The last linearisation's posterior is the answer: named effects, groups the data
-   cannot split, unexplained structure and the intervals (:mod:`rvcalib.result`).
+   from the linearised estimate, whichever fits better); the others leave the model (zero). That is a proposal;
+   where it does not lower the criterion (:func:`criterion`: the likelihood at its best noise variance, the
+   tolerance prior, the risk inflation criterion's price per parameter), the union of the current and the chosen sets, started
+   from the current state, is the second. A proposal is accepted only when it lowers the criterion, so the loop
+   never goes back: the estimator proposes, the criterion decides.
+6. Repeat from 3 until no proposal lowers the criterion, or the chosen set no longer changes and the model TE
+   moves by less than ``step_tolerance`` times the noise (or ``max_linearisations``). The empirical block joins
+   only once the physical candidates have converged: what the physics cannot give is judged against the best
+   physical model, not against a linearisation far from it. The posterior of the linearisation whose proposal
+   was accepted last is the answer: named effects, groups the data cannot split, unexplained structure and the
+   intervals (:mod:`rvcalib.result`).
 """
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 from typing import Callable
@@ -64,7 +70,8 @@ class Projector:
         return (self.N.T @ r) / self.counts
 
 
-def _scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.ndarray, readings: list) -> tuple:
+def _scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.ndarray, readings: list,
+            dataset) -> tuple:
     """Prior scales of the solved and the reading parameters, with the two taken from the model's response: the
     compliance's (the model's own compliance at the runs: the TE per N m of friction torque, which is load) and
     the empirical terms' (the median RMS TE of a tolerance-class Table 4 effect)."""
@@ -72,7 +79,8 @@ def _scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.ndarray,
     tr = np.array([c.prior_scale for c in readings for _ in range(c.n_params)])
     names = [c.name for c in model.candidates for _ in range(c.n_params)]
     if "friction_torque_Nm" in names and "torsional_compliance_arcsec_per_Nm" in names:
-        own = float(np.median(np.abs(J[:, names.index("friction_torque_Nm")])))
+        loaded = np.concatenate([np.full(r.n, r.load_Nm > 0) for r in dataset.runs])
+        own = float(np.median(np.abs(J[loaded, names.index("friction_torque_Nm")])))
         if own > 0:
             ts[names.index("torsional_compliance_arcsec_per_Nm")] = own
     t4 = [i for i, c in enumerate(c for c in model.candidates for _ in range(c.n_params)) if c.family == "table4"]
@@ -184,6 +192,77 @@ class _Problem:
         return Features(self.proj(np.column_stack([J * ts, self.R * tr])), self.starts, prior)
 
 
+@dataclass
+class _State:
+    """An accepted state of the loop: the solved parameters, the model TE there, the reading coefficients, the
+    chosen parameters with their prior standard deviations, the posterior that chose them and the criterion."""
+
+    theta: np.ndarray
+    te: np.ndarray
+    b_r: np.ndarray
+    a_s: np.ndarray
+    a_r: np.ndarray
+    sd: np.ndarray
+    phi: float
+    fit: object = None
+    F: Features | None = None
+
+
+def criterion(pb, theta: np.ndarray, te: np.ndarray, b_r: np.ndarray, a_s: np.ndarray, a_r: np.ndarray,
+              tau: np.ndarray) -> float:
+    """The one number every state of the loop is judged by (lower is better):
+
+        n ln(RSS / n) + sum_A (x_j / tau_j)^2 + 2 ln(p) |A|,   RSS = |P (y - f(theta) - R b)|^2
+
+    minus twice the log-likelihood with the noise variance at its maximum (``RSS / n``, ``n`` the readings less the
+    tests' constants: no noise figure has to be assumed), the tolerance prior of the chosen parameters ``A``
+    (``tau`` their prior scales) and the risk inflation criterion's price of each chosen parameter among the ``p``
+    the library holds (Foster and George 1994: a parameter is worth choosing among p candidates when it lowers the
+    chi-square by more than 2 ln p)."""
+    r = pb.proj(pb.y - te - pb.R @ b_r)
+    n_s = theta.size
+    n = r.size - len(pb.tests)
+    x = np.concatenate([theta[a_s], b_r[a_r]])
+    t = np.concatenate([tau[a_s], tau[n_s + a_r]])
+    p = n_s + b_r.size
+    rss = max(float(r @ r), 1e-300)
+    return float(n * math.log(rss / n) + np.sum((x / t) ** 2) + 2.0 * math.log(max(p, 2)) * x.size)
+
+
+def _propose(pb, cur: _State, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, pool, log) -> _State | None:
+    """The best of two proposals from one linearisation, if it lowers the criterion below the current state's:
+    the posterior's chosen set (from where its parameters are, or from the linearised estimate), and, where that
+    does not lower it, the union of the current and the chosen sets started from the current state."""
+    m = pb.model
+    n = m.n_params
+    best = None
+    tries = [(a_s, a_r, linear)]
+    union_s, union_r = np.union1d(cur.a_s, a_s).astype(int), np.union1d(cur.a_r, a_r).astype(int)
+    if union_s.size + union_r.size > cur.a_s.size + cur.a_r.size:
+        tries.append((union_s, union_r, None))
+    for k, (ps, pr, alt) in enumerate(tries):
+        if k == 1 and best is not None and best.phi < cur.phi:
+            break
+        here = np.zeros(n)
+        here[ps] = cur.theta[ps]
+        psd = sd.copy()                 # the chosen set's prior sds; the tolerance scale (1) for the others
+        b0 = np.zeros(cur.b_r.size)
+        b0[pr] = cur.b_r[pr]
+        th, b, te, _ = refine(m, pb.y, pb.proj, pb.R, here, b0, ps, pr, psd * tau, sigma, spread=spread, pool=pool,
+                              log=log, feasible=cur.theta, alternative=alt)
+        phi = criterion(pb, th, te, b, ps, pr, tau)
+        log(f"  {'chosen set' if k == 0 else 'union with the current set'}: criterion {phi:.4f} "
+            f"(current {cur.phi:.4f})")
+        last = th
+        if best is None or phi < best.phi:
+            best = _State(th, te, b, ps, pr, psd, phi, fit, F)
+    if best is None or best.phi >= cur.phi:
+        return None
+    if best.theta is not last:
+        m.te(best.theta)                        # the model's states at the accepted state (the next Jacobian's)
+    return best
+
+
 def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callable[[str], None] | None = None,
               model=None) -> CalibrationResult:
     """Calibrate the reducer model of a measured dataset.
@@ -214,45 +293,60 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     log(f"library: {len(pb.library)} candidates ({m.n_params} solved parameters, {R.shape[1]} reading columns); "
         f"residual RMS {rms_before:.4g} arcsec")
     pool_cm = ProcessPoolExecutor(settings.workers) if settings.workers > 1 else nullcontext()
-    fit = F = scales = spread = renew = X0 = None
-    active_prev: tuple = ()
+    fit = F = scales = spread = renew = X0 = J = None
     stopped = "max_linearisations"
-    b_r = np.zeros(R.shape[1])
     empirical = False
     with pool_cm as pool:
         theta, te = _global_fit(pb, theta, te, pool, log)
+        dense = np.array([i for i, c in enumerate(c for c in m.candidates for _ in range(c.n_params)) if c.dense],
+                         int)
+        cur = None
         for it in range(1, settings.max_linearisations + 1):
-            J = m.jacobian(theta, spread, renew, pool)
-            scales = scales or _scales(pb.library, m, J, R, pb.readings)
+            if J is None:
+                J = m.jacobian(theta, spread, renew, pool)
+            scales = scales or _scales(pb.library, m, J, R, pb.readings, dataset)
             ts, tr = scales
+            tau = np.concatenate(scales)
+            if cur is None:
+                cur = _State(theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), np.ones(tau.size),
+                             criterion(pb, theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), tau))
             F = pb.features(J, scales, empirical)
             X0 = F.X if X0 is None else X0
             z = proj(y - te + J @ theta)
             fit = fit_sparse(F, z, settings.sparse(), init=fit.effects if fit is not None else None, fixed=pb.fixed)
             sigma = math.sqrt(fit.sigma2)
             a_s, a_r, sd = _active(fit, F, m.n_params, settings, pb.fixed)
-            here, linear = np.zeros(m.n_params), np.zeros(m.n_params)   # the chosen effects in, the others out
-            here[a_s], linear[a_s] = theta[a_s], fit.coef[:m.n_params][a_s] * ts[a_s]
-            b_r = np.zeros(R.shape[1])
+            linear = np.zeros(m.n_params)
+            linear[a_s] = fit.coef[:m.n_params][a_s] * ts[a_s]
             spread, renew = _next_linearisation(fit, F, m.n_params, ts)
-            new, b_r, te_new, _ = refine(m, y, proj, R, here, b_r, a_s, a_r, sd * np.concatenate(scales), sigma,
-                                         spread=spread, pool=pool, log=log, feasible=theta, alternative=linear)
-            moved = float(np.sqrt(np.mean(proj(te_new - te) ** 2)))
-            log(f"linearisation {it}: {fit.n_supported} effects supported, {a_s.size + a_r.size} parameters chosen, "
-                f"sigma {sigma:.4g} arcsec, the model TE moved {moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")
-            theta, te = new, te_new
-            key = (tuple(a_s), tuple(a_r))
-            if key == active_prev and moved <= settings.step_tolerance * sigma:
+            new = _propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, pool, log)
+            if new is None:
+                m.te(cur.theta)                         # the model's states back at the current state
+                log(f"linearisation {it}: no proposal lowers the criterion ({time.perf_counter() - t0:.0f} s)")
+                if empirical or not pb.empirical.any():
+                    stopped = "converged"
+                    break
+                empirical = True
+                log("the physical candidates have converged; the empirical block joins")
+                continue                                # the same state: its columns stand
+            moved = float(np.sqrt(np.mean(proj(new.te - cur.te) ** 2)))
+            same = (tuple(new.a_s), tuple(new.a_r)) == (tuple(cur.a_s), tuple(cur.a_r))
+            log(f"linearisation {it}: {fit.n_supported} effects supported, {new.a_s.size + new.a_r.size} parameters "
+                f"chosen, sigma {sigma:.4g} arcsec, criterion {cur.phi:.4f} -> {new.phi:.4f}, the model TE moved "
+                f"{moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")
+            cur, theta, te, J = new, new.theta, new.te, None
+            renew = renew | (m.column_kinds() != "pin")
+            if same and moved <= settings.step_tolerance * sigma:
                 if empirical or not pb.empirical.any():
                     stopped = "converged"
                     break
                 empirical = True            # the physics has converged: now what it cannot give
                 log("the physical candidates have converged; the empirical block joins")
-            active_prev = key
-            renew = renew | (m.column_kinds() != "pin")
-        twins = swap_twins(pb, X0, theta, math.sqrt(fit.sigma2), a_s, a_r)
-    return assemble(dataset, pb, F, fit, scales, theta, te, settings,
-                    {"rms_before": rms_before, "stopped_by": stopped, "ramp_lines": pb.ramp_lines, "b_r": b_r,
-                     "active_s": a_s, "active_r": a_r, "prior_sd": sd, "twins": twins,
+        if cur.fit is None:                 # nothing accepted: the posterior of the last linearisation
+            cur.fit, cur.F = fit, F
+        twins = swap_twins(pb, X0, cur.theta, math.sqrt(cur.fit.sigma2), cur.a_s, cur.a_r)
+    return assemble(dataset, pb, cur.F, cur.fit, scales, cur.theta, cur.te, settings,
+                    {"rms_before": rms_before, "stopped_by": stopped, "ramp_lines": pb.ramp_lines, "b_r": cur.b_r,
+                     "active_s": cur.a_s, "active_r": cur.a_r, "prior_sd": cur.sd, "twins": twins,
                      "seconds": time.perf_counter() - t0, "linearisations": it, "max_order": pb.max_order,
                      "solves": getattr(m, "solves", 0)})

@@ -5,6 +5,7 @@ what the physics adds beyond a linear response is the subject of tests/test_cali
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -67,8 +68,13 @@ def test_several_effects_at_once_named_with_intervals_that_cover(base):
     ds, fm = base
     truth = {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2,
              "pin_pitch[pin=7] (+)": 0.004}
-    res = calibrate(_data(ds, fm, truth), CalibrationSettings(), model=fm)
+    lines: list[str] = []
+    res = calibrate(_data(ds, fm, truth), CalibrationSettings(), model=fm, log=lines.append)
     got = _named(res)
+    steps = [re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines]
+    steps = [(float(m.group(1)), float(m.group(2))) for m in steps if m]
+    assert steps and all(b <= a for a, b in steps), lines         # an accepted state never raises the criterion
+    assert all(a == b for (_, b), (a, _) in zip(steps, steps[1:])), steps   # and the next starts from it
     for name, v in truth.items():
         name = name.replace(" (+)", "")
         assert name in got, (name, [e.line() for e in res.effects], res.groups)
