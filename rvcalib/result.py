@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy import optimize, stats
 
+from rvcalib.robust import floored, score_covariance
 from rvcalib.sparse import credible_sets
 from rvrig.dataset import noise_estimate
 
@@ -114,16 +115,42 @@ def mixture_interval(alpha: float, m: float, s: float, level: float = 0.95) -> t
 
 class Laplace:
     """The joint Gaussian posterior of the chosen parameters at the final state (Laplace's approximation of the
-    nonlinear MAP): precision ``X_A' X_A / sigma^2 + diag(1 / prior_sd^2)`` in the scaled units of the last
-    linearisation's columns, mean the refined state. Correlations between chosen effects (a pin's pitch and the
-    ring's fit, say) widen each one's interval, which the estimator's independent single effects do not."""
+    nonlinear MAP), in the scaled units of the last linearisation's columns, mean the refined state.
+
+    The candidates not chosen are not taken as exactly zero: each is a Gaussian random effect whose variance is its
+    posterior second moment under the estimator (``coef_var + coef^2`` of :class:`rvcalib.sparse.SparseFit`, what
+    the data leave of it). The noise of the chosen parameters' regression is then ``sigma^2 I + X_B D_B X_B'`` and
+    the precision ``X_A' (sigma^2 I + X_B D_B X_B')^-1 X_A + diag(1 / prior_sd^2)`` (Woodbury's identity keeps it
+    to the size of B). A chosen effect that an unchosen candidate could stand in for gets the wider interval that
+    uncertainty of the selection gives; correlations between chosen effects (a pin's pitch and the ring's fit, say)
+    widen each one's interval, which the estimator's independent single effects do not. Given the final residual
+    (``residual``, runs cut at ``offsets``), the white-noise information is replaced by the residual's own score
+    covariance where that is larger (:mod:`rvcalib.robust`: a residual that still holds structure widens the
+    intervals)."""
 
     def __init__(self, X: np.ndarray, idx: np.ndarray, prior_sd: np.ndarray, sigma2: float, values: np.ndarray,
-                 tau: np.ndarray) -> None:
+                 tau: np.ndarray, background: np.ndarray | None = None, residual: np.ndarray | None = None,
+                 offsets: np.ndarray | None = None) -> None:
         self.pos = {int(j): k for k, j in enumerate(idx)}
         Xa = X[:, idx]
-        A = Xa.T @ Xa / sigma2 + np.diag(1.0 / prior_sd[idx] ** 2)
-        self.cov = np.linalg.pinv(A) * np.outer(tau[idx], tau[idx])
+        W = Xa / sigma2                                     # (sigma^2 I + X_B D_B X_B')^-1 X_A
+        if background is not None:
+            out = np.ones(X.shape[1], dtype=bool)
+            out[idx] = False
+            keep = out & (background > 1e-12 * np.max(background, initial=0.0)) & (background > 0)
+            if keep.any():
+                Xb = X[:, keep] * np.sqrt(background[keep])
+                M = sigma2 * np.eye(Xb.shape[1]) + Xb.T @ Xb
+                W = (Xa - Xb @ np.linalg.solve(M, Xb.T @ Xa)) / sigma2
+        G = Xa.T @ W
+        P = np.diag(1.0 / prior_sd[idx] ** 2)
+        Hinv = np.linalg.pinv(G + P)
+        if residual is None:
+            cov = Hinv
+        else:                                               # the sandwich of rvcalib.robust: never narrower
+            S = floored(score_covariance(W, residual, offsets), G)
+            cov = Hinv @ (S + P) @ Hinv
+        self.cov = cov * np.outer(tau[idx], tau[idx])
         self.mean = values[idx]
 
     def block(self, a: int, b: int):
@@ -289,14 +316,14 @@ def assemble(dataset, pb, F, fit, scales, theta, te, settings, info: dict) -> Ca
     tau = np.concatenate(scales)
     n_s = theta.size
     idx = np.concatenate([info["active_s"], n_s + info["active_r"]]).astype(int)
-    laplace = Laplace(F.X, idx, info["prior_sd"], fit.sigma2, np.concatenate([theta, info["b_r"]]), tau) \
-        if idx.size else None
-    named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed, laplace,
-                                                         info.get("twins"))
     resid = pb.y - te - pb.R @ info["b_r"]
     consts = pb.proj.constants(resid)
     r = pb.proj(resid)
     offs = np.cumsum([0] + [run.n for run in dataset.runs])
+    laplace = Laplace(F.X, idx, info["prior_sd"], fit.sigma2, np.concatenate([theta, info["b_r"]]), tau,
+                      background=fit.coef_var + fit.coef ** 2, residual=r, offsets=offs) if idx.size else None
+    named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed, laplace,
+                                                         info.get("twins"))
     m = pb.model
     case = m.case_dict(m.groups[0], theta) if hasattr(m, "groups") and m.groups else {}
     return CalibrationResult(

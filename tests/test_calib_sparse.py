@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rvcalib.result import mixture_interval
+from rvcalib.result import Laplace, mixture_interval
 from rvcalib.sparse import Features, SparseSettings, credible_sets, fit_sparse, single_effect
 
 
@@ -119,3 +119,22 @@ def test_mixture_interval_closed_forms():
 def test_settings_refused(field, value, match):
     with pytest.raises(ValueError, match=match):
         SparseSettings(**{field: value}).validate()
+
+
+def test_laplace_takes_an_unchosen_look_alike_as_a_random_effect():
+    """Chosen column x_a, unchosen x_b = x_a + small, background variance v of b: the chosen coefficient's variance
+    is the closed form 1 / (x_a' (s2 I + v x_b x_b')^-1 x_a + 1 / p^2) (Sherman-Morrison), wider than without b."""
+    rng = np.random.default_rng(3)
+    n, s2, p2, v = 200, 0.04, 4.0, 0.5
+    xa = rng.normal(size=n)
+    xb = xa + 0.1 * rng.normal(size=n)
+    X = np.column_stack([xa, xb])
+    prior_sd = np.array([math.sqrt(p2), 1.0])
+    tau = np.array([2.0, 1.0])                      # physical = scaled * tau
+    lap = Laplace(X, np.array([0]), prior_sd, s2, np.array([0.3, 0.0]), tau, background=np.array([9.0, v]))
+    c = xb @ xa
+    quad = (xa @ xa - v * c ** 2 / (s2 + v * (xb @ xb))) / s2
+    assert lap.block(0, 1)[1][0, 0] == pytest.approx(tau[0] ** 2 / (quad + 1 / p2), rel=1e-9)
+    alone = Laplace(X, np.array([0]), prior_sd, s2, np.array([0.3, 0.0]), tau)
+    assert alone.block(0, 1)[1][0, 0] == pytest.approx(tau[0] ** 2 / (xa @ xa / s2 + 1 / p2), rel=1e-9)
+    assert lap.block(0, 1)[1][0, 0] > 10 * alone.block(0, 1)[1][0, 0]
