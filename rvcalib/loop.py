@@ -344,7 +344,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
                 log("the physical candidates have converged; the empirical block joins")
         if cur.fit is None:                 # nothing accepted: the posterior of the last linearisation
             cur.fit, cur.F = fit, F
-        twins = swap_twins(pb, X0, cur.theta, math.sqrt(cur.fit.sigma2), cur.a_s, cur.a_r)
+        twins = swap_twins(pb, X0, cur.theta, math.sqrt(cur.fit.sigma2), cur.a_s, cur.a_r, scales[0])
     return assemble(dataset, pb, cur.F, cur.fit, scales, cur.theta, cur.te, settings,
                     {"rms_before": rms_before, "stopped_by": stopped, "ramp_lines": pb.ramp_lines, "b_r": cur.b_r,
                      "active_s": cur.a_s, "active_r": cur.a_r, "prior_sd": cur.sd, "twins": twins,

@@ -9,7 +9,8 @@ would hide.
 
 So at the end every named single-parameter effect ``f`` is confronted with each candidate ``g`` whose column at the
 first linearisation (where neither was in the model) is nearly the same line (|correlation| at least
-:data:`SCREEN`, a screen that only limits the cost): the model is solved with ``f``'s size moved to ``g`` and the
+:data:`SCREEN`, a screen that only limits the cost): the model is solved with ``f``'s effect moved to ``g`` (at the size
+whose first-linearisation TE is ``f``'s, beyond what the reading coefficients take, its sign included: a half-turn twin acts with the opposite sign) and the
 reading coefficients refitted, and where the fit is worse by less than the 95 % quantile of chi-square with one
 degree of freedom (``Delta chi^2 < 3.84``, a likelihood ratio the data cannot tell from chance), ``g`` is a twin
 and ``f`` is reported as a group with it instead of a name.
@@ -30,7 +31,7 @@ DELTA_CHI2 = float(stats.chi2.ppf(0.95, 1))
 
 
 def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np.ndarray,
-               active_r: np.ndarray) -> dict[int, list[tuple[int, float]]]:
+               active_r: np.ndarray, tau: np.ndarray | None = None) -> dict[int, list[tuple[int, float, float]]]:
     """The twins of each chosen single-parameter feature.
 
     Parameters
@@ -47,6 +48,7 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
         Feature index -> [(twin feature index, Delta chi^2), ...] for the chosen features that have twins.
     """
     m, n = pb.model, pb.model.n_params
+    tau = np.ones(n) if tau is None else tau
     Ra = pb.proj(pb.R[:, active_r])
 
     def chi2(th: np.ndarray) -> float:
@@ -64,6 +66,12 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
     chosen = [f for f in single if pb.starts[f] in on]
     if not chosen:
         return {}
+    Q = np.linalg.qr(Ra)[0] if active_r.size else np.zeros((Ra.shape[0], 0))
+
+    def keep(x: np.ndarray) -> np.ndarray:
+        """What the refitted reading coefficients cannot absorb of a column."""
+        return x - Q @ (Q.T @ x)
+
     C = X0 / np.maximum(np.linalg.norm(X0, axis=0), 1e-300)
     base = chi2(theta)
     out: dict[int, list[tuple[int, float]]] = {}
@@ -74,12 +82,15 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
         near = [others[k] for k in np.argsort(-r)[:MOST] if r[k] >= SCREEN]
         found = []
         for g in near:
-            th = theta.copy()
-            th[pb.starts[g]] = np.clip(theta[j], m._lower[pb.starts[g]], m._upper[pb.starts[g]])
+            k = pb.starts[g]
+            th = theta.copy()               # g at the size whose first-linearisation TE is f's (sign included)
+            xk, xj = keep(X0[:, k]), keep(X0[:, j])
+            size = (xk @ xj) / max(xk @ xk, 1e-300) * theta[j] / tau[j] * tau[k]
+            th[k] = np.clip(size, m._lower[k], m._upper[k])
             th[j] = 0.0
             d = chi2(th) - base
             if d < DELTA_CHI2:
-                found.append((g, float(d)))
+                found.append((g, float(d), float(th[k])))
         if found:
             out[f] = found
     m.te(theta)                                     # the model's states are the estimate's again

@@ -49,7 +49,7 @@ def test_two_candidates_with_the_same_te_are_twins_and_a_different_one_is_not():
     X0 = pb.proj(shapes)
     got = swap_twins(pb, X0, np.array([2.0, 0.0, 0.0, 0.0]), 0.05, np.array([0]), np.zeros(0, int))
     assert list(got) == [0]
-    assert [g for g, _ in got[0]] == [1]                    # the exact twin; not the near one, not the other order
+    assert [g for g, *_ in got[0]] == [1]                   # the exact twin; not the near one, not the other order
     assert got[0][0][1] == pytest.approx(0.0, abs=1e-9)
     chi_near = float(np.sum(pb.proj(0.02 * 2.0 * np.cos(11 * PHI)) ** 2)) / 0.05 ** 2
     assert chi_near > DELTA_CHI2                            # why the near one is not a twin: it fits worse
@@ -62,7 +62,34 @@ def test_a_swap_refits_the_reading_coefficients_and_leaves_the_model_at_the_esti
     pb = _problem(shapes, np.array([1.0, 0.0]), sigma=0.05, R=R, b_true=np.array([0.8]))
     theta = np.array([1.0, 0.0])
     got = swap_twins(pb, pb.proj(np.column_stack([shapes, R])), theta, 0.05, np.array([0]), np.array([0]))
-    assert [g for g, _ in got[0]] == [1]                    # the reading coefficient takes the difference
+    assert [g for g, *_ in got[0]] == [1]                   # the reading coefficient takes the difference
     assert np.allclose(pb.model.te(theta), shapes @ theta)
     plain = _problem(shapes, theta, sigma=0.05)             # no reading column: the order-1 term tells them apart
     assert swap_twins(plain, plain.proj(shapes), theta, 0.05, np.array([0]), np.zeros(0, int)) == {}
+
+
+def test_a_twin_of_the_opposite_sign_is_found_at_its_own_size():
+    """A candidate whose TE is the named one's with the opposite sign and half the scale (the half-turn twins of
+    a two-crank reducer act with opposite signs): its swap size is minus twice the named size, and it is a twin."""
+    a = np.cos(3 * PHI) + 0.3 * np.sin(7 * PHI)
+    shapes = np.column_stack([a, -0.5 * a, np.sin(2 * PHI)])
+    model = np.column_stack([a, -0.5 * a, np.sin(2 * PHI)])
+    pb = _problem(shapes, np.array([2.0, 0.0, 0.0]), sigma=0.05)
+    pb.model = LinearModel(model)
+    theta = np.array([2.0, 0.0, 0.0])
+    got = swap_twins(pb, pb.proj(shapes), theta, 0.05, np.array([0]), np.zeros(0, int))
+    assert [g for g, *_ in got[0]] == [1]
+    assert got[0][0][2] == pytest.approx(-4.0)
+    assert got[0][0][1] == pytest.approx(0.0, abs=1e-9)
+
+
+class LinearModel(KinkedModel):
+    """te(theta) = shapes theta, both signs (a twin of the opposite sign needs a negative size)."""
+
+    def __init__(self, shapes: np.ndarray) -> None:
+        super().__init__(shapes)
+        self._lower = np.full(self.n_params, -10.0)
+
+    def te(self, theta: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        return self.shapes @ theta
