@@ -143,8 +143,7 @@ def _global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.nd
     """The always-estimated block's maximum a posteriori alone (no other effect), through the reducer model: the
     state the first linearisation starts from. A clearance or preload of the whole ring changes how every other
     error shows, so the other candidates' columns are taken where the ring's fit already is."""
-    m = pb.model
-    dense = np.array([i for i, c in enumerate(c for c in m.candidates for _ in range(c.n_params)) if c.dense], int)
+    m, dense = pb.model, pb.dense_params
     if dense.size == 0:
         return theta, te
     tau = np.array([c.prior_scale for c in m.candidates for _ in range(c.n_params)])
@@ -181,6 +180,9 @@ class _Problem:
         w = Library(self.solved + self.readings).prior_weights(settings.empirical_weight)
         self.prior = np.r_[[1.0] if dense else [], w[len(dense):]]
         self.empirical = np.array([fc[0].family == "empirical" for fc in self.feature_cands], dtype=bool)
+        #: the solved parameters of the always-estimated block (indices into the model's state)
+        self.dense_params = np.array([i for i, c in enumerate(c for c in self.model.candidates
+                                                               for _ in range(c.n_params)) if c.dense], dtype=int)
 
     def features(self, J: np.ndarray, scales, empirical: bool) -> Features:
         """The scaled, projected columns as features; without ``empirical`` the empirical block's prior weight is
@@ -298,8 +300,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     empirical = False
     with pool_cm as pool:
         theta, te = _global_fit(pb, theta, te, pool, log)
-        dense = np.array([i for i, c in enumerate(c for c in m.candidates for _ in range(c.n_params)) if c.dense],
-                         int)
+        dense = pb.dense_params
         cur = None
         for it in range(1, settings.max_linearisations + 1):
             if J is None:
