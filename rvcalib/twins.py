@@ -9,10 +9,11 @@ would hide.
 
 So at the end every named single-parameter effect ``f`` is confronted with each candidate ``g`` whose column at the
 first linearisation (where neither was in the model) is nearly the same line (|correlation| at least
-:data:`SCREEN`, a screen that only limits the cost): the model is solved with ``f``'s effect moved to ``g`` (at the size
-whose first-linearisation TE is ``f``'s, beyond what the reading coefficients take, its sign included: a half-turn twin acts with the opposite sign) and the
-reading coefficients refitted, and where the fit is worse by less than the 95 % quantile of chi-square with one
-degree of freedom (``Delta chi^2 < 3.84``, a likelihood ratio the data cannot tell from chance), ``g`` is a twin
+:data:`SCREEN`, a screen that only limits the cost): the model is solved with ``f``'s effect moved to ``g`` (at the
+size whose first-linearisation TE is ``f``'s beyond what the reading coefficients take, its sign included: a
+half-turn twin acts with the opposite sign) and the reading coefficients refitted, and where the fit is worse by
+less than the 95 % quantile of chi-square with one degree of freedom (``Delta chi^2 < 3.84``, a likelihood ratio
+the data cannot tell from chance), ``g`` is a twin
 and ``f`` is reported as a group with it instead of a name.
 """
 from __future__ import annotations
