@@ -13,8 +13,7 @@ first linearisation (where neither was in the model) is nearly the same line (|c
 size whose first-linearisation TE is ``f``'s beyond what the reading coefficients take, its sign included: a
 half-turn twin acts with the opposite sign) and the reading coefficients refitted, and where the fit is worse by
 less than the 95 % quantile of chi-square with one degree of freedom (``Delta chi^2 < 3.84``, a likelihood ratio
-the data cannot tell from chance), ``g`` is a twin
-and ``f`` is reported as a group with it instead of a name.
+the data cannot tell from chance), ``g`` is a twin and ``f`` is reported as a group with it instead of a name.
 """
 from __future__ import annotations
 
