@@ -15,8 +15,8 @@ reducer model through rvdyn (:mod:`rvcalib.reducer_model`); the method is writte
    from the linearised estimate, whichever fits better); the others leave the model (zero). That is a proposal;
    where it does not lower the criterion (:func:`criterion`: the likelihood at its best noise variance, the
    tolerance prior, the risk inflation criterion's price per parameter), the union of the current and the chosen
-   sets, started from the current state, is the second. A proposal is accepted only when it lowers the criterion, so the loop
-   never goes back: the estimator proposes, the criterion decides.
+   sets, started from the current state, is the second. A proposal is accepted only when it lowers the criterion,
+   so the loop never goes back: the estimator proposes, the criterion decides.
 6. Repeat from 3 until no proposal lowers the criterion, or the chosen set no longer changes and the model TE
    moves by less than ``step_tolerance`` times the noise (or ``max_linearisations``). The empirical block joins
    only once the physical candidates have converged: what the physics cannot give is judged against the best
