@@ -44,6 +44,7 @@ from rvcalib.result import CalibrationResult, assemble
 from rvcalib.settings import CalibrationSettings
 from rvcalib.refine import refine
 from rvcalib.sparse import Features, credible_sets, fit_sparse
+from rvcalib.swaps import feature_columns, features_of, penalised_fit, swap_table
 from rvcalib.twins import swap_twins
 
 
@@ -184,6 +185,10 @@ class _Problem:
         self.dense_params = np.array([i for i, c in enumerate(c for c in self.model.candidates
                                                                for _ in range(c.n_params)) if c.dense], dtype=int)
 
+    def feature_name(self, f: int) -> str:
+        """A feature's name (its candidates' names)."""
+        return "+".join(c.name for c in self.feature_cands[f]) if f not in self.fixed else "the dense block"
+
     def features(self, J: np.ndarray, scales, empirical: bool) -> Features:
         """The scaled, projected columns as features; without ``empirical`` the empirical block's prior weight is
         zero (none of it can be chosen)."""
@@ -231,33 +236,71 @@ def criterion(pb, theta: np.ndarray, te: np.ndarray, b_r: np.ndarray, a_s: np.nd
     return float(n * math.log(rss / n) + np.sum((x / t) ** 2) + 2.0 * math.log(max(p, 2)) * x.size)
 
 
-def _propose(pb, cur: _State, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, pool, log) -> _State | None:
-    """The best of two proposals from one linearisation, if it lowers the criterion below the current state's:
-    the posterior's chosen set (from where its parameters are, or from the linearised estimate), and, where that
-    does not lower it, the union of the current and the chosen sets started from the current state."""
+def _swap_tries(pb, cur: _State, F: Features, z: np.ndarray, tau: np.ndarray, most: int) -> list:
+    """The best ``most`` swaps of the current chosen set on the linearised model (:mod:`rvcalib.swaps`), each as a
+    try for the reducer model: its solved and reading parameters, its prior standard deviations and its linearised
+    estimate (the penalised refit of the swapped set) as the second start."""
+    if most == 0:
+        return []
+    n = pb.model.n_params
+    c = np.concatenate([cur.theta, cur.b_r]) / tau
+    r = z - F.X @ c                                 # the current residual (J is taken at the current state)
+    sigma = math.sqrt(max(float(r @ r), 1e-300) / max(r.size - len(pb.tests), 1))
+    chosen = set(features_of(F.starts, np.concatenate([cur.a_s, n + cur.a_r]))) | set(pb.fixed)
+    allowed = F.prior > 0
+    tries = []
+    for sw in swap_table(F.X, F.starts, z, chosen, allowed, sigma, pb.fixed, most=most)[:most]:
+        feats = sorted((chosen - {sw.out}) | {sw.into})
+        cols = feature_columns(F.starts, feats)
+        coef = penalised_fit(F.X[:, cols], z, sigma)[3]
+        alt = np.zeros(n)
+        s_cols = cols[cols < n]
+        alt[s_cols] = coef[cols < n] * tau[s_cols]
+        psd = cur.sd.copy()
+        psd[feature_columns(F.starts, [sw.into])] = 1.0
+        tries.append((s_cols, cols[cols >= n] - n, alt, psd, f"swap {pb.feature_name(sw.out)} -> "
+                      f"{pb.feature_name(sw.into)} (linearised change {sw.delta:+.2f})"))
+    return tries
+
+
+def _propose(pb, cur: _State, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log) -> _State | None:
+    """The best of the proposals from one linearisation, if it lowers the criterion below the current state's:
+    the posterior's chosen set (from where its parameters are, or from the linearised estimate); where that does
+    not lower it with another set than the current one, the union of the current and the chosen sets started from
+    the current state; where neither does, the best swaps of the current set (:func:`_swap_tries`)."""
     m = pb.model
     n = m.n_params
     best = None
-    tries = [(a_s, a_r, linear)]
+    tries = [(a_s, a_r, linear, sd, "chosen set")]
     union_s, union_r = np.union1d(cur.a_s, a_s).astype(int), np.union1d(cur.a_r, a_r).astype(int)
     if union_s.size + union_r.size > cur.a_s.size + cur.a_r.size:
-        tries.append((union_s, union_r, None))
-    for k, (ps, pr, alt) in enumerate(tries):
-        if k == 1 and best is not None and best.phi < cur.phi:
+        tries.append((union_s, union_r, None, sd, "union with the current set"))
+
+    def moves(st: _State | None) -> bool:
+        """Whether a state lowers the criterion with another chosen set than the current one."""
+        return (st is not None and st.phi < cur.phi and
+                (tuple(st.a_s), tuple(st.a_r)) != (tuple(cur.a_s), tuple(cur.a_r)))
+
+    k, last, swapped = 0, None, False
+    while k < len(tries):
+        if k > 0 and moves(best):
             break
+        ps, pr, alt, psd, label = tries[k]
         here = np.zeros(n)
         here[ps] = cur.theta[ps]
-        psd = sd.copy()                 # the chosen set's prior sds; the tolerance scale (1) for the others
         b0 = np.zeros(cur.b_r.size)
         b0[pr] = cur.b_r[pr]
         th, b, te, _ = refine(m, pb.y, pb.proj, pb.R, here, b0, ps, pr, psd * tau, sigma, spread=spread, pool=pool,
                               log=log, feasible=cur.theta, alternative=alt)
         phi = criterion(pb, th, te, b, ps, pr, tau)
-        log(f"  {'chosen set' if k == 0 else 'union with the current set'}: criterion {phi:.4f} "
-            f"(current {cur.phi:.4f})")
+        log(f"  {label}: criterion {phi:.4f} (current {cur.phi:.4f})")
         last = th
         if best is None or phi < best.phi:
             best = _State(th, te, b, ps, pr, psd, phi, fit, F)
+        k += 1
+        if k == len(tries) and not swapped and not moves(best):
+            tries += _swap_tries(pb, cur, F, z, tau, pb.settings.swaps)
+            swapped = True
     if best is None or best.phi >= cur.phi:
         return None
     if best.theta is not last:
@@ -320,7 +363,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             linear = np.zeros(m.n_params)
             linear[a_s] = fit.coef[:m.n_params][a_s] * ts[a_s]
             spread, renew = _next_linearisation(fit, F, m.n_params, ts)
-            new = _propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, pool, log)
+            new = _propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log)
             if new is None:
                 m.te(cur.theta)                         # the model's states back at the current state
                 log(f"linearisation {it}: no proposal lowers the criterion ({time.perf_counter() - t0:.0f} s)")
@@ -345,7 +388,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
                 log("the physical candidates have converged; the empirical block joins")
         if cur.fit is None:                 # nothing accepted: the posterior of the last linearisation
             cur.fit, cur.F = fit, F
-        twins = swap_twins(pb, X0, cur.theta, math.sqrt(cur.fit.sigma2), cur.a_s, cur.a_r, scales[0])
+        twins = swap_twins(pb, X0, cur.theta, math.sqrt(cur.fit.sigma2), cur.a_s, cur.a_r, scales[0], F.X)
     return assemble(dataset, pb, cur.F, cur.fit, scales, cur.theta, cur.te, settings,
                     {"rms_before": rms_before, "stopped_by": stopped, "ramp_lines": pb.ramp_lines, "b_r": cur.b_r,
                      "active_s": cur.a_s, "active_r": cur.a_r, "prior_sd": cur.sd, "twins": twins,

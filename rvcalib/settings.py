@@ -32,6 +32,9 @@ class CalibrationSettings:
     step_tolerance : float
         The iteration has converged when the last linearisation's step changes the model TE by at most this
         fraction of the noise (RMS over the readings).
+    swaps : int
+        Most swaps of the chosen set (one feature out, another in: :mod:`rvcalib.swaps`) tried through the reducer
+        model at a linearisation where the estimator's proposals do not lower the criterion; 0: none.
     workers : int
         Processes for the Jacobian's columns.
     contact : str or None
@@ -50,6 +53,7 @@ class CalibrationSettings:
     max_order: int | None = None
     max_linearisations: int = 12
     step_tolerance: float = 0.1
+    swaps: int = 1
     workers: int = 1
     contact: str | None = None
     rated_Nm: float | None = None
@@ -70,6 +74,8 @@ class CalibrationSettings:
             bad("max_linearisations", "an integer in 1..100")
         if not (math.isfinite(self.step_tolerance) and self.step_tolerance > 0):
             bad("step_tolerance", "a finite number > 0")
+        if not (isinstance(self.swaps, int) and 0 <= self.swaps <= 20):
+            bad("swaps", "an integer in 0..20")
         if not (isinstance(self.workers, int) and 1 <= self.workers <= 64):
             bad("workers", "an integer in 1..64")
         if self.contact not in CONTACTS:

@@ -7,13 +7,17 @@ half a turn apart give the same TE to rounding), the next linearisation takes it
 other's where it is not, and the two no longer look alike. Which one entered first is then a coin toss the result
 would hide.
 
-So at the end every named single-parameter effect ``f`` is confronted with each candidate ``g`` whose column at the
-first linearisation (where neither was in the model) is nearly the same line (|correlation| at least
-:data:`SCREEN`, a screen that only limits the cost): the model is solved with ``f``'s effect moved to ``g`` (at the
-size whose first-linearisation TE is ``f``'s beyond what the reading coefficients take, its sign included: a
-half-turn twin acts with the opposite sign) and the reading coefficients refitted, and where the fit is worse by
-less than the 95 % quantile of chi-square with one degree of freedom (``Delta chi^2 < 3.84``, a likelihood ratio
-the data cannot tell from chance), ``g`` is a twin and ``f`` is reported as a group with it instead of a name.
+So at the end every named single-parameter effect ``f`` is confronted with the candidates ``g`` the data may not
+split from it, screened two ways (the screen only limits the cost): columns at the first linearisation (where
+neither was in the model) on nearly the same line (|correlation| at least :data:`SCREEN`), and candidates that,
+at the last linearisation, take ``f``'s TE with the other chosen parameters refitted and leave less than
+:data:`DELTA_CHI2` of it (a partial alias: a look-alike on the other crank or disc that, with the others moved,
+gives the same fit). The model is solved with ``f``'s effect moved to ``g`` (the least-squares move of ``f``'s
+linearised TE onto ``g`` and the other chosen parameters, on the columns of the screen that admitted ``g``, its sign
+included: a half-turn twin acts with the opposite sign) and the reading coefficients refitted, and where the fit
+is worse by less than the 95 % quantile of chi-square with one degree of freedom (``Delta chi^2 < 3.84``, a
+likelihood ratio the data cannot tell from chance), ``g`` is a twin and ``f`` is reported as a group with it
+instead of a name.
 """
 from __future__ import annotations
 
@@ -31,7 +35,8 @@ DELTA_CHI2 = float(stats.chi2.ppf(0.95, 1))
 
 
 def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np.ndarray,
-               active_r: np.ndarray, tau: np.ndarray | None = None) -> dict[int, list[tuple[int, float, float]]]:
+               active_r: np.ndarray, tau: np.ndarray | None = None,
+               X_last: np.ndarray | None = None) -> dict[int, list[tuple[int, float, float]]]:
     """The twins of each chosen single-parameter feature.
 
     Parameters
@@ -41,11 +46,14 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
     theta : (p,) the final solved parameters
     sigma : noise standard deviation, arcsec
     active_s, active_r : the chosen solved parameters and reading coefficients
+    tau : (p,) the solved parameters' prior scales (the columns' scaling); ones when None
+    X_last : (n, P) or None, the columns at the last linearisation (the partial-alias screen); none when None
 
     Returns
     -------
     dict
-        Feature index -> [(twin feature index, Delta chi^2), ...] for the chosen features that have twins.
+        Feature index -> [(twin feature index, Delta chi^2, its size), ...] for the chosen features that have
+        twins.
     """
     m, n = pb.model, pb.model.n_params
     tau = np.ones(n) if tau is None else tau
@@ -66,32 +74,57 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
     chosen = [f for f in single if pb.starts[f] in on]
     if not chosen:
         return {}
-    Q = np.linalg.qr(Ra)[0] if active_r.size else np.zeros((Ra.shape[0], 0))
-
-    def keep(x: np.ndarray) -> np.ndarray:
-        """What the refitted reading coefficients cannot absorb of a column."""
-        return x - Q @ (Q.T @ x)
-
     C = X0 / np.maximum(np.linalg.norm(X0, axis=0), 1e-300)
     base = chi2(theta)
-    out: dict[int, list[tuple[int, float]]] = {}
+    out: dict[int, list[tuple[int, float, float]]] = {}
     for f in chosen:
         j = pb.starts[f]
         others = [g for g in single if g != f and pb.starts[g] not in on]
-        r = np.array([abs(C[:, j] @ C[:, pb.starts[g]]) for g in others])
-        near = [others[k] for k in np.argsort(-r)[:MOST] if r[k] >= SCREEN]
+        cols = np.array([pb.starts[g] for g in others], dtype=int)
+        r = np.abs(C[:, cols].T @ C[:, j])
+        near = {others[k]: X0 for k in np.argsort(-r)[:MOST] if r[k] >= SCREEN}
+        if X_last is not None:
+            d = _moved_chi2(X_last, j, theta[j] / tau[j], active_s, n + active_r, cols) / sigma ** 2
+            for k in np.argsort(d)[:MOST]:
+                if d[k] < DELTA_CHI2:
+                    near.setdefault(others[k], X_last)
         found = []
-        for g in near:
+        for g, X in list(near.items())[:2 * MOST]:
             k = pb.starts[g]
-            th = theta.copy()               # g at the size whose first-linearisation TE is f's (sign included)
-            xk, xj = keep(X0[:, k]), keep(X0[:, j])
-            size = (xk @ xj) / max(xk @ xk, 1e-300) * theta[j] / tau[j] * tau[k]
-            th[k] = np.clip(size, m._lower[k], m._upper[k])
-            th[j] = 0.0
-            d = chi2(th) - base
-            if d < DELTA_CHI2:
-                found.append((g, float(d), float(th[k])))
+            th = _moved(X, theta, j, k, active_s, n + active_r, tau, m._lower, m._upper)
+            dchi = chi2(th) - base
+            if dchi < DELTA_CHI2:
+                found.append((g, float(dchi), float(th[k])))
         if found:
-            out[f] = found
+            out[f] = sorted(found, key=lambda t: t[1])
     m.te(theta)                                     # the model's states are the estimate's again
     return out
+
+
+def _moved_chi2(X: np.ndarray, j: int, c: float, active_s: np.ndarray, reading_cols: np.ndarray,
+                cols: np.ndarray) -> np.ndarray:
+    """For each candidate column: what is left of column ``j``'s TE (coefficient ``c``, scaled units) after the
+    least-squares move onto the candidate, the other chosen solved columns and the chosen reading columns."""
+    keep = np.concatenate([active_s[active_s != j], reading_cols]).astype(int)
+    Q = np.linalg.qr(X[:, keep])[0] if keep.size else np.zeros((X.shape[0], 0))
+    t = X[:, j] * c
+    t = t - Q @ (Q.T @ t)
+    G = X[:, cols]
+    G = G - Q @ (Q.T @ G)
+    gg = np.maximum(np.sum(G ** 2, axis=0), 1e-300)
+    return float(t @ t) - (G.T @ t) ** 2 / gg
+
+
+def _moved(X: np.ndarray, theta: np.ndarray, j: int, k: int, active_s: np.ndarray, reading_cols: np.ndarray,
+           tau: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """The state with parameter ``j``'s effect moved to ``k``: the least-squares move of ``j``'s linearised TE onto
+    ``k`` and the other chosen solved parameters (the reading columns take their part; the chi-square refits them),
+    within the parameters' bounds."""
+    B = active_s[active_s != j].astype(int)
+    D = X[:, np.concatenate([[k], B, reading_cols]).astype(int)]
+    coef = np.linalg.lstsq(D, X[:, j] * theta[j] / tau[j], rcond=None)[0]
+    th = theta.copy()
+    th[k] = coef[0] * tau[k]
+    th[B] = theta[B] + coef[1:1 + B.size] * tau[B]
+    th[j] = 0.0
+    return np.clip(th, lower, upper)

@@ -12,8 +12,9 @@ import pytest
 
 from calib_standin import frozen_model
 from rvrig.dataset import noise_estimate, read_dataset
-from rvcalib.loop import calibrate
+from rvcalib.loop import _Problem, _propose, _scales, _State, calibrate, criterion
 from rvcalib.readings import nuisance_columns
+from rvcalib.refine import refine
 from rvcalib.settings import CalibrationSettings
 from rvcalib.simulate import simulate_dataset, standard_runs
 
@@ -116,10 +117,36 @@ def test_twins_the_data_cannot_split_are_a_group_with_sizes(base):
     assert sum(m["probability"] for m in grp[0]["members"]) >= 0.95
 
 
+def test_a_look_alike_in_the_chosen_set_is_swapped_for_the_truth(base):
+    """A state holding a partial look-alike of the true effect (a cam eccentricity whose column is 0.99 alike to
+    the true carrier-hole eccentricity's), at its best size: the estimator's proposal is that set again, so only
+    the swap (rvcalib.swaps) reaches the truth; it lowers the criterion, and the truth is found at its size."""
+    ds, fm = base
+    truth, alias = "carrier_hole_eccentricity[crank=0]", "cam_eccentricity[crank=0,disc=1]"
+    data = _data(ds, fm, {truth: 4.0, "torsional_compliance_arcsec_per_Nm": 0.2}, seed=3)
+    pb = _Problem(data, CalibrationSettings(), fm)
+    names = [c.name for c in fm.candidates for _ in range(c.n_params)]
+    scales = _scales(pb.library, fm, fm.J, pb.R, pb.readings, data)
+    tau = np.concatenate(scales)
+    a_s = np.sort(np.r_[pb.dense_params, names.index("torsional_compliance_arcsec_per_Nm"), names.index(alias)])
+    none = np.zeros(0, int)
+    th, b, te, _ = refine(fm, pb.y, pb.proj, pb.R, np.zeros(fm.n_params), np.zeros(pb.R.shape[1]), a_s, none, tau,
+                          0.2)
+    cur = _State(th, te, b, a_s, none, np.ones(tau.size), criterion(pb, th, te, b, a_s, none, tau))
+    z = pb.proj(pb.y - te + fm.J @ th)
+    lines: list[str] = []
+    new = _propose(pb, cur, None, pb.features(fm.J, scales, False), a_s, none, np.ones(tau.size), 0.2, None, None,
+                   tau, z, None, lines.append)
+    assert new is not None and new.phi < cur.phi, lines
+    assert any(s.strip().startswith(f"swap {alias} -> {truth}") for s in lines), lines
+    assert names.index(truth) in new.a_s and names.index(alias) not in new.a_s
+    assert new.theta[names.index(truth)] == pytest.approx(4.0, rel=0.1)
+
+
 @pytest.mark.parametrize("field,value,match", [
     ("max_effects", 0, "max_effects = 0"), ("empirical_weight", -1.0, "empirical_weight = -1.0"),
     ("contact", "soft", "contact = 'soft'"), ("rated_Nm", 0.0, "rated_Nm = 0.0"),
-    ("families", ("table4", "magic"), "families"), ("workers", 0, "workers = 0")])
+    ("families", ("table4", "magic"), "families"), ("workers", 0, "workers = 0"), ("swaps", -1, "swaps = -1")])
 def test_settings_refused_naming_the_field(field, value, match):
     with pytest.raises(ValueError, match=match):
         CalibrationSettings(**{field: value}).validate()

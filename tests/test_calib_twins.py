@@ -93,3 +93,27 @@ class LinearModel(KinkedModel):
     def te(self, theta: np.ndarray) -> np.ndarray:
         self.calls += 1
         return self.shapes @ theta
+
+
+def test_a_partial_alias_with_another_chosen_parameter_refitted_is_a_twin():
+    """The named candidate's TE is another's once a third chosen parameter moves (``a = (a - h / 2) + h / 2``):
+    their columns are only 0.90 alike, so the first-linearisation screen misses them; the last linearisation's
+    screen, which refits the other chosen parameters, admits the alias, and the swap moves the third parameter too.
+    The three columns are linearly dependent, so the third is as much the alias's twin as the first."""
+    a = np.cos(3 * PHI) + 0.3 * np.sin(7 * PHI)
+    h = np.sin(2 * PHI)
+    shapes = np.column_stack([a, a - 0.5 * h, h, np.cos(5 * PHI)])
+    pb = _problem(shapes, np.array([2.0, 0.0, 1.0, 0.0]), sigma=0.05)
+    pb.model = LinearModel(shapes)
+    theta = np.array([2.0, 0.0, 1.0, 0.0])
+    X = pb.proj(shapes)
+    corr = abs(X[:, 0] @ X[:, 1]) / np.linalg.norm(X[:, 0]) / np.linalg.norm(X[:, 1])
+    assert 0.85 < corr < 0.95
+    assert swap_twins(pb, X, theta, 0.05, np.array([0, 2]), np.zeros(0, int)) == {}
+    got = swap_twins(pb, X, theta, 0.05, np.array([0, 2]), np.zeros(0, int), X_last=X)
+    assert [g for g, *_ in got[0]] == [1]
+    assert got[0][0][2] == pytest.approx(2.0)
+    assert got[0][0][1] == pytest.approx(0.0, abs=1e-6)
+    assert [g for g, *_ in got[2]] == [1]                   # three dependent columns: h = 2 a - 2 (a - h / 2)
+    assert got[2][0][2] == pytest.approx(-2.0)
+    assert np.allclose(pb.model.te(theta), shapes @ theta)
