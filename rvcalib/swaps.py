@@ -4,9 +4,10 @@ The loop's estimator proposes a chosen set from its posterior (:mod:`rvcalib.spa
 with the current one. Neither proposal can replace one chosen feature by another that the posterior has not put
 forward: when a look-alike entered first (a half-turn alias on the other crank or disc, fitted at a size that
 absorbs part of the true effect), the posterior at the next linearisation sees the residual the look-alike leaves
-and nothing more. The swap neighbourhood of best-subset local search (Hazimeh and Mazumder 2020, "Fast best subset
-selection: coordinate descent and local combinatorial optimization", Operations Research 68(5), section 3) is the
-move that reaches it: take one feature ``f`` out of the chosen set ``A`` and put one candidate ``g`` in its place.
+and nothing more. The swap neighbourhood of best-subset local search is the move that reaches it (Hazimeh and
+Mazumder, "Fast best subset selection: coordinate descent and local combinatorial optimization algorithms",
+Operations Research 68 (2020) 1517-1537, doi:10.1287/opre.2019.1919): take one feature ``f`` out of the chosen
+set ``A`` and put one candidate ``g`` in its place.
 
 On the linearised model ``z = X c + e`` (the features' scaled, projected columns: a unit coefficient is the
 tolerance scale), the criterion's likelihood and prior terms are, to first order at ``sigma^2 = RSS / n``,
