@@ -45,7 +45,7 @@ from rvcalib.settings import CalibrationSettings
 from rvcalib.refine import refine
 from rvcalib.sparse import Features, credible_sets, fit_sparse
 from rvcalib.swaps import feature_columns, features_of, penalised_fit, swap_table
-from rvcalib.twins import swap_twins
+from rvcalib.twins import DELTA_CHI2, swap_twins
 
 
 def resolved_order(dataset) -> int:
@@ -237,9 +237,11 @@ def criterion(pb, theta: np.ndarray, te: np.ndarray, b_r: np.ndarray, a_s: np.nd
 
 
 def _swap_tries(pb, cur: _State, F: Features, z: np.ndarray, tau: np.ndarray, most: int) -> list:
-    """The best ``most`` swaps of the current chosen set on the linearised model (:mod:`rvcalib.swaps`), each as a
-    try for the reducer model: its solved and reading parameters, its prior standard deviations and its linearised
-    estimate (the penalised refit of the swapped set) as the second start."""
+    """The best ``most`` swaps of the current chosen set on the linearised model (:mod:`rvcalib.swaps`) among those
+    that lower its chi-square by more than chi2(1) at 95 % (a smaller change is one the data cannot tell from
+    chance: such a pair is a group, :mod:`rvcalib.twins`, not a move), each as a try for the reducer model: its
+    solved and reading parameters, its prior standard deviations and its linearised estimate (the penalised refit
+    of the swapped set) as the second start."""
     if most == 0:
         return []
     n = pb.model.n_params
@@ -249,7 +251,8 @@ def _swap_tries(pb, cur: _State, F: Features, z: np.ndarray, tau: np.ndarray, mo
     chosen = set(features_of(F.starts, np.concatenate([cur.a_s, n + cur.a_r]))) | set(pb.fixed)
     allowed = F.prior > 0
     tries = []
-    for sw in swap_table(F.X, F.starts, z, chosen, allowed, sigma, pb.fixed, most=most)[:most]:
+    table = swap_table(F.X, F.starts, z, chosen, allowed, sigma, pb.fixed, most=most)
+    for sw in [sw for sw in table if sw.delta < -DELTA_CHI2][:most]:
         feats = sorted((chosen - {sw.out}) | {sw.into})
         cols = feature_columns(F.starts, feats)
         coef = penalised_fit(F.X[:, cols], z, sigma)[3]
