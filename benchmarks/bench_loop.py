@@ -17,7 +17,7 @@ It prints one line per draw (verdict, RMS after against the noise, compliance, n
 seconds) with each named effect against its truth and the groups, then the summary: the pass count, the
 pooled coverage of the named effects' 95 % intervals and the median wall and CPU seconds, which it
 appends to ``benchmarks/results.csv`` (:mod:`results_log`, benchmark ``bench_loop``, figures
-``<method>_<set>_passed`` ...; ``<method>_<set>_subset_...`` for a subset of the seeds).
+``<method>_<set>_passed`` ...; ``<method>_<set>_seeds_<s1>_<s2>..._...`` for a subset of the seeds).
 
 Run: ``python benchmarks/bench_loop.py --set dev|heldout [--method new] [--seeds N ...] [--workers 1|2]
 [--out DIR] [--draws DIR] [--fresh] [--verbose] [--report-only]`` (``--report-only``: the table of the draws
@@ -113,11 +113,11 @@ def summary(recs: list[dict[str, Any]]) -> dict[str, Any]:
     return p
 
 
-def record_summary(method: str, set_name: str, full: bool, summ: dict[str, Any]) -> None:
-    """Append the summary figures to ``benchmarks/results.csv``."""
+def record_summary(method: str, set_name: str, seeds: list[int] | None, summ: dict[str, Any]) -> None:
+    """Append the summary figures to ``benchmarks/results.csv`` (``seeds``: the subset run, None for the set)."""
     from results_log import record
 
-    tag = f"{method}_{set_name}" + ("" if full else "_subset")
+    tag = f"{method}_{set_name}" + ("" if seeds is None else "_seeds_" + "_".join(str(s) for s in seeds))
     figs = [(f"{tag}_draws", summ["draws"], "count"), (f"{tag}_passed", summ["passed"], "count"),
             (f"{tag}_raised", summ["raised"], "count"), (f"{tag}_named", summ["n_intervals"], "count")]
     if summ["coverage"] is not None:
@@ -175,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{summ['median_wall_s']:.0f} s, median CPU {summ['median_cpu_s']:.0f} s ({args.workers} worker(s); "
           f"load average now {os.getloadavg()[0]:.1f})", flush=True)
     if not args.report_only:
-        record_summary(args.method, args.set, set(seeds) == set(SETS[args.set]), summ)
+        record_summary(args.method, args.set, None if set(seeds) == set(SETS[args.set]) else sorted(seeds), summ)
     return 0 if summ["passed"] == summ["draws"] else 1
 
 

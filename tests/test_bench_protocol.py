@@ -243,7 +243,7 @@ def test_bench_loop_fails_a_raising_method_and_resumes(tmp_path, monkeypatch, ca
     assert bench_loop.main(argv) == 1
     rec = json.loads((tmp_path / "out" / "seed101.json").read_text())
     assert rec["error"] == "RuntimeError: no convergence" and not rec["score"]["passed"]
-    assert recorded[-1][:3] == ("new", "dev", False) and recorded[-1][3]["raised"] == 1
+    assert recorded[-1][:3] == ("new", "dev", [101]) and recorded[-1][3]["raised"] == 1
     out = capsys.readouterr().out
     assert "seed 101: FAIL (raised)" in out and "SUMMARY new dev: 0/1 pass (1 raised)" in out
     bench_loop.main(argv)                                              # reused, not run again
@@ -255,3 +255,16 @@ def test_bench_loop_fails_a_raising_method_and_resumes(tmp_path, monkeypatch, ca
     bench_loop.main(argv + ["--fresh"])
     assert calls == ["new", "new"]
     assert json.loads(ap.read_text())["test_offsets"] == {}
+
+
+def test_bench_loop_names_a_subset_by_its_seeds(monkeypatch):
+    import results_log
+    got = []
+    monkeypatch.setattr(results_log, "record", lambda bench, figs: got.append((bench, figs)))
+    summ = {"draws": 2, "passed": 1, "raised": 0, "n_intervals": 4, "coverage": 0.5, "median_wall_s": 10.0,
+            "median_cpu_s": 9.0}
+    bench_loop.record_summary("new", "heldout", [9001, 9002], summ)
+    bench_loop.record_summary("new", "dev", None, summ)
+    names = [f for _, figs in got for f, *_ in figs]
+    assert "new_heldout_seeds_9001_9002_passed" in names and "new_dev_passed" in names
+    assert not any("subset" in n for n in names)
