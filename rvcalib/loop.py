@@ -71,7 +71,7 @@ class Projector:
         return (self.N.T @ r) / self.counts
 
 
-def _scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.ndarray, readings: list,
+def prior_scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.ndarray, readings: list,
             dataset) -> tuple:
     """Prior scales of the solved and the reading parameters, with the two taken from the model's response: the
     compliance's (the model's own compliance at the runs: the TE per N m of friction torque, which is load) and
@@ -155,7 +155,7 @@ def _global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.nd
     return theta, te
 
 
-class _Problem:
+class Problem:
     """What one calibration holds: data, library, model, columns, projection."""
 
     def __init__(self, dataset, settings: CalibrationSettings, model=None) -> None:
@@ -200,7 +200,7 @@ class _Problem:
 
 
 @dataclass
-class _State:
+class LoopState:
     """An accepted state of the loop: the solved parameters, the model TE there, the reading coefficients, the
     chosen parameters with their prior standard deviations, the posterior that chose them and the criterion."""
 
@@ -236,7 +236,7 @@ def criterion(pb, theta: np.ndarray, te: np.ndarray, b_r: np.ndarray, a_s: np.nd
     return float(n * math.log(rss / n) + np.sum((x / t) ** 2) + 2.0 * math.log(max(p, 2)) * x.size)
 
 
-def _swap_tries(pb, cur: _State, F: Features, z: np.ndarray, tau: np.ndarray, most: int) -> list:
+def _swap_tries(pb, cur: LoopState, F: Features, z: np.ndarray, tau: np.ndarray, most: int) -> list:
     """The best ``most`` swaps of the current chosen set on the linearised model (:mod:`rvcalib.swaps`) among those
     that lower its chi-square by more than chi2(1) at 95 % (a smaller change is one the data cannot tell from
     chance: such a pair is a group, :mod:`rvcalib.twins`, not a move), each as a try for the reducer model: its
@@ -266,7 +266,7 @@ def _swap_tries(pb, cur: _State, F: Features, z: np.ndarray, tau: np.ndarray, mo
     return tries
 
 
-def _propose(pb, cur: _State, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log) -> _State | None:
+def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log) -> LoopState | None:
     """The best of the proposals from one linearisation, if it lowers the criterion below the current state's:
     the posterior's chosen set (from where its parameters are, or from the linearised estimate); where that does
     not lower it with another set than the current one, the union of the current and the chosen sets started from
@@ -279,7 +279,7 @@ def _propose(pb, cur: _State, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, 
     if union_s.size + union_r.size > cur.a_s.size + cur.a_r.size:
         tries.append((union_s, union_r, None, sd, "union with the current set"))
 
-    def moves(st: _State | None) -> bool:
+    def moves(st: LoopState | None) -> bool:
         """Whether a state lowers the criterion with another chosen set than the current one."""
         return (st is not None and st.phi < cur.phi and
                 (tuple(st.a_s), tuple(st.a_r)) != (tuple(cur.a_s), tuple(cur.a_r)))
@@ -299,7 +299,7 @@ def _propose(pb, cur: _State, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, 
         log(f"  {label}: criterion {phi:.4f} (current {cur.phi:.4f})")
         last = th
         if best is None or phi < best.phi:
-            best = _State(th, te, b, ps, pr, psd, phi, fit, F)
+            best = LoopState(th, te, b, ps, pr, psd, phi, fit, F)
         k += 1
         if k == len(tries) and not swapped and not moves(best):
             tries += _swap_tries(pb, cur, F, z, tau, pb.settings.swaps)
@@ -333,7 +333,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     settings = (settings or CalibrationSettings()).validate()
     log = log or (lambda s: None)
     t0 = time.perf_counter()
-    pb = _Problem(dataset, settings, model)
+    pb = Problem(dataset, settings, model)
     m, y, proj, R = pb.model, pb.y, pb.proj, pb.R
     theta = np.zeros(m.n_params)
     te = m.te(theta)
@@ -351,11 +351,11 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
         for it in range(1, settings.max_linearisations + 1):
             if J is None:
                 J = m.jacobian(theta, spread, renew, pool)
-            scales = scales or _scales(pb.library, m, J, R, pb.readings, dataset)
+            scales = scales or prior_scales(pb.library, m, J, R, pb.readings, dataset)
             ts, tr = scales
             tau = np.concatenate(scales)
             if cur is None:
-                cur = _State(theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), np.ones(tau.size),
+                cur = LoopState(theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), np.ones(tau.size),
                              criterion(pb, theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), tau))
             F = pb.features(J, scales, empirical)
             X0 = F.X if X0 is None else X0
@@ -366,7 +366,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             linear = np.zeros(m.n_params)
             linear[a_s] = fit.coef[:m.n_params][a_s] * ts[a_s]
             spread, renew = _next_linearisation(fit, F, m.n_params, ts)
-            new = _propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log)
+            new = propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log)
             if new is None:
                 m.te(cur.theta)                         # the model's states back at the current state
                 log(f"linearisation {it}: no proposal lowers the criterion ({time.perf_counter() - t0:.0f} s)")

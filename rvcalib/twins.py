@@ -41,7 +41,7 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
 
     Parameters
     ----------
-    pb : rvcalib.loop._Problem
+    pb : rvcalib.loop.Problem
     X0 : (n, P) the features' scaled, projected columns at the first linearisation
     theta : (p,) the final solved parameters
     sigma : noise standard deviation, arcsec

@@ -12,7 +12,7 @@ import pytest
 
 from calib_standin import frozen_model
 from rvrig.dataset import noise_estimate, read_dataset
-from rvcalib.loop import _Problem, _propose, _scales, _State, calibrate, criterion
+from rvcalib.loop import Problem, propose, prior_scales, LoopState, calibrate, criterion
 from rvcalib.readings import nuisance_columns
 from rvcalib.refine import refine
 from rvcalib.settings import CalibrationSettings
@@ -121,18 +121,18 @@ def _propose_from(ds, fm, truth: dict, held: str):
     """One proposal step from the state that holds ``held`` (with the compliance and the dense block) at its best
     size, on data made with ``truth``; the estimator's chosen set is that same set."""
     data = _data(ds, fm, truth, seed=3)
-    pb = _Problem(data, CalibrationSettings(), fm)
+    pb = Problem(data, CalibrationSettings(), fm)
     names = [c.name for c in fm.candidates for _ in range(c.n_params)]
-    scales = _scales(pb.library, fm, fm.J, pb.R, pb.readings, data)
+    scales = prior_scales(pb.library, fm, fm.J, pb.R, pb.readings, data)
     tau = np.concatenate(scales)
     a_s = np.sort(np.r_[pb.dense_params, names.index("torsional_compliance_arcsec_per_Nm"), names.index(held)])
     none = np.zeros(0, int)
     th, b, te, _ = refine(fm, pb.y, pb.proj, pb.R, np.zeros(fm.n_params), np.zeros(pb.R.shape[1]), a_s, none, tau,
                           0.2)
-    cur = _State(th, te, b, a_s, none, np.ones(tau.size), criterion(pb, th, te, b, a_s, none, tau))
+    cur = LoopState(th, te, b, a_s, none, np.ones(tau.size), criterion(pb, th, te, b, a_s, none, tau))
     z = pb.proj(pb.y - te + fm.J @ th)
     lines: list[str] = []
-    new = _propose(pb, cur, None, pb.features(fm.J, scales, False), a_s, none, np.ones(tau.size), 0.2, None, None,
+    new = propose(pb, cur, None, pb.features(fm.J, scales, False), a_s, none, np.ones(tau.size), 0.2, None, None,
                    tau, z, None, lines.append)
     return names, cur, new, lines
 
