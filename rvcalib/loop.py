@@ -15,8 +15,9 @@ reducer model through rvdyn (:mod:`rvcalib.reducer_model`); the method is writte
    from the linearised estimate, whichever fits better); the others leave the model (zero). That is a proposal;
    where it does not lower the criterion (:func:`criterion`: the likelihood at its best noise variance, the
    tolerance prior, the risk inflation criterion's price per parameter), the union of the current and the chosen
-   sets, started from the current state, is the second. A proposal is accepted only when it lowers the criterion,
-   so the loop never goes back: the estimator proposes, the criterion decides.
+   sets, started from the current state, is the second; the best swaps of one chosen parameter for another are
+   the third. A proposal is accepted only when it lowers the criterion (a swap: by more than chi2(1) at 95 %), so
+   the loop never goes back: the estimator proposes, the criterion decides.
 6. Repeat from 3 until no proposal lowers the criterion, or the chosen set no longer changes and the model TE
    moves by less than ``step_tolerance`` times the noise (or ``max_linearisations``). The empirical block joins
    only once the physical candidates have converged: what the physics cannot give is judged against the best
@@ -240,8 +241,9 @@ def _swap_tries(pb, cur: LoopState, F: Features, z: np.ndarray, tau: np.ndarray,
     """The best ``most`` swaps of the current chosen set on the linearised model (:mod:`rvcalib.swaps`) among those
     that lower its chi-square by more than chi2(1) at 95 % (a smaller change is one the data cannot tell from
     chance: such a pair is a group, :mod:`rvcalib.twins`, not a move), each as a try for the reducer model: its
-    solved and reading parameters, its prior standard deviations and its linearised estimate (the penalised refit
-    of the swapped set) as the second start."""
+    solved and reading parameters, its linearised estimate (the penalised refit of the swapped set) as the second
+    start, its prior standard deviations, its label and the criterion's drop it must reach to be accepted (the
+    same chi2(1) margin, now on the reducer model)."""
     if most == 0:
         return []
     n = pb.model.n_params
@@ -262,7 +264,7 @@ def _swap_tries(pb, cur: LoopState, F: Features, z: np.ndarray, tau: np.ndarray,
         psd = cur.sd.copy()
         psd[feature_columns(F.starts, [sw.into])] = 1.0
         tries.append((s_cols, cols[cols >= n] - n, alt, psd, f"swap {pb.feature_name(sw.out)} -> "
-                      f"{pb.feature_name(sw.into)} (linearised change {sw.delta:+.2f})"))
+                      f"{pb.feature_name(sw.into)} (linearised change {sw.delta:+.2f})", DELTA_CHI2))
     return tries
 
 
@@ -270,25 +272,27 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
     """The best of the proposals from one linearisation, if it lowers the criterion below the current state's:
     the posterior's chosen set (from where its parameters are, or from the linearised estimate); where that does
     not lower it with another set than the current one, the union of the current and the chosen sets started from
-    the current state; where neither does, the best swaps of the current set (:func:`_swap_tries`)."""
+    the current state; where neither does, the best swaps of the current set (:func:`_swap_tries`). A swap keeps
+    the set's size, so its criterion drop is a likelihood ratio: it counts only beyond chi2(1) at 95 % (the swap
+    is judged by its drop less that margin); below it the pair is one the data cannot split."""
     m = pb.model
     n = m.n_params
-    best = None
-    tries = [(a_s, a_r, linear, sd, "chosen set")]
+    best, best_key = None, math.inf
+    tries = [(a_s, a_r, linear, sd, "chosen set", 0.0)]
     union_s, union_r = np.union1d(cur.a_s, a_s).astype(int), np.union1d(cur.a_r, a_r).astype(int)
     if union_s.size + union_r.size > cur.a_s.size + cur.a_r.size:
-        tries.append((union_s, union_r, None, sd, "union with the current set"))
+        tries.append((union_s, union_r, None, sd, "union with the current set", 0.0))
 
-    def moves(st: LoopState | None) -> bool:
-        """Whether a state lowers the criterion with another chosen set than the current one."""
-        return (st is not None and st.phi < cur.phi and
-                (tuple(st.a_s), tuple(st.a_r)) != (tuple(cur.a_s), tuple(cur.a_r)))
+    def moves() -> bool:
+        """Whether the best state lowers the criterion with another chosen set than the current one."""
+        return (best is not None and best_key < cur.phi and
+                (tuple(best.a_s), tuple(best.a_r)) != (tuple(cur.a_s), tuple(cur.a_r)))
 
     k, last, swapped = 0, None, False
     while k < len(tries):
-        if k > 0 and moves(best):
+        if k > 0 and moves():
             break
-        ps, pr, alt, psd, label = tries[k]
+        ps, pr, alt, psd, label, margin = tries[k]
         here = np.zeros(n)
         here[ps] = cur.theta[ps]
         b0 = np.zeros(cur.b_r.size)
@@ -296,15 +300,16 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
         th, b, te, _ = refine(m, pb.y, pb.proj, pb.R, here, b0, ps, pr, psd * tau, sigma, spread=spread, pool=pool,
                               log=log, feasible=cur.theta, alternative=alt)
         phi = criterion(pb, th, te, b, ps, pr, tau)
-        log(f"  {label}: criterion {phi:.4f} (current {cur.phi:.4f})")
+        log(f"  {label}: criterion {phi:.4f} (current {cur.phi:.4f}" +
+            (f", to be accepted below {cur.phi - margin:.4f})" if margin else ")"))
         last = th
-        if best is None or phi < best.phi:
-            best = LoopState(th, te, b, ps, pr, psd, phi, fit, F)
+        if phi + margin < best_key:
+            best, best_key = LoopState(th, te, b, ps, pr, psd, phi, fit, F), phi + margin
         k += 1
-        if k == len(tries) and not swapped and not moves(best):
+        if k == len(tries) and not swapped and not moves():
             tries += _swap_tries(pb, cur, F, z, tau, pb.settings.swaps)
             swapped = True
-    if best is None or best.phi >= cur.phi:
+    if best is None or best_key >= cur.phi:
         return None
     if best.theta is not last:
         m.te(best.theta)                        # the model's states at the accepted state (the next Jacobian's)

@@ -4,11 +4,13 @@ structure outside the physics, twins the data cannot split, settings. The data a
 what the physics adds beyond a linear response is the subject of tests/test_calib_loop.py."""
 from __future__ import annotations
 
+import copy
 import dataclasses
 import re
 
 import numpy as np
 import pytest
+from scipy import optimize
 
 from calib_standin import frozen_model
 from rvrig.dataset import noise_estimate, read_dataset
@@ -117,9 +119,9 @@ def test_twins_the_data_cannot_split_are_a_group_with_sizes(base):
     assert sum(m["probability"] for m in grp[0]["members"]) >= 0.95
 
 
-def _propose_from(ds, fm, truth: dict, held: str):
-    """One proposal step from the state that holds ``held`` (with the compliance and the dense block) at its best
-    size, on data made with ``truth``; the estimator's chosen set is that same set."""
+def _state_holding(ds, fm, truth: dict, held: str):
+    """The problem on data made with ``truth`` and the state that holds ``held`` (with the compliance and the
+    dense block) at its best size."""
     data = _data(ds, fm, truth, seed=3)
     pb = Problem(data, CalibrationSettings(), fm)
     names = [c.name for c in fm.candidates for _ in range(c.n_params)]
@@ -130,11 +132,27 @@ def _propose_from(ds, fm, truth: dict, held: str):
     th, b, te, _ = refine(fm, pb.y, pb.proj, pb.R, np.zeros(fm.n_params), np.zeros(pb.R.shape[1]), a_s, none, tau,
                           0.2)
     cur = LoopState(th, te, b, a_s, none, np.ones(tau.size), criterion(pb, th, te, b, a_s, none, tau))
-    z = pb.proj(pb.y - te + fm.J @ th)
+    return pb, names, scales, cur
+
+
+def _propose_from(ds, fm, truth: dict, held: str):
+    """One proposal step from the state that holds ``held`` at its best size, on data made with ``truth``; the
+    estimator's chosen set is that same set."""
+    pb, names, scales, cur = _state_holding(ds, fm, truth, held)
+    tau = np.concatenate(scales)
+    z = pb.proj(pb.y - cur.te + fm.J @ cur.theta)
     lines: list[str] = []
-    new = propose(pb, cur, None, pb.features(fm.J, scales, False), a_s, none, np.ones(tau.size), 0.2, None, None,
-                   tau, z, None, lines.append)
+    new = propose(pb, cur, None, pb.features(fm.J, scales, False), cur.a_s, cur.a_r, np.ones(tau.size), 0.2, None,
+                  None, tau, z, None, lines.append)
     return names, cur, new, lines
+
+
+def _bounded(fm, idx: int, bound: float):
+    """The stand-in with parameter ``idx`` held within +-``bound`` (its physical bound, as the model reports it)."""
+    out = copy.copy(fm)
+    out._lower, out._upper = fm._lower.copy(), fm._upper.copy()
+    out._lower[idx], out._upper[idx] = -bound, bound
+    return out
 
 
 def test_a_look_alike_in_the_chosen_set_is_swapped_for_the_truth(base):
@@ -158,6 +176,35 @@ def test_a_twin_the_data_cannot_split_is_not_swapped(base):
     names, cur, new, lines = _propose_from(ds, fm, {truth: 3.0, "torsional_compliance_arcsec_per_Nm": 0.2}, twin)
     assert not any(s.strip().startswith("swap") for s in lines), lines
     assert new is None or names.index(twin) in new.a_s
+
+
+def test_a_swap_is_accepted_only_beyond_chi2_1(base):
+    """The look-alike state of the test above, with the true effect held by a physical bound: the linearised model
+    (which knows no bounds) still ranks the swap to the truth far beyond chi2(1), but the reducer model lets it
+    lower the criterion by less. With the bound where the swap's drop is 2 (below chi2(1) at 95 %, 3.84) it is
+    not accepted; with the bound where the drop is 8 it is."""
+    ds, fm = base
+    truth, alias = "carrier_hole_eccentricity[crank=0]", "cam_eccentricity[crank=0,disc=1]"
+    data = {truth: 4.0, "torsional_compliance_arcsec_per_Nm": 0.2}
+    names = [c.name for c in fm.candidates for _ in range(c.n_params)]
+    i_t = names.index(truth)
+
+    def drop(bound: float) -> float:
+        """The criterion's drop of the swap at ``bound``, refined as the loop refines it."""
+        pb, _, scales, cur = _state_holding(ds, _bounded(fm, i_t, bound), data, alias)
+        a_s = np.sort(np.r_[np.setdiff1d(cur.a_s, [names.index(alias)]), i_t])
+        th, b, te, _ = refine(pb.model, pb.y, pb.proj, pb.R, np.zeros(fm.n_params), cur.b_r, a_s, cur.a_r,
+                              np.concatenate(scales), 0.2)
+        return cur.phi - criterion(pb, th, te, b, a_s, cur.a_r, np.concatenate(scales))
+
+    for want, accepted in ((2.0, False), (8.0, True)):
+        bound = optimize.brentq(lambda x: drop(x) - want, 0.01, 4.0, xtol=1e-4)
+        _, cur, new, lines = _propose_from(ds, _bounded(fm, i_t, bound), data, alias)
+        assert any(s.strip().startswith(f"swap {alias} -> {truth}") for s in lines), lines
+        swapped = new is not None and i_t in new.a_s and names.index(alias) not in new.a_s
+        assert swapped == accepted, (want, bound, lines)
+        if accepted:
+            assert cur.phi - new.phi == pytest.approx(want, abs=0.5)
 
 
 @pytest.mark.parametrize("field,value,match", [
