@@ -8,7 +8,8 @@ data cannot split, unexplained structure, the tests' constants, and the fit befo
   angle with the components' covariance; the magnitude's interval is the delta method's.
 * A *group* is a pure credible set of several candidates: each would explain the same part of the data, with the
   size given (its posterior mean given that it is the one; a size beyond the candidate's physical bounds is
-  reported as unbounded) and its probability.
+  reported as unbounded) and its probability. The two sides of one pin-wise error (its positive and its negative
+  values, two candidates) are one member: the data point at that pin whichever side fits (:func:`merge_sides`).
 * *Unexplained* structure is a pure credible set of empirical terms only (an order, a load- or direction-dependent
   term the physical library does not give); a set mixing both is a group "physical or unexplained".
 * A *diffuse* set (members that do not explain the same signal) names nothing; its effect stays in the fit.
@@ -169,6 +170,26 @@ def _member(c, mean: np.ndarray, tau: np.ndarray, prob: float) -> dict:
             "value": float(size) if bounded else "unbounded", "angle_deg": ang, "probability": prob}
 
 
+def merge_sides(members: list) -> list:
+    """The members of a group with the two sides of one pin-wise error (:class:`rvcalib.library.Candidate`
+    ``side``: its positive and its negative values are two candidates) as one member: the effect, its probability
+    the sum of the sides', its size that of the most probable side whose size lies within that side's range
+    (``"unbounded"`` where neither does), and each side's own size and probability under ``sides``. The order of
+    first appearance is kept."""
+    out: dict[str, dict] = {}
+    for m in members:
+        if m["name"] not in out:
+            out[m["name"]] = dict(m)
+            continue
+        first = out[m["name"]]
+        sides = first.pop("sides", None) or [{"value": first["value"], "probability": first["probability"]}]
+        sides.append({"value": m["value"], "probability": m["probability"]})
+        bounded = [sd for sd in sides if sd["value"] != "unbounded"]
+        first.update(value=max(bounded, key=lambda sd: sd["probability"])["value"] if bounded else "unbounded",
+                     probability=sum(sd["probability"] for sd in sides), sides=sides)
+    return list(out.values())
+
+
 def _effect(c, alpha: float, m: np.ndarray, S: np.ndarray, level: float) -> NamedEffect:
     """A named effect from its parameters' posterior given the effect (mean m, covariance S, physical units) and
     the probability alpha that it is an effect at all."""
@@ -274,8 +295,9 @@ def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed
         if cs.effect < len(fixed):
             continue
         eff = fit.effects[cs.effect]
-        members = [_member(cands[f], eff.mean[F.starts[f]:F.starts[f + 1]], tau[F.starts[f]:F.starts[f + 1]], p)
-                   for f, p in zip(cs.features, cs.probabilities)]
+        members = merge_sides([_member(cands[f], eff.mean[F.starts[f]:F.starts[f + 1]],
+                                       tau[F.starts[f]:F.starts[f + 1]], p)
+                               for f, p in zip(cs.features, cs.probabilities)])
         info = {"members": members, "coverage": cs.coverage, "purity": cs.purity, "log_bf": cs.log_bf}
         if not cs.pure(settings.sparse()):
             if all(d["members"] != members for d in diffuse):

@@ -19,7 +19,7 @@ from rvcalib.datasheet import rated_torque, reducer_datasheet
 from rvcalib.equivalents import result_equivalents, rotation_per_offset_deg
 from rvcalib.report import bounded_groups, physical_bounds, write_report
 from rvcalib.reportmd import markdown
-from rvcalib.result import CalibrationResult, NamedEffect
+from rvcalib.result import CalibrationResult, NamedEffect, merge_sides
 from rvcalib.settings import CalibrationSettings
 
 #: A group size of the kind the data leave free (only the combination of two members is fixed).
@@ -182,3 +182,20 @@ def test_an_existing_file_is_refused_as_the_report_folder(ds81, tmp_path):
     f.write_text("x")
     with pytest.raises(ValueError, match="--out .* is an existing file"):
         write_report(hand_result(ds81), ds81, f)
+
+
+def test_the_two_sides_of_one_pin_are_one_group_member():
+    """A credible set holding both sides of pin 8's radius error (the negative side's size beyond its range) and
+    another candidate: pin 8 is one member, with the probabilities summed and the size of the side that fits."""
+    def member(name: str, value, p: float) -> dict:
+        return {"name": name, "key": "pin_radius", "family": "table4", "instance": {"pin": 8}, "unit": "um",
+                "value": value, "angle_deg": None, "probability": p}
+
+    got = merge_sides([member("pin_radius[pin=8]", "unbounded", 0.6), member("pin_pitch[pin=9]", 0.002, 0.1),
+                       member("pin_radius[pin=8]", 1.889, 0.3)])
+    assert [m["name"] for m in got] == ["pin_radius[pin=8]", "pin_pitch[pin=9]"]
+    assert got[0]["value"] == 1.889 and got[0]["probability"] == pytest.approx(0.9)
+    assert got[0]["sides"] == [{"value": "unbounded", "probability": 0.6}, {"value": 1.889, "probability": 0.3}]
+    assert got[1] == member("pin_pitch[pin=9]", 0.002, 0.1)
+    both = merge_sides([member("pin_radius[pin=8]", "unbounded", 0.5), member("pin_radius[pin=8]", "unbounded", 0.4)])
+    assert len(both) == 1 and both[0]["value"] == "unbounded"
