@@ -44,18 +44,28 @@ class FrozenModel:
         return self._kinds
 
 
-def frozen_model(dataset, families=None) -> FrozenModel:
+def frozen_model(dataset, families=None, cache=None) -> FrozenModel:
     """The stand-in for ``dataset``: its library's solved candidates (dense first, as the loop orders them), the
-    real model's TE and Jacobian at the declared state (pin columns: secants over the prior scale)."""
+    real model's TE and Jacobian at the declared state (pin columns: secants over the prior scale). ``cache``: an
+    npz file holding ``te0`` and ``J`` of an earlier call on the same readings (used when the shapes fit; written
+    when absent)."""
     from rvcalib.settings import CalibrationSettings
 
     s = CalibrationSettings() if families is None else CalibrationSettings(families=families)
     lib = build_library(dataset, resolved_order(dataset), s.families, ramp_shown(dataset)[0])
     solved = [c for c in lib if c.solved and c.dense] + [c for c in lib if c.solved and not c.dense]
     m = ReducerModel(dataset, solved)
+    n = sum(r.n for r in dataset.runs)
+    if cache is not None and cache.is_file():
+        got = np.load(cache)
+        if got["J"].shape == (n, m.n_params):
+            return FrozenModel(m, got["te0"], got["J"])
     theta = np.zeros(m.n_params)
     te0 = m.te(theta)
-    return FrozenModel(m, te0, m.jacobian(theta))
+    out = FrozenModel(m, te0, m.jacobian(theta))
+    if cache is not None:
+        np.savez(cache, te0=te0, J=out.J)
+    return out
 
 
 #: Families whose solved candidates are model options only (what the stand-in can give a column).
