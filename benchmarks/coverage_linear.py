@@ -24,7 +24,6 @@ Figures are appended to ``benchmarks/results.csv``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 import tempfile
@@ -37,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from calib_standin import frozen_model  # noqa: E402
+from calib_standin import frozen_model, with_te  # noqa: E402
 from realistic import COMPLIANCE_KEY, draw  # noqa: E402
 from results_log import record  # noqa: E402
 from score import pool, score, score_lines  # noqa: E402
@@ -45,7 +44,7 @@ from rvcad.errors import ERROR_TYPES  # noqa: E402
 from rvcalib import CalibrationSettings, calibrate  # noqa: E402
 from rvcalib.readings import nuisance_columns  # noqa: E402
 from rvcalib.simulate import simulate_dataset, standard_runs  # noqa: E402
-from rvrig.dataset import noise_estimate, read_dataset  # noqa: E402
+from rvrig.dataset import read_dataset  # noqa: E402
 
 NOISE_ARCSEC = 0.2
 #: Seeds of this study (its own: the protocol's dev and held-out seeds are the full-physics draws').
@@ -93,13 +92,7 @@ def measured(ds, fm, theta: np.ndarray, seed: int):
     rng = np.random.default_rng(seed)
     N, _ = nuisance_columns(ds)
     te = fm.te(theta) + N @ rng.normal(0.0, 30.0, N.shape[1]) + rng.normal(0.0, NOISE_ARCSEC, N.shape[0])
-    runs, pos = [], 0
-    for r in ds.runs:
-        t = te[pos:pos + r.n]
-        pos += r.n
-        runs.append(dataclasses.replace(r, output_deg=r.input_deg / r.ratio + t / 3600.0,
-                                        noise_arcsec=noise_estimate(t)))
-    return dataclasses.replace(ds, runs=runs)
+    return with_te(ds, te)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -8,6 +8,8 @@
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from rvcalib.datasheet import reducer_case
@@ -16,6 +18,7 @@ from rvcalib.library import build_library
 from rvcalib.loop import resolved_order
 from rvcalib.readings import ramp_shown
 from rvcalib.reducer_model import ReducerModel
+from rvrig.dataset import noise_estimate
 
 
 class FrozenModel:
@@ -66,6 +69,18 @@ def frozen_model(dataset, families=None, cache=None) -> FrozenModel:
     if cache is not None:
         np.savez(cache, te0=te0, J=out.J)
     return out
+
+
+def with_te(ds, te: np.ndarray):
+    """The dataset with its TE readings replaced by ``te`` (arcsec, the runs' readings end to end; the input
+    readings kept)."""
+    runs, pos = [], 0
+    for r in ds.runs:
+        t = te[pos:pos + r.n]
+        pos += r.n
+        runs.append(dataclasses.replace(r, output_deg=r.input_deg / r.ratio + t / 3600.0,
+                                        noise_arcsec=noise_estimate(t)))
+    return dataclasses.replace(ds, runs=runs)
 
 
 #: Families whose solved candidates are model options only (what the stand-in can give a column).

@@ -5,15 +5,14 @@ what the physics adds beyond a linear response is the subject of tests/test_cali
 from __future__ import annotations
 
 import copy
-import dataclasses
 import re
 
 import numpy as np
 import pytest
 from scipy import optimize
 
-from calib_standin import frozen_model
-from rvrig.dataset import noise_estimate, read_dataset
+from calib_standin import frozen_model, with_te
+from rvrig.dataset import read_dataset
 from rvcalib.loop import Problem, propose, prior_scales, LoopState, calibrate, criterion
 from rvcalib.readings import nuisance_columns
 from rvcalib.refine import refine
@@ -33,17 +32,6 @@ def base(tmp_path_factory):
     return ds, frozen_model(ds)
 
 
-def _with_te(ds, te: np.ndarray):
-    """The dataset with its TE readings replaced (the input readings kept)."""
-    runs, pos = [], 0
-    for r in ds.runs:
-        t = te[pos:pos + r.n]
-        pos += r.n
-        runs.append(dataclasses.replace(r, output_deg=r.input_deg / r.ratio + t / 3600.0,
-                                        noise_arcsec=noise_estimate(t)))
-    return dataclasses.replace(ds, runs=runs)
-
-
 def _truth(fm, values: dict) -> np.ndarray:
     names = [c.name for c in fm.candidates for _ in range(c.n_params)]
     th = np.zeros(fm.n_params)
@@ -60,7 +48,7 @@ def _data(ds, fm, truth: dict, extra: np.ndarray | None = None, noise: float = 0
     rng = np.random.default_rng(seed)
     N, _ = nuisance_columns(ds)
     te = fm.te(_truth(fm, truth)) + N @ rng.normal(0.0, 30.0, N.shape[1]) + rng.normal(0.0, noise, N.shape[0])
-    return _with_te(ds, te + (0.0 if extra is None else extra))
+    return with_te(ds, te + (0.0 if extra is None else extra))
 
 
 def _named(res) -> dict:
