@@ -186,16 +186,6 @@ class Problem:
         self.dense_params = np.array([i for i, c in enumerate(c for c in self.model.candidates
                                                                for _ in range(c.n_params)) if c.dense], dtype=int)
 
-    def prior_variance(self) -> np.ndarray:
-        """Per column of the features, the variance the library's prior gives a physical candidate before any data
-        (its prior inclusion weight, the candidates' ``share``, times its tolerance class squared, which is 1 in
-        the columns' scaled units); 0 for the always-estimated block and the empirical terms (no tolerance model)."""
-        out = np.zeros(self.starts[-1])
-        for f in range(len(self.feature_cands)):
-            if f not in self.fixed and not self.empirical[f]:
-                out[self.starts[f]:self.starts[f + 1]] = self.prior[f]
-        return out
-
     def feature_name(self, f: int) -> str:
         """A feature's name (its candidates' names)."""
         return "+".join(c.name for c in self.feature_cands[f]) if f not in self.fixed else "the dense block"

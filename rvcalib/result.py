@@ -118,11 +118,9 @@ class Laplace:
     """The joint Gaussian posterior of the chosen parameters at the final state (Laplace's approximation of the
     nonlinear MAP), in the scaled units of the last linearisation's columns, mean the refined state.
 
-    The candidates not chosen are not taken as exactly zero: each is a Gaussian random effect (``background``, in
-    :func:`assemble` the larger of its posterior second moment under the estimator, ``coef_var + coef^2`` of
-    :class:`rvcalib.sparse.SparseFit`, and the variance the library's prior gives it before any data,
-    :meth:`rvcalib.loop.Problem.prior_variance`: the estimator's "at most L effects" shrinks a small effect it does
-    not choose to zero, while a real reducer holds every error at some size within its tolerance). The noise of the chosen parameters' regression is then ``sigma^2 I + X_B D_B X_B'`` and
+    The candidates not chosen are not taken as exactly zero: each is a Gaussian random effect whose variance is its
+    posterior second moment under the estimator (``coef_var + coef^2`` of :class:`rvcalib.sparse.SparseFit`, what
+    the data leave of it). The noise of the chosen parameters' regression is then ``sigma^2 I + X_B D_B X_B'`` and
     the precision ``X_A' (sigma^2 I + X_B D_B X_B')^-1 X_A + diag(1 / prior_sd^2)`` (Woodbury's identity keeps it
     to the size of B). A chosen effect that an unchosen candidate could stand in for gets the wider interval that
     uncertainty of the selection gives; correlations between chosen effects (a pin's pitch and the ring's fit, say)
@@ -346,8 +344,7 @@ def assemble(dataset, pb, F, fit, scales, theta, te, settings, info: dict) -> Ca
     r = pb.proj(resid)
     offs = np.cumsum([0] + [run.n for run in dataset.runs])
     laplace = Laplace(F.X, idx, info["prior_sd"], fit.sigma2, np.concatenate([theta, info["b_r"]]), tau,
-                      background=np.maximum(fit.coef_var + fit.coef ** 2, pb.prior_variance()), residual=r,
-                      offsets=offs) if idx.size else None
+                      background=fit.coef_var + fit.coef ** 2, residual=r, offsets=offs) if idx.size else None
     named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed, laplace,
                                                          info.get("twins"))
     m = pb.model

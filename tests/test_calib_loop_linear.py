@@ -202,25 +202,3 @@ def test_a_swap_is_accepted_only_beyond_chi2_1(base):
 def test_settings_refused_naming_the_field(field, value, match):
     with pytest.raises(ValueError, match=match):
         CalibrationSettings(**{field: value}).validate()
-
-
-
-def test_the_unchosen_enter_the_intervals_with_their_prior_variance(base):
-    """Problem.prior_variance: a physical candidate's prior weight (the tolerance class is 1 in the scaled
-    columns); nothing for the always-estimated block and the empirical terms. A cam phase of the default layout is
-    one of four instances (1/4); one side of one pin's pitch error is half of one of 40 pins (1/80)."""
-    ds, fm = base
-    pb = Problem(_data(ds, fm, {"torsional_compliance_arcsec_per_Nm": 0.2}), CalibrationSettings(), fm)
-    v = pb.prior_variance()
-    assert v.shape == (pb.starts[-1],)
-    share = {}
-    for f, fc in enumerate(pb.feature_cands):
-        cols = v[pb.starts[f]:pb.starts[f + 1]]
-        if f in pb.fixed or fc[0].family == "empirical":
-            assert np.all(cols == 0.0), fc[0].name
-        else:
-            assert np.all(cols == fc[0].share), fc[0].name
-            share[fc[0].name] = float(cols[0])
-    assert share["cam_phase[crank=0,disc=0]"] == pytest.approx(0.25)
-    assert share["pin_pitch[pin=7] (+)"] == pytest.approx(1.0 / 80.0)
-    assert {fc[0].family for f, fc in enumerate(pb.feature_cands) if f not in pb.fixed} >= {"table4", "empirical"}
