@@ -19,7 +19,7 @@ Each draw is scored by :func:`score.score` (the protocol's rules); the pooled co
 effects whose interval holds the truth (0 for an effect the truth does not hold).
 
 Run: ``python benchmarks/coverage_linear.py [--seeds 1 2 ...] [--per-rev K] [--out FILE.json]``.
-Figures are appended to ``benchmarks/results.csv``.
+Figures are appended to ``benchmarks/results.csv``, named by the seeds unless the run is of the default 1-20.
 """
 from __future__ import annotations
 
@@ -127,10 +127,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.out:
         args.out.write_text(json.dumps({"seeds": args.seeds, "per_rev": args.per_rev, "scores": scores,
                                         "pooled": pooled}, indent=1, default=str))
-    record("coverage_linear", [("draws", pooled["draws"], "count"), ("passed", pooled["passed"], "count"),
-                               ("intervals", pooled["n_intervals"], "count"), ("covered", pooled["covered"], "count"),
-                               ("coverage", pooled["coverage"] or 0.0, "fraction"),
-                               ("seconds", time.perf_counter() - t0, "s")])
+    pre = "" if list(args.seeds) == list(SEEDS) else "seeds_" + "_".join(map(str, args.seeds)) + "_"
+    record("coverage_linear", [(pre + "draws", pooled["draws"], "count"), (pre + "passed", pooled["passed"], "count"),
+                               (pre + "intervals", pooled["n_intervals"], "count"),
+                               (pre + "covered", pooled["covered"], "count"),
+                               (pre + "coverage", pooled["coverage"] or 0.0, "fraction"),
+                               (pre + "seconds", time.perf_counter() - t0, "s")])
     return 0
 
 
