@@ -13,7 +13,8 @@ at the declared state, ``te(theta) = te0 + J theta``). What it keeps of a realis
 What it does not keep: the physics beyond the first order (contact sets that change with the errors, the kinks of
 the pin-wise errors), and one reading layout for every draw (``--per-rev`` readings per revolution from 0.37 deg
 of input angle; the default 333 is the protocol's, above twice the input order 121 of the default design, so
-the sun's eccentricity is not aliased onto the low orders). A miss here is therefore a miss of the estimator and its intervals, not of the linearisation.
+the sun's eccentricity is not aliased onto the low orders). A miss here is therefore a miss of the estimator and
+its intervals, not of the linearisation.
 
 Each draw is scored by :func:`score.score` (the protocol's rules); the pooled coverage is the share of named
 effects whose interval holds the truth (0 for an effect the truth does not hold).
@@ -36,13 +37,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from calib_standin import frozen_model, with_te  # noqa: E402
+from calib_standin import frozen_model, rig_data  # noqa: E402
 from realistic import COMPLIANCE_KEY, draw  # noqa: E402
 from results_log import record  # noqa: E402
 from score import pool, score, score_lines  # noqa: E402
 from rvcad.errors import ERROR_TYPES  # noqa: E402
 from rvcalib import CalibrationSettings, calibrate  # noqa: E402
-from rvcalib.readings import nuisance_columns  # noqa: E402
 from rvcalib.simulate import simulate_dataset, standard_runs  # noqa: E402
 from rvrig.dataset import read_dataset  # noqa: E402
 
@@ -87,14 +87,6 @@ def truth_vector(fm, dr) -> tuple[np.ndarray, dict]:
     return theta, {"expected_effects": expected, "noise_te_arcsec": NOISE_ARCSEC}
 
 
-def measured(ds, fm, theta: np.ndarray, seed: int):
-    """The layout's dataset with the TE of ``theta``, each test's zero and the noise of ``seed``."""
-    rng = np.random.default_rng(seed)
-    N, _ = nuisance_columns(ds)
-    te = fm.te(theta) + N @ rng.normal(0.0, 30.0, N.shape[1]) + rng.normal(0.0, NOISE_ARCSEC, N.shape[0])
-    return with_te(ds, te)
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS))
@@ -113,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     for seed in args.seeds:
         theta, answer = truth_vector(fm, draw(seed))
         t1 = time.perf_counter()
-        res = calibrate(measured(ds, fm, theta, seed), CalibrationSettings(workers=1), model=fm)
+        res = calibrate(rig_data(ds, fm.te(theta), NOISE_ARCSEC, seed), CalibrationSettings(workers=1), model=fm)
         s = score(res.to_dict(), answer)
         scores.append(dict(s, seed=seed))
         print(f"seed {seed}: {'PASS' if s['passed'] else 'FAIL'} RMS {s['rms_ratio']:.2f}x, covered "

@@ -73,7 +73,7 @@ class Projector:
 
 
 def prior_scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.ndarray, readings: list,
-            dataset) -> tuple:
+                 dataset) -> tuple:
     """Prior scales of the solved and the reading parameters, with the two taken from the model's response: the
     compliance's (the model's own compliance at the runs: the TE per N m of friction torque, which is load) and
     the empirical terms' (the median RMS TE of a tolerance-class Table 4 effect)."""
@@ -361,7 +361,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             tau = np.concatenate(scales)
             if cur is None:
                 cur = LoopState(theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), np.ones(tau.size),
-                             criterion(pb, theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), tau))
+                                criterion(pb, theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), tau))
             F = pb.features(J, scales, empirical)
             X0 = F.X if X0 is None else X0
             z = proj(y - te + J @ theta)

@@ -16,7 +16,7 @@ from rvcalib.datasheet import reducer_case
 from rvcalib.holdout import declared_te, model_te
 from rvcalib.library import build_library
 from rvcalib.loop import resolved_order
-from rvcalib.readings import ramp_shown
+from rvcalib.readings import nuisance_columns, ramp_shown
 from rvcalib.reducer_model import ReducerModel
 from rvrig.dataset import noise_estimate
 
@@ -81,6 +81,14 @@ def with_te(ds, te: np.ndarray):
         runs.append(dataclasses.replace(r, output_deg=r.input_deg / r.ratio + t / 3600.0,
                                         noise_arcsec=noise_estimate(t)))
     return dataclasses.replace(ds, runs=runs)
+
+
+def rig_data(ds, te: np.ndarray, noise: float, seed: int):
+    """The dataset as a rig would record the TE ``te`` (arcsec): each test's zero ``normal(0, 30)`` arcsec, then
+    white noise of ``noise`` arcsec, both from ``numpy.random.default_rng(seed)`` in that order."""
+    rng = np.random.default_rng(seed)
+    N, _ = nuisance_columns(ds)
+    return with_te(ds, te + N @ rng.normal(0.0, 30.0, N.shape[1]) + rng.normal(0.0, noise, N.shape[0]))
 
 
 #: Families whose solved candidates are model options only (what the stand-in can give a column).

@@ -11,10 +11,9 @@ import numpy as np
 import pytest
 from scipy import optimize
 
-from calib_standin import frozen_model, with_te
+from calib_standin import frozen_model, rig_data
 from rvrig.dataset import read_dataset
 from rvcalib.loop import Problem, propose, prior_scales, LoopState, calibrate, criterion
-from rvcalib.readings import nuisance_columns
 from rvcalib.refine import refine
 from rvcalib.settings import CalibrationSettings
 from rvcalib.simulate import simulate_dataset, standard_runs
@@ -45,10 +44,7 @@ def _truth(fm, values: dict) -> np.ndarray:
 
 
 def _data(ds, fm, truth: dict, extra: np.ndarray | None = None, noise: float = 0.2, seed: int = 0):
-    rng = np.random.default_rng(seed)
-    N, _ = nuisance_columns(ds)
-    te = fm.te(_truth(fm, truth)) + N @ rng.normal(0.0, 30.0, N.shape[1]) + rng.normal(0.0, noise, N.shape[0])
-    return with_te(ds, te + (0.0 if extra is None else extra))
+    return rig_data(ds, fm.te(_truth(fm, truth)) + (0.0 if extra is None else extra), noise, seed)
 
 
 def _named(res) -> dict:
