@@ -23,7 +23,7 @@ from typing import Any
 from rvcad import validation as v
 from rvcad.errors import MAX_LOAD_NM, Case
 from rvcalib.reportmd import num, reducer_line, te_formula
-from rvcalib.settings import CONTACTS, CalibrationSettings
+from rvcalib.settings import CONTACTS, ESTIMATORS, CalibrationSettings
 
 #: Most single effects (the estimator's own bound on ``max_effects``).
 MAX_EFFECTS = 1000
@@ -39,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="rv-calibrate",
         usage="%(prog)s DATASET --out DIR [--reducer DESIGN.json] [--json] [--workers N] [--max-effects L] "
               "[--max-order K] [--empirical-weight W] [--contact physical|impact] [--rated-Nm T] [--holdout-loads] "
-              "[--verbose]\n       %(prog)s import FILES... --out DATASET_DIR [--ratio N | --reducer DESIGN.json] "
+              "[--estimator sparse|tolerance-prior] [--verbose]\n       %(prog)s import FILES... --out DATASET_DIR [--ratio N | --reducer DESIGN.json] "
               "[options of rv-calibrate import --help]",
         description="Calibrate the reducer model on measured TE: what the rig shows, the effects the declared model "
                     "lacks (named with 95 % intervals, or grouped where the data cannot split them), what no "
@@ -75,6 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "needs it")
     p.add_argument("--holdout-loads", dest="holdout_loads", action="store_true",
                    help="also fit without each load in turn and predict it (one more loop per load)")
+    p.add_argument("--estimator", default="sparse", metavar="E",
+                   help="sparse (the sum of single effects, default) or tolerance-prior (every candidate a Gaussian "
+                        "effect at its tolerance class, no selection); docs/calibration.md")
     p.add_argument("--verbose", action="store_true", help="progress on stderr")
     return p
 
@@ -91,10 +94,12 @@ def settings_from(args: argparse.Namespace) -> CalibrationSettings:
         v.reject("--contact", args.contact, " or ".join(allowed), cls=v.OptionError)
     if args.rated_Nm is not None:
         v.option_real(args.rated_Nm, "--rated-Nm", 0.0, MAX_LOAD_NM, lo_open=True, unit="N m")
+    if args.estimator not in ESTIMATORS:
+        v.reject("--estimator", args.estimator, " or ".join(ESTIMATORS), cls=v.OptionError)
     v.output_dir(args.out)
     return CalibrationSettings(max_effects=args.max_effects, max_order=args.max_order,
                                empirical_weight=float(args.empirical_weight), workers=args.workers,
-                               contact=args.contact, rated_Nm=args.rated_Nm).validate()
+                               contact=args.contact, rated_Nm=args.rated_Nm, estimator=args.estimator).validate()
 
 
 def _friction(result, dataset, law) -> Any:

@@ -38,6 +38,7 @@ import numpy as np
 
 from rvdyn.solver import law_from_model
 
+from rvcalib.gaussian import estimate as tolerance_prior_estimate
 from rvcalib.library import Library, build_library
 from rvcalib.readings import nuisance_columns, ramp_shown, reading_columns
 from rvcalib.reducer_model import ReducerModel
@@ -351,6 +352,9 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     empirical = False
     with pool_cm as pool:
         theta, te = _global_fit(pb, theta, te, pool, log)
+        if settings.estimator == "tolerance-prior":
+            scales = prior_scales(pb.library, m, m.jacobian(theta, None, None, pool), R, pb.readings, dataset)
+            return tolerance_prior_estimate(pb, settings, theta, scales, pool, log, t0, rms_before, time.perf_counter)
         dense = pb.dense_params
         cur = None
         for it in range(1, settings.max_linearisations + 1):

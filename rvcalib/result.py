@@ -190,7 +190,7 @@ def merge_sides(members: list) -> list:
     return list(out.values())
 
 
-def _effect(c, alpha: float, m: np.ndarray, S: np.ndarray, level: float) -> NamedEffect:
+def named_effect(c, alpha: float, m: np.ndarray, S: np.ndarray, level: float) -> NamedEffect:
     """A named effect from its parameters' posterior given the effect (mean m, covariance S, physical units) and
     the probability alpha that it is an effect at all."""
     size, ang = c.size(m)
@@ -213,10 +213,10 @@ def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float, laplace: 
     a_tot = min(1.0, sum(a for a, _, _ in parts))
     got = laplace.block(F.starts[f], F.starts[f + 1]) if laplace is not None else None
     if got is not None:
-        return _effect(c, a_tot, got[0], got[1], level)
+        return named_effect(c, a_tot, got[0], got[1], level)
     m = sum(a * mu for a, mu, _ in parts) / max(a_tot, 1e-300)
     S = sum(a * (cv + np.outer(mu, mu)) for a, mu, cv in parts) / max(a_tot, 1e-300) - np.outer(m, m)
-    return _effect(c, a_tot, m * tau, S * np.outer(tau, tau), level)
+    return named_effect(c, a_tot, m * tau, S * np.outer(tau, tau), level)
 
 
 def _twin_group(eff: NamedEffect, cands: list, f: int, twins: list, level: float) -> dict:
@@ -241,14 +241,21 @@ def _unexplained(members: list, cands: list) -> dict:
 
 
 def read_dense(fc: list, e, F, tau: np.ndarray, level: float, laplace: Laplace | None = None) -> tuple[list, list]:
-    """The always-estimated candidates (one fixed effect over all of them): each named where its interval excludes
-    zero, unless its posterior correlation with another is so strong (|r| > 0.95) that only their combination is
-    determined: such a pair is a group with the size each would have alone."""
+    """The always-estimated candidates (one fixed effect over all of them) read from the estimator's effect ``e``
+    or, where given, the joint posterior ``laplace``: :func:`read_block`."""
     m = e.mean[F.starts[0]:F.starts[1]] * tau
     S = e.cov_of(F, 0) * np.outer(tau, tau)
     got = laplace.block(F.starts[0], F.starts[1]) if laplace is not None else None
     if got is not None:
         m, S = got
+    return read_block(fc, m, S, level)
+
+
+def read_block(fc: list, m: np.ndarray, S: np.ndarray, level: float) -> tuple[list, list]:
+    """The candidates ``fc`` with the joint posterior mean ``m`` and covariance ``S`` of their parameters
+    (physical units): each named where its interval excludes zero, unless its posterior correlation with another
+    is so strong (|r| > 0.95) that only their combination is determined: such a pair is a group with the size each
+    would have alone."""
     sd = np.sqrt(np.maximum(np.diag(S), 1e-300))
     corr = S / np.outer(sd, sd)
     named, groups = [], []
@@ -275,7 +282,7 @@ def read_dense(fc: list, e, F, tau: np.ndarray, level: float, laplace: Laplace |
     for i, c in enumerate(fc):
         if i in tied:
             continue
-        eff = _effect(c, 1.0, m[spans[i]], S[spans[i], spans[i]], level)
+        eff = named_effect(c, 1.0, m[spans[i]], S[spans[i], spans[i]], level)
         if eff.ci95[0] > 0 or eff.ci95[1] < 0 or (c.polar and eff.ci95[0] > 0):
             named.append(eff)
     return named, groups
@@ -339,22 +346,36 @@ def assemble(dataset, pb, F, fit, scales, theta, te, settings, info: dict) -> Ca
     tau = np.concatenate(scales)
     n_s = theta.size
     idx = np.concatenate([info["active_s"], n_s + info["active_r"]]).astype(int)
-    resid = pb.y - te - pb.R @ info["b_r"]
-    consts = pb.proj.constants(resid)
-    r = pb.proj(resid)
+    r = pb.proj(pb.y - te - pb.R @ info["b_r"])
     offs = np.cumsum([0] + [run.n for run in dataset.runs])
     laplace = Laplace(F.X, idx, info["prior_sd"], fit.sigma2, np.concatenate([theta, info["b_r"]]), tau,
                       background=fit.coef_var + fit.coef ** 2, residual=r, offsets=offs) if idx.size else None
     named, groups, unexplained, diffuse = read_posterior(F, fit, pb.feature_cands, tau, settings, pb.fixed, laplace,
                                                          info.get("twins"))
+    cap = fit.n_supported - len(pb.fixed) >= settings.max_effects
+    return assemble_common(pb, theta, te, info["b_r"], named, groups, unexplained, diffuse, math.sqrt(fit.sigma2),
+                           settings, dict(info, cap_binds=cap))
+
+
+def assemble_common(pb, theta: np.ndarray, te: np.ndarray, b_r: np.ndarray, named: list, groups: list,
+                    unexplained: list, diffuse: list, sigma: float, settings, info: dict) -> CalibrationResult:
+    """The result from what an estimator read: the state (``theta``, the model TE ``te`` there, the reading
+    coefficients ``b_r``), its named effects, groups, unexplained structure and diffuse sets, the noise standard
+    deviation it estimated (arcsec), and ``info`` (``rms_before``, ``stopped_by``, ``cap_binds``, ``seconds``,
+    ``linearisations``)."""
+    dataset = pb.dataset
+    resid = pb.y - te - pb.R @ b_r
+    consts = pb.proj.constants(resid)
+    r = pb.proj(resid)
+    offs = np.cumsum([0] + [run.n for run in dataset.runs])
     m = pb.model
     case = m.case_dict(m.groups[0], theta) if hasattr(m, "groups") and m.groups else {}
     return CalibrationResult(
         effects=named, groups=groups, unexplained=unexplained, diffuse=diffuse,
         nuisance=[{"test": t, "constant_arcsec": float(c)} for t, c in zip(pb.tests, consts)],
         rms_before=info["rms_before"], rms_after=float(np.sqrt(np.mean(r ** 2))),
-        noise_arcsec=_noise(dataset, r, offs), sigma_arcsec=float(math.sqrt(fit.sigma2)),
-        stopped_by=info["stopped_by"], cap_binds=fit.n_supported - len(pb.fixed) >= settings.max_effects,
+        noise_arcsec=_noise(dataset, r, offs), sigma_arcsec=float(sigma),
+        stopped_by=info["stopped_by"], cap_binds=bool(info["cap_binds"]),
         seconds=float(info["seconds"]), linearisations=info["linearisations"], settings=settings.to_dict(),
-        notes=list(pb.library.notes) + list(info["ramp_lines"]), reducer=dataset.reducer(), calibrated_case=case,
+        notes=list(pb.library.notes) + list(pb.ramp_lines), reducer=dataset.reducer(), calibrated_case=case,
         residuals=[r[offs[i]:offs[i + 1]] for i in range(len(dataset.runs))])

@@ -8,6 +8,9 @@ from rvcalib.library import FAMILIES
 from rvcalib.sparse import SparseSettings
 
 CONTACTS = (None, "physical", "impact")
+#: The estimators: the sum of single effects with its loop (rvcalib.sparse, rvcalib.loop), or the Gaussian
+#: posterior of every candidate at its tolerance class (rvcalib.gaussian).
+ESTIMATORS = ("sparse", "tolerance-prior")
 
 
 @dataclass(frozen=True)
@@ -44,6 +47,12 @@ class CalibrationSettings:
         than the default.
     families : tuple of str
         Candidate families in the library.
+    estimator : str
+        ``sparse``: the sum of single effects, its chosen set refined through the reducer model, re-linearised
+        (:mod:`rvcalib.sparse`); ``tolerance-prior``: every candidate a Gaussian random effect at its tolerance
+        class, their joint maximum a posteriori through the reducer model and its Laplace posterior, no selection
+        (:mod:`rvcalib.gaussian`). ``max_effects``, ``min_purity``, ``max_linearisations``, ``step_tolerance`` and
+        ``swaps`` are the sparse estimator's.
     """
 
     max_effects: int = 30
@@ -58,6 +67,7 @@ class CalibrationSettings:
     contact: str | None = None
     rated_Nm: float | None = None
     families: tuple = FAMILIES
+    estimator: str = "sparse"
 
     def validate(self) -> "CalibrationSettings":
         """Return self, or raise ValueError naming the field, its value and what is allowed."""
@@ -84,6 +94,8 @@ class CalibrationSettings:
             bad("rated_Nm", "None or a number in (0, 20000] N m")
         if not self.families or any(f not in FAMILIES for f in self.families):
             bad("families", f"a non-empty tuple from {list(FAMILIES)}")
+        if self.estimator not in ESTIMATORS:
+            bad("estimator", f"one of {list(ESTIMATORS)}")
         return self
 
     def sparse(self) -> SparseSettings:

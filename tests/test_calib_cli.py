@@ -34,6 +34,7 @@ SETTINGS = CalibrationSettings(max_order=6, families=FAMILIES, workers=1)
     (["--empirical-weight", "0"], r"--empirical-weight 0.0 is out of range; allowed: a number in \(0, 1e\+06\]"),
     (["--empirical-weight", "nan"], r"--empirical-weight nan is not finite"),
     (["--contact", "soft"], r"--contact 'soft' is not allowed; allowed: physical or impact"),
+    (["--estimator", "ridge"], r"--estimator 'ridge' is not allowed; allowed: sparse or tolerance-prior"),
     (["--rated-Nm", "-5"], r"--rated-Nm -5.0 is out of range; allowed: a number in \(0, 20000\] N m"),
     (["--workers", "two"], r"argument --workers: invalid int value: 'two'"),
 ])
@@ -79,9 +80,10 @@ def test_import_is_delegated(capsys, tmp_path):
 def test_the_options_make_one_settings_object(tmp_path):
     args = build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o"), "--max-effects", "12",
                                       "--max-order", "40", "--empirical-weight", "0.5", "--contact", "impact",
-                                      "--rated-Nm", "1568", "--workers", "1"])
+                                      "--rated-Nm", "1568", "--workers", "1", "--estimator", "tolerance-prior"])
     assert settings_from(args) == CalibrationSettings(max_effects=12, max_order=40, empirical_weight=0.5,
-                                                      contact="impact", rated_Nm=1568.0, workers=1)
+                                                      contact="impact", rated_Nm=1568.0, workers=1,
+                                                      estimator="tolerance-prior")
     assert settings_from(build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o")])).workers == 2
 
 

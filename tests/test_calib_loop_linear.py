@@ -194,7 +194,86 @@ def test_a_swap_is_accepted_only_beyond_chi2_1(base):
 @pytest.mark.parametrize("field,value,match", [
     ("max_effects", 0, "max_effects = 0"), ("empirical_weight", -1.0, "empirical_weight = -1.0"),
     ("contact", "soft", "contact = 'soft'"), ("rated_Nm", 0.0, "rated_Nm = 0.0"),
-    ("families", ("table4", "magic"), "families"), ("workers", 0, "workers = 0"), ("swaps", -1, "swaps = -1")])
+    ("families", ("table4", "magic"), "families"), ("workers", 0, "workers = 0"), ("swaps", -1, "swaps = -1"),
+    ("estimator", "ridge", "estimator = 'ridge' is not allowed: one of")])
 def test_settings_refused_naming_the_field(field, value, match):
     with pytest.raises(ValueError, match=match):
         CalibrationSettings(**{field: value}).validate()
+
+
+# ---------------------------------------------------------------------------------------------- tolerance prior
+TOLERANCE_PRIOR = CalibrationSettings(estimator="tolerance-prior")
+
+
+def _covers(e, v) -> bool:
+    """The truth v inside the named effect's 95 % region (an interval, or the chi-square(2) ellipse)."""
+    if isinstance(v, tuple):
+        d = np.array(e.components) - np.array(v)
+        return float(d @ np.linalg.solve(np.array(e.cov), d)) <= 5.991
+    return e.ci95[0] <= v <= e.ci95[1]
+
+
+def test_tolerance_prior_names_several_effects_with_regions_that_cover(base):
+    """Four effects at once (a ring offset, the compliance, a pin's pitch, a cam's eccentricity), each test with its
+    rig zero, noise 0.2 arcsec, 60 readings a revolution for 343 parameters: every named effect is one the truth
+    holds, its 95 % region holding the truth; the ring offset and the compliance, which the data determine, are
+    named; the noise of the greatest evidence near the true one; the residual at the noise; no structure outside
+    the physics reported."""
+    ds, fm = base
+    truth = {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2,
+             "pin_pitch[pin=7] (+)": 0.004, "cam_eccentricity[crank=0,disc=0]": (4.0, 0.0)}
+    lines: list[str] = []
+    res = calibrate(_data(ds, fm, truth, seed=5), TOLERANCE_PRIOR, model=fm, log=lines.append)
+    got = _named(res)
+    want = {k.replace(" (+)", ""): v for k, v in truth.items()}
+    assert {"pin_circle_offset", "torsional_compliance_arcsec_per_Nm"} <= set(got), [e.line() for e in res.effects]
+    for name, e in got.items():
+        assert name in want and _covers(e, want[name]), e.line()
+    assert res.sigma_arcsec == pytest.approx(0.2, rel=0.1)
+    assert res.rms_after <= 1.2 * 0.2 and res.unexplained == []
+    assert res.settings["estimator"] == "tolerance-prior" and res.linearisations >= 2
+    steps = [re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines]
+    assert all(float(m.group(2)) <= float(m.group(1)) for m in steps if m), lines   # a step never raises it
+
+
+def test_tolerance_prior_reports_structure_outside_the_physics_as_unexplained(base):
+    ds, fm = base
+    th = np.concatenate([np.radians(r.output_deg) for r in ds.runs])
+    load = np.concatenate([np.full(r.n, r.load_Nm) for r in ds.runs])
+    extra = 0.05 * load * np.cos(7 * th + 0.4)                # order 7, proportional to the load: 0.5 / 1.5 arcsec
+    res = calibrate(_data(ds, fm, {"torsional_compliance_arcsec_per_Nm": 0.2}, extra), TOLERANCE_PRIOR, model=fm)
+    assert "order 7 (load)" in [u["label"] for u in res.unexplained], res.unexplained
+    assert res.rms_after <= 1.2 * 0.2
+
+
+def test_tolerance_prior_names_no_twin_the_data_cannot_split(base):
+    """The four cams' phases give the same TE up to the sign: no one of them is named, and the sum their
+    posterior gives still explains the data."""
+    ds, fm = base
+    res = calibrate(_data(ds, fm, {"cam_phase[crank=0,disc=0]": 3.0, "torsional_compliance_arcsec_per_Nm": 0.2}),
+                    TOLERANCE_PRIOR, model=fm)
+    assert not any(e.key == "cam_phase" for e in res.effects), [e.line() for e in res.effects]
+    assert res.rms_after <= 1.2 * 0.2
+
+
+def test_evidence_noise_and_block_variance_against_closed_forms():
+    """MacKay's fixed point with flat priors is the unbiased RSS / (n - p); the REML variance of a one-direction
+    block is ``max(0, (z^2 - s2_hat) / |b|^2)`` with ``s2_hat`` the rest over its m - 1 directions."""
+    from rvcalib.gaussian import block_variance, evidence_sigma
+
+    rng = np.random.default_rng(11)
+    X = rng.normal(size=(80, 4))
+    r = rng.normal(0.0, 0.3, 80)
+    beta = np.linalg.lstsq(X, r, rcond=None)[0]
+    res = r - X @ beta
+    sigma, _ = evidence_sigma(X, res, np.full(4, 1e12), 80, 1.0)
+    assert sigma == pytest.approx(np.sqrt(res @ res / 76), rel=1e-6)
+    b = rng.normal(size=80)
+    for amp in (0.0, 3.0):
+        y = rng.normal(0.0, 0.3, 80) + amp * b / np.linalg.norm(b)
+        z2 = float((b @ y) ** 2 / (b @ b))
+        s2 = (float(y @ y) - z2) / 79
+        gamma, sigma2 = block_variance(y, b[:, None], 80)
+        want = max(0.0, (z2 - s2) / float(b @ b))
+        assert gamma == pytest.approx(want, rel=1e-4, abs=1e-9)
+        assert sigma2 == pytest.approx(s2 if want > 0 else float(y @ y) / 80, rel=1e-4)

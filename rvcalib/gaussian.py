@@ -1,0 +1,287 @@
+"""The tolerance-prior estimator: every candidate a Gaussian random effect at its tolerance class, no selection.
+
+A real reducer holds every error of the library at some size within its tolerance class (the library's prior
+scale: a third of the paper's Table 4 value for a Table 4 error, a stated scale for each model and measurement
+option). This estimator takes that as its prior, for all candidates at once:
+
+* each physical candidate outside the always-estimated block ``theta_j ~ N(0, s_j^2)``, ``s_j`` its prior scale
+  (the two sides of a pin-wise error are two such candidates, each on its side of zero: a half-normal prior);
+* the model options of the always-estimated block (the compliance: a property of the reducer, not an error
+  within a class) nearly flat (:data:`FLAT`, a thousand prior scales); its Table 4 errors (the pin-circle
+  diameter, the radius of all pins) at their class like every other;
+* the tests' constants projected out (nuisance, never an effect).
+
+**Criterion and search.** The maximum a posteriori of all parameters through the reducer model itself,
+
+    minimise  |P (y - f(theta) - R_m b)|^2 / sigma^2 + sum_j (theta_j / s_j)^2 + sum_k (b_k / s_k)^2
+
+(``R_m`` the measurement effects' reading columns), by the trust-region method of :func:`rvcalib.refine.refine`
+within the physical bounds, each iteration on the reducer model's columns at its state (re-linearisation). There is
+one criterion and one search; no candidate is chosen or dropped.
+
+**Intervals.** Laplace's approximation at the MAP: the covariance ``(X' X / sigma^2 + diag(1 / s^2))^-1`` of all
+parameters at once (``X`` the columns at the MAP), so each interval holds what every other candidate, at its
+tolerance class, could move it. ``sigma`` is the noise of the greatest evidence (MacKay's fixed point,
+D. J. C. MacKay, "Bayesian interpolation", Neural Computation 4 (1992) 415-447, eq. 4.10:
+``sigma^2 = |r|^2 / (n - k - g)``, ``k`` the tests' constants, ``g = sum_j (1 - C_jj / s_j^2)`` the parameters the
+data determine).
+
+**What is named.** A candidate whose 95 % posterior region excludes zero (one component: its interval; two
+components: the chi-square(2) ellipse), with its MAP value and that interval. The rest are not told from zero by
+the data: they are in the fit at their posterior means, never named. In the always-estimated block, two
+parameters whose posterior correlation exceeds 0.95 are a group (:func:`rvcalib.result.read_block`).
+
+**The empirical block** (orders and load or direction terms no candidate gives) joins after the physics, on its
+residual, with its own Gaussian prior (the typical TE of a tolerance-class Table 4 error); a term whose region
+excludes zero is reported as unexplained structure, never as a physical effect.
+
+Reference: the prior is the tolerance stack-up's (each error within its class); the estimator is the linearised
+Bayesian least squares of inverse problems (A. Tarantola, *Inverse Problem Theory*, SIAM 2005, section 3.2),
+iterated as Gauss-Newton through the nonlinear model.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import optimize, stats
+
+from rvcalib.reducer_model import ModelEvaluationError
+from rvcalib.result import CalibrationResult, assemble_common, named_effect, read_block
+
+#: The always-estimated block's prior standard deviation, in prior scales (nearly flat).
+FLAT = 1e3
+
+
+class _Counted:
+    """The forward model, counting its Jacobians (the linearisations)."""
+
+    def __init__(self, model) -> None:
+        self.model, self.jacobians = model, 0
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+    def jacobian(self, *a, **k):
+        self.jacobians += 1
+        return self.model.jacobian(*a, **k)
+
+
+def prior_sd(pb, ts: np.ndarray, tr: np.ndarray) -> np.ndarray:
+    """Prior standard deviation of every solved parameter and reading coefficient, physical units: the prior
+    scale (the tolerance class), :data:`FLAT` times it for a model option of the always-estimated block (the
+    compliance: a property of the reducer, not an error within a class)."""
+    sd = np.concatenate([ts, tr]).astype(float)
+    fam = np.array([c.family for c in pb.model.candidates for _ in range(c.n_params)])
+    flat = pb.dense_params[fam[pb.dense_params] == "model"]
+    sd[flat] *= FLAT
+    return sd
+
+
+def evidence_sigma(X: np.ndarray, r: np.ndarray, sd: np.ndarray, dof: int, sigma0: float,
+                   iterations: int = 50) -> tuple[float, np.ndarray]:
+    """MacKay's fixed point for the noise (see the module docstring) and the posterior covariance there.
+
+    Parameters
+    ----------
+    X : (n, q) the columns at the MAP, projected; r : (n,) the residual there; sd : (q,) prior standard deviations;
+    dof : readings less the constants; sigma0 : the start, arcsec.
+    """
+    prec = 1.0 / np.square(sd)
+    G = X.T @ X
+    s2 = sigma0 ** 2
+    C = np.linalg.pinv(G / s2 + np.diag(prec))
+    for _ in range(iterations):
+        g = float(np.sum(1.0 - prec * np.diag(C)))
+        new = float(r @ r) / max(dof - g, 1.0)
+        C = np.linalg.pinv(G / new + np.diag(prec))
+        if abs(new - s2) <= 1e-10 * s2:
+            s2 = new
+            break
+        s2 = new
+    return math.sqrt(s2), C
+
+
+class Posterior:
+    """The Laplace posterior of the parameters ``idx`` (solved first, then readings), physical units; the
+    interface of :class:`rvcalib.result.Laplace` (``block``)."""
+
+    def __init__(self, idx: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> None:
+        self.pos = {int(j): k for k, j in enumerate(idx)}
+        self.mean, self.cov = mean, cov
+
+    def block(self, a: int, b: int):
+        if any(j not in self.pos for j in range(a, b)):
+            return None
+        k = [self.pos[j] for j in range(a, b)]
+        return self.mean[k], self.cov[np.ix_(k, k)]
+
+
+def _named(pb, post: Posterior, level: float) -> list:
+    """The physical candidates outside the always-estimated block whose posterior region excludes zero (of the
+    two sides of one pin-wise error, the side with the larger evidence)."""
+    out: dict = {}
+    for f, fc in enumerate(pb.feature_cands):
+        if f in pb.fixed or pb.empirical[f]:
+            continue
+        got = post.block(pb.starts[f], pb.starts[f + 1])
+        if got is None:
+            continue
+        m, S = got
+        d2 = float(m @ np.linalg.solve(S, m))
+        if d2 <= stats.chi2.ppf(level, m.size):
+            continue
+        c = fc[0]
+        if c.effect_name not in out or out[c.effect_name][0] < d2:
+            out[c.effect_name] = (d2, named_effect(c, 1.0, m, S, level))
+    return [e for _, e in out.values()]
+
+
+def _profiled(lam: float, z2: np.ndarray, s2: np.ndarray, rest: float, m: int) -> float:
+    """-2 times the profile restricted log-likelihood at lambda = gamma / sigma^2 (constants dropped)."""
+    d = 1.0 + lam * s2
+    return float(np.sum(np.log(d)) + m * np.log((np.sum(z2 / d) + rest) / m))
+
+
+def block_variance(r: np.ndarray, B: np.ndarray, dof: int) -> tuple[float, float]:
+    """Restricted maximum likelihood of ``gamma`` and ``sigma^2`` in ``r ~ N(0, sigma^2 I + gamma B B')``
+    (H. D. Patterson and R. Thompson, Biometrika 58 (1971) 545-554), ``r`` and ``B`` projected off what the fit
+    holds, ``dof`` the residual's degrees of freedom. With ``B``'s singular values ``s_i``, ``z_i = u_i' r`` and
+    ``rest = |r|^2 - sum z_i^2``, ``lambda = gamma / sigma^2`` minimises
+    ``sum_i log(1 + lambda s_i^2) + dof log sigma^2(lambda)``, ``sigma^2(lambda) = (sum_i z_i^2 / (1 + lambda
+    s_i^2) + rest) / dof``; a residual at white noise gives ``gamma = 0``."""
+    U, s, _ = np.linalg.svd(B, full_matrices=False)
+    k = int(min(np.sum(s > s[0] * 1e-8), dof - 1)) if s.size and s[0] > 0 else 0
+    if k == 0:
+        return 0.0, float(r @ r) / dof
+    s2 = s[:k] ** 2
+    z2 = (U[:, :k].T @ r) ** 2
+    rest = max(float(r @ r) - float(z2.sum()), 0.0)
+    got = optimize.minimize_scalar(lambda t: _profiled(np.expm1(t), z2, s2, rest, dof),
+                                   bounds=(0.0, math.log1p(1e8 / s2[-1])), method="bounded",
+                                   options={"xatol": 1e-6})
+    lam = float(np.expm1(got.x)) if _profiled(float(np.expm1(got.x)), z2, s2, rest, dof) < _profiled(
+        0.0, z2, s2, rest, dof) else 0.0
+    sigma2 = float((np.sum(z2 / (1.0 + lam * s2)) + rest) / dof)
+    return lam * sigma2, sigma2
+
+
+def _unexplained(pb, r: np.ndarray, Q: np.ndarray, tr: np.ndarray, level: float) -> tuple[list, np.ndarray]:
+    """The empirical block on the physics' residual ``r``: each term ``N(0, gamma tr^2)`` with ``gamma`` the
+    data's (:func:`block_variance` on what is orthogonal to the physics' columns, orthonormal ``Q``), its Gaussian posterior, the terms whose region excludes zero (unexplained
+    structure) and the coefficients of every reading column (0 but the empirical ones)."""
+    b = np.zeros(pb.R.shape[1])
+    emp = [f for f in range(len(pb.feature_cands)) if pb.empirical[f]]
+    if not emp:
+        return [], b
+    n_s = pb.model.n_params
+    cols = np.concatenate([np.arange(pb.starts[f], pb.starts[f + 1]) for f in emp]) - n_s
+    E = pb.proj(pb.R[:, cols])
+    Eo = E - Q @ (Q.T @ E)
+    gamma, s2 = block_variance(r - Q @ (Q.T @ r), Eo * tr[cols], r.size - len(pb.tests) - Q.shape[1])
+    if gamma <= 0:
+        return [], b
+    C = np.linalg.inv(E.T @ E / s2 + np.diag(1.0 / (gamma * tr[cols] ** 2)))
+    m = C @ (E.T @ r) / s2
+    b[cols] = m
+    out, pos = [], 0
+    for f in emp:
+        c, k = pb.feature_cands[f][0], pb.starts[f + 1] - pb.starts[f]
+        mm, S = m[pos:pos + k], C[pos:pos + k, pos:pos + k]
+        pos += k
+        if float(mm @ np.linalg.solve(S, mm)) > stats.chi2.ppf(level, k):
+            size, ang = c.size(mm)
+            out.append({"label": c.effect_name, "order": c.order, "kind": c.key, "amplitude_arcsec": float(size),
+                        "phase_deg": ang, "probability": 1.0, "members": []})
+    return out, b
+
+
+def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, sigma: float, settings, pool,
+                 log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The MAP of the criterion (module docstring) by Gauss-Newton through the reducer model: at each state the
+    linearised problem's bounded MAP (``scipy.optimize.lsq_linear`` on the prior-augmented system, within the
+    physical bounds), halved while it does not lower the criterion, then the noise of the greatest evidence at the
+    new state (:func:`evidence_sigma`, on that linearisation's columns); converged when a step moves the model TE
+    by at most ``settings.step_tolerance`` of the noise (RMS), or after ``settings.max_linearisations``.
+
+    Returns (theta, the measurement coefficients ``b`` of the reading columns ``a_r``, the model TE, sigma)."""
+    n_s = model.n_params
+    Rm = pb.proj(pb.R[:, a_r])
+    lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
+    hi = np.concatenate([model._upper, np.full(a_r.size, np.inf)])
+    w = 1.0 / sd[np.concatenate([np.arange(n_s), n_s + a_r])]
+    x = np.concatenate([np.clip(theta, model._lower, model._upper), np.zeros(a_r.size)])
+    te = model.te(x[:n_s])
+
+    def objective(x, te, sigma) -> float:
+        r = pb.proj(pb.y - te) - Rm @ x[n_s:]
+        return float(r @ r) / sigma ** 2 + float(np.sum((x * w) ** 2))
+
+    phi = objective(x, te, sigma)
+    for it in range(1, settings.max_linearisations + 1):
+        J = np.column_stack([pb.proj(model.jacobian(x[:n_s], None, None, pool)), Rm])
+        r = pb.proj(pb.y - te) - Rm @ x[n_s:]
+        A = np.vstack([J / sigma, np.diag(w)])
+        rhs = np.concatenate([r / sigma, -x * w])
+        step = optimize.lsq_linear(A, rhs, bounds=(lo - x, hi - x), method="bvls").x
+        for _ in range(6):
+            new = np.clip(x + step, lo, hi)
+            try:
+                te_new = model.te(new[:n_s])
+            except ModelEvaluationError:
+                step = step / 2
+                continue
+            phi_new = objective(new, te_new, sigma)
+            if phi_new < phi:
+                break
+            step = step / 2
+        else:
+            model.te(x[:n_s])
+            log(f"linearisation {it}: no step lowers the criterion")
+            break
+        moved = float(np.sqrt(np.mean(pb.proj(te_new - te) ** 2)))
+        x, te = new, te_new
+        r = pb.proj(pb.y - te) - Rm @ x[n_s:]
+        sigma_new = evidence_sigma(J, r, 1.0 / w, r.size - len(pb.tests), sigma)[0]
+        log(f"linearisation {it}: criterion {phi:.4f} -> {phi_new:.4f}, the model TE moved {moved:.3g} arcsec RMS, "
+            f"noise of the greatest evidence {sigma_new:.4g} arcsec")
+        sigma, phi = sigma_new, objective(x, te, sigma_new)
+        if moved <= settings.step_tolerance * sigma:
+            break
+    return x[:n_s], x[n_s:], te, sigma
+
+
+def estimate(pb, settings, theta: np.ndarray, scales: tuple, pool, log, t0: float, rms_before: float,
+             start) -> CalibrationResult:
+    """The tolerance-prior estimate (see the module docstring) from ``theta`` (the always-estimated block's own
+    MAP); ``scales`` the prior scales of the solved and the reading parameters; ``start`` the clock."""
+    ts, tr = scales
+    model = _Counted(pb.model)
+    n_s = model.n_params
+    sd = prior_sd(pb, ts, tr)
+    meas = np.array([k for f, fc in enumerate(pb.feature_cands) if f not in pb.fixed and not pb.empirical[f]
+                     and fc[0].family == "measurement" for k in range(pb.starts[f], pb.starts[f + 1])], dtype=int)
+    a_r = meas - n_s
+    sigma0 = max(float(pb.dataset.noise_arcsec()), 1e-3)
+    theta, b_m, te, sigma1 = map_estimate(model, pb, theta, a_r, sd, sigma0, settings, pool, log)
+    b_r = np.zeros(pb.R.shape[1])
+    b_r[a_r] = b_m
+    J = pb.proj(model.jacobian(theta, None, None, pool))
+    X = np.column_stack([J, pb.proj(pb.R[:, a_r])])
+    idx = np.concatenate([np.arange(n_s), n_s + a_r])
+    r = pb.proj(pb.y - te - pb.R @ b_r)
+    sigma, C = evidence_sigma(X, r, sd[idx], r.size - len(pb.tests), sigma1)
+    post = Posterior(idx, np.concatenate([theta, b_m]), C)
+    log(f"tolerance-prior MAP of {n_s} solved and {a_r.size} reading parameters: {model.jacobians} Jacobians, "
+        f"residual RMS {math.sqrt(float(np.mean(r ** 2))):.4g} arcsec, noise of the greatest evidence {sigma:.4g}")
+    named, groups = [], []
+    for f in pb.fixed:
+        n, g = read_block(pb.feature_cands[f], *post.block(pb.starts[f], pb.starts[f + 1]), settings.coverage)
+        named, groups = named + n, groups + g
+    named += _named(pb, post, settings.coverage)
+    U, sv, _ = np.linalg.svd(X, full_matrices=False)
+    Q = U[:, sv > sv[0] * 1e-10]
+    unexplained, b_e = _unexplained(pb, r, Q, sd[n_s:], settings.coverage)
+    return assemble_common(pb, theta, te, b_r + b_e, named, groups, unexplained, [], sigma, settings,
+                           {"rms_before": rms_before, "stopped_by": "converged", "cap_binds": False,
+                            "seconds": start() - t0, "linearisations": model.jacobians})
