@@ -43,16 +43,18 @@ from rvcad.atomic import atomic_path  # noqa: E402
 from realistic import SETS, generate, seeds_of  # noqa: E402
 from score import pool, score, score_lines  # noqa: E402
 
-METHODS = ("new",)
+#: ``new``: rv-calibrate with its default (sparse) estimator; ``tolerance-prior``: with the tolerance-prior one.
+METHODS = ("new", "tolerance-prior")
 
 
 def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = None, workers: int = 1) -> dict[str, Any]:
     """One method with its default options on a dataset; the result in the schema (:mod:`score`)."""
-    if method == "new":
+    if method in METHODS:
         from rvcalib.loop import calibrate as calibrate_new
         from rvcalib.settings import CalibrationSettings
 
-        return calibrate_new(dataset, settings=CalibrationSettings(workers=workers), log=log).to_dict()
+        est = "sparse" if method == "new" else method
+        return calibrate_new(dataset, settings=CalibrationSettings(workers=workers, estimator=est), log=log).to_dict()
     raise ValueError(f"method {method!r} is unknown; allowed: {list(METHODS)}")
 
 

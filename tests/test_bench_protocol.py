@@ -268,3 +268,39 @@ def test_bench_loop_names_a_subset_by_its_seeds(monkeypatch):
     names = [f for _, figs in got for f, *_ in figs]
     assert "new_heldout_seeds_9001_9002_passed" in names and "new_dev_passed" in names
     assert not any("subset" in n for n in names)
+
+
+# ---------------------------------------------------------------------------------------------- tolerance prior
+def test_tolerance_prior_posterior_against_its_closed_forms():
+    """One column with a Gaussian prior: the ridge formula; a flat column: least squares; the evidence's noise of
+    a flat model: the unbiased residual variance RSS / (n - p)."""
+    import tolerance_prior as tp
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(50, 1))
+    r = 2.0 * x[:, 0] + rng.normal(0.0, 0.5, 50)
+    m, C = tp.posterior(x, r, 0.5, np.array([1.5]))
+    xx, xr = float(x[:, 0] @ x[:, 0]), float(x[:, 0] @ r)
+    assert m[0] == pytest.approx(xr / (xx + 0.25 / 1.5 ** 2), rel=1e-12)
+    assert C[0, 0] == pytest.approx(1.0 / (xx / 0.25 + 1.0 / 1.5 ** 2), rel=1e-12)
+    X = rng.normal(size=(50, 3))
+    m, _ = tp.posterior(X, r, 0.5, np.full(3, np.inf))
+    ols = np.linalg.lstsq(X, r, rcond=None)[0]
+    assert np.allclose(m, ols, rtol=1e-10)
+    rss = float(np.sum((r - X @ ols) ** 2))
+    assert tp.noise_evidence(X, r, 50, np.full(3, np.inf), 1.0) == pytest.approx(math.sqrt(rss / 47), rel=1e-8)
+
+
+def test_tolerance_prior_names_only_what_its_region_excludes_zero():
+    import tolerance_prior as tp
+
+    one = SimpleNamespace(n_params=1, effect_name="a", key="a", family="table4", instance=(), unit="um",
+                          size=lambda v: (float(v[0]), None))
+    two = SimpleNamespace(n_params=2, effect_name="b", key="b", family="table4", instance=(), unit="um",
+                          size=lambda v: (float(np.hypot(*v)), float(np.degrees(np.arctan2(v[1], v[0])))))
+    cov = np.diag([1.0, 1.0, 1.0])
+    got = tp.named_effects([one, two], np.array([2.5, 1.5, 1.5]), cov)     # 2.5 > 1.96; 4.5 < chi2(2) 5.99
+    assert [e["name"] for e in got] == ["a"]
+    assert got[0]["ci95"] == pytest.approx([2.5 - 1.959964, 2.5 + 1.959964], abs=1e-5)
+    got = tp.named_effects([one, two], np.array([1.5, 2.0, 1.8]), cov)     # 1.5 < 1.96; 7.24 > 5.99
+    assert [e["name"] for e in got] == ["b"]
