@@ -153,12 +153,13 @@ def spectrum_section(ds) -> list:
     return figs
 
 
-def loop_section(ds, workers: int, rated_Nm: float) -> list:
-    """The loop on the imported dataset: RMS before/after against the noise, what it named, the tests' zeros."""
+def loop_section(ds, workers: int, rated_Nm: float, estimator: str = "sparse") -> list:
+    """The loop on the imported dataset: RMS before/after against the noise, what it named, the tests' zeros
+    (figures named ``loop_...``, ``loop_tolerance_prior_...`` for that estimator)."""
     from rvcalib import CalibrationSettings, calibrate
 
     t0 = time.perf_counter()
-    res = calibrate(ds, CalibrationSettings(workers=workers, rated_Nm=rated_Nm),
+    res = calibrate(ds, CalibrationSettings(workers=workers, rated_Nm=rated_Nm, estimator=estimator),
                     log=lambda s: print(f"    [{time.perf_counter() - t0:6.0f} s] {s}", flush=True))
     sec = time.perf_counter() - t0
     print(f"  {sec:.0f} s; RMS before {res.rms_before:.2f}, after {res.rms_after:.2f} arcsec, noise "
@@ -175,11 +176,12 @@ def loop_section(ds, workers: int, rated_Nm: float) -> list:
     for n in res.notes:
         print(f"    note: {n}")
     names = [e.key for e in res.effects]
-    return [("loop_rms_before", res.rms_before, "arcsec"), ("loop_rms_after", res.rms_after, "arcsec"),
-            ("loop_noise", res.noise_arcsec, "arcsec"), ("loop_sigma", res.sigma_arcsec, "arcsec"),
-            ("loop_effects", len(res.effects), "count"), ("loop_seconds", sec, "s"),
-            ("loop_ramp_or_scale_named", float(any(k in ("output_encoder_scale_error", "drift_arcsec_per_rev")
-                                                   for k in names)), "bool")]
+    pre = "loop_" if estimator == "sparse" else "loop_" + estimator.replace("-", "_") + "_"
+    return [(pre + "rms_before", res.rms_before, "arcsec"), (pre + "rms_after", res.rms_after, "arcsec"),
+            (pre + "noise", res.noise_arcsec, "arcsec"), (pre + "sigma", res.sigma_arcsec, "arcsec"),
+            (pre + "effects", len(res.effects), "count"), (pre + "seconds", sec, "s"),
+            (pre + "ramp_or_scale_named", float(any(k in ("output_encoder_scale_error", "drift_arcsec_per_rev")
+                                                    for k in names)), "bool")]
 
 
 def main() -> int:
@@ -191,6 +193,8 @@ def main() -> int:
     p.add_argument("--out", type=Path, default=None, help="folder for the figure (default: a temporary folder)")
     p.add_argument("--no-loop", action="store_true", help="skip the loop")
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--estimator", default="sparse", choices=("sparse", "tolerance-prior"),
+                   help="the loop's estimator (rv-calibrate --estimator)")
     args = p.parse_args()
     folder = args.data or next((c for c in CANDIDATES if (c / FILES[0]).is_file()), None)
     if folder is None or not all((folder / f).is_file() for f in FILES):
@@ -213,7 +217,7 @@ def main() -> int:
         figs += spectrum_section(read_dataset(full))
         if not args.no_loop:
             print("4. the loop (rvcalib.calibrate) on the imported dataset")
-            figs += loop_section(ds, args.workers, args.rated_Nm)
+            figs += loop_section(ds, args.workers, args.rated_Nm, args.estimator)
     record("real_rv160n", [(n, float(v), u) for n, v, u in figs])
     return 0
 
