@@ -28,8 +28,10 @@ data determine).
 
 **What is named.** A candidate whose 95 % posterior region excludes zero (one component: its interval; two
 components: the chi-square(2) ellipse), with its MAP value and that interval. The rest are not told from zero by
-the data: they are in the fit at their posterior means, never named. In the always-estimated block, two
-parameters whose posterior correlation exceeds 0.95 are a group (:func:`rvcalib.result.read_block`).
+the data: they are in the fit at their posterior means, never named. A candidate so named whose posterior
+correlation with another exceeds 0.95 (the data fix their combination only) is reported as a group of the two
+instead, each with the size it would have alone; in the always-estimated block likewise
+(:func:`rvcalib.result.read_block`).
 
 **The empirical block** (orders and load or direction terms no candidate gives) joins after the physics, on its
 residual, with its own Gaussian prior (the typical TE of a tolerance-class Table 4 error); a term whose region
@@ -51,6 +53,9 @@ from rvcalib.result import CalibrationResult, assemble_common, named_effect, rea
 
 #: The always-estimated block's prior standard deviation, in prior scales (nearly flat).
 FLAT = 1e3
+#: Two candidates whose posterior correlation exceeds this are reported together (as in
+#: :func:`rvcalib.result.read_block`): the data fix their combination only.
+TIE = 0.95
 
 
 class _Counted:
@@ -117,24 +122,52 @@ class Posterior:
         return self.mean[k], self.cov[np.ix_(k, k)]
 
 
-def _named(pb, post: Posterior, level: float) -> list:
+def _member(c, m: np.ndarray) -> dict:
+    size, ang = c.size(m)
+    inside = all(c.lower <= x <= c.upper for x in m)
+    return {"name": c.effect_name, "key": c.key, "family": c.family, "instance": dict(c.instance), "unit": c.unit,
+            "value": float(size) if inside else "unbounded", "angle_deg": ang, "probability": 1.0}
+
+
+def read_named(pb, post: Posterior, level: float) -> tuple[list, list]:
     """The physical candidates outside the always-estimated block whose posterior region excludes zero (of the
-    two sides of one pin-wise error, the side with the larger evidence)."""
+    two sides of one pin-wise error, the side with the larger evidence), and, for such a candidate whose posterior
+    correlation with another candidate exceeds :data:`TIE` (only their combination is determined: the sun's
+    eccentricity and the input encoder's, say), a group of the two with the size each would have alone (its
+    posterior mean were the other zero) instead of a name."""
+    sd = np.sqrt(np.maximum(np.diag(post.cov), 1e-300))
+    corr = post.cov / np.outer(sd, sd)
+    feats = [f for f in range(len(pb.feature_cands)) if f not in pb.fixed and not pb.empirical[f]
+             and post.block(pb.starts[f], pb.starts[f + 1]) is not None]
+    pos = {f: [post.pos[j] for j in range(pb.starts[f], pb.starts[f + 1])] for f in feats}
     out: dict = {}
-    for f, fc in enumerate(pb.feature_cands):
-        if f in pb.fixed or pb.empirical[f]:
-            continue
-        got = post.block(pb.starts[f], pb.starts[f + 1])
-        if got is None:
-            continue
-        m, S = got
+    for f in feats:
+        m, S = post.block(pb.starts[f], pb.starts[f + 1])
         d2 = float(m @ np.linalg.solve(S, m))
         if d2 <= stats.chi2.ppf(level, m.size):
             continue
-        c = fc[0]
+        c = pb.feature_cands[f][0]
         if c.effect_name not in out or out[c.effect_name][0] < d2:
-            out[c.effect_name] = (d2, named_effect(c, 1.0, m, S, level))
-    return [e for _, e in out.values()]
+            out[c.effect_name] = (d2, f, named_effect(c, 1.0, m, S, level))
+    named, groups = [], []
+    for _, f, eff in out.values():
+        c = pb.feature_cands[f][0]
+        tied = [(float(np.max(np.abs(corr[np.ix_(pos[f], pos[g])]))), g) for g in feats
+                if pb.feature_cands[g][0].effect_name != c.effect_name]
+        tied = [(r, g) for r, g in tied if r > TIE]
+        if not tied:
+            named.append(eff)
+            continue
+        members = []
+        for a, b in [(f, g) for _, g in tied[:1]] + [(g, f) for _, g in tied]:
+            ia, ib = pos[a], pos[b]
+            alone = post.mean[ia] - post.cov[np.ix_(ia, ib)] @ np.linalg.solve(post.cov[np.ix_(ib, ib)],
+                                                                                 post.mean[ib])
+            members.append(_member(pb.feature_cands[a][0], alone))
+        groups.append({"kind": "physical", "coverage": level, "purity": max(r for r, _ in tied),
+                       "reason": "the data fix their combination only (posterior correlation above 0.95)",
+                       "members": members})
+    return named, groups
 
 
 def _profiled(lam: float, z2: np.ndarray, s2: np.ndarray, rest: float, m: int) -> float:
@@ -278,7 +311,8 @@ def estimate(pb, settings, theta: np.ndarray, scales: tuple, pool, log, t0: floa
     for f in pb.fixed:
         n, g = read_block(pb.feature_cands[f], *post.block(pb.starts[f], pb.starts[f + 1]), settings.coverage)
         named, groups = named + n, groups + g
-    named += _named(pb, post, settings.coverage)
+    n, g = read_named(pb, post, settings.coverage)
+    named, groups = named + n, groups + g
     U, sv, _ = np.linalg.svd(X, full_matrices=False)
     Q = U[:, sv > sv[0] * 1e-10]
     unexplained, b_e = _unexplained(pb, r, Q, sd[n_s:], settings.coverage)

@@ -277,3 +277,25 @@ def test_evidence_noise_and_block_variance_against_closed_forms():
         want = max(0.0, (z2 - s2) / float(b @ b))
         assert gamma == pytest.approx(want, rel=1e-4, abs=1e-9)
         assert sigma2 == pytest.approx(s2 if want > 0 else float(y @ y) / 80, rel=1e-4)
+
+
+def test_tolerance_prior_reports_a_pair_it_cannot_split_as_a_group():
+    """Of two candidates whose posterior correlation is -0.98 the data fix the combination only: a group with the
+    size each would have alone (its mean given the other zero); an independent third one is named."""
+    from types import SimpleNamespace
+
+    from rvcalib.gaussian import Posterior, read_named
+
+    def cand(name):
+        return SimpleNamespace(effect_name=name, key=name, family="table4", instance=(), unit="um", meaning="",
+                               polar=False, lower=-200.0, upper=200.0, size=lambda v: (float(v[0]), None))
+
+    pb = SimpleNamespace(feature_cands=[[cand("a")], [cand("b")], [cand("c")]], fixed=(), starts=np.arange(4),
+                         empirical=np.zeros(3, dtype=bool))
+    cov = np.array([[1.0, -0.98, 0.0], [-0.98, 1.0, 0.0], [0.0, 0.0, 0.04]]) * 0.01
+    mean = np.array([2.0, -1.5, 3.0])
+    named, groups = read_named(pb, Posterior(np.arange(3), mean, cov), 0.95)
+    assert [e.name for e in named] == ["c"] and named[0].ci95 == pytest.approx([3 - 0.0392, 3 + 0.0392], abs=1e-4)
+    assert len(groups) >= 1
+    alone = {m["name"]: m["value"] for m in groups[0]["members"]}
+    assert alone == pytest.approx({"a": 2.0 - 0.98 * 1.5, "b": -1.5 + 0.98 * 2.0})
