@@ -237,7 +237,8 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     new state (:func:`evidence_sigma`, on that linearisation's columns); converged when a step moves the model TE
     by at most ``settings.step_tolerance`` of the noise (RMS), or after ``settings.max_linearisations``.
 
-    Returns (theta, the measurement coefficients ``b`` of the reading columns ``a_r``, the model TE, sigma)."""
+    Returns (theta, the measurement coefficients ``b`` of the reading columns ``a_r``, the model TE, sigma, and
+    ``converged`` or ``max_linearisations``: what stopped it)."""
     n_s = model.n_params
     Rm = pb.proj(pb.R[:, a_r])
     lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
@@ -251,6 +252,7 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
         return float(r @ r) / sigma ** 2 + float(np.sum((x * w) ** 2))
 
     phi = objective(x, te, sigma)
+    stopped = "max_linearisations"
     for it in range(1, settings.max_linearisations + 1):
         J = np.column_stack([pb.proj(model.jacobian(x[:n_s], None, None, pool)), Rm])
         r = pb.proj(pb.y - te) - Rm @ x[n_s:]
@@ -271,6 +273,7 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
         else:
             model.te(x[:n_s])
             log(f"linearisation {it}: no step lowers the criterion")
+            stopped = "converged"
             break
         moved = float(np.sqrt(np.mean(pb.proj(te_new - te) ** 2)))
         x, te = new, te_new
@@ -280,8 +283,9 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
             f"noise of the greatest evidence {sigma_new:.4g} arcsec")
         sigma, phi = sigma_new, objective(x, te, sigma_new)
         if moved <= settings.step_tolerance * sigma:
+            stopped = "converged"
             break
-    return x[:n_s], x[n_s:], te, sigma
+    return x[:n_s], x[n_s:], te, sigma, stopped
 
 
 def estimate(pb, settings, theta: np.ndarray, scales: tuple, pool, log, t0: float, rms_before: float,
@@ -296,7 +300,7 @@ def estimate(pb, settings, theta: np.ndarray, scales: tuple, pool, log, t0: floa
                      and fc[0].family == "measurement" for k in range(pb.starts[f], pb.starts[f + 1])], dtype=int)
     a_r = meas - n_s
     sigma0 = max(float(pb.dataset.noise_arcsec()), 1e-3)
-    theta, b_m, te, sigma1 = map_estimate(model, pb, theta, a_r, sd, sigma0, settings, pool, log)
+    theta, b_m, te, sigma1, stopped = map_estimate(model, pb, theta, a_r, sd, sigma0, settings, pool, log)
     b_r = np.zeros(pb.R.shape[1])
     b_r[a_r] = b_m
     J = pb.proj(model.jacobian(theta, None, None, pool))
@@ -317,5 +321,5 @@ def estimate(pb, settings, theta: np.ndarray, scales: tuple, pool, log, t0: floa
     Q = U[:, sv > sv[0] * 1e-10]
     unexplained, b_e = _unexplained(pb, r, Q, sd[n_s:], settings.coverage)
     return assemble_common(pb, theta, te, b_r + b_e, named, groups, unexplained, [], sigma, settings,
-                           {"rms_before": rms_before, "stopped_by": "converged", "cap_binds": False,
+                           {"rms_before": rms_before, "stopped_by": stopped, "cap_binds": False,
                             "seconds": start() - t0, "linearisations": model.jacobians})

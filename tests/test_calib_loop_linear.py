@@ -232,6 +232,7 @@ def test_tolerance_prior_names_several_effects_with_regions_that_cover(base):
     assert res.sigma_arcsec == pytest.approx(0.2, rel=0.1)
     assert res.rms_after <= 1.2 * 0.2 and res.unexplained == []
     assert res.settings["estimator"] == "tolerance-prior" and res.linearisations >= 2
+    assert res.stopped_by == "converged"
     steps = [re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines]
     assert all(float(m.group(2)) <= float(m.group(1)) for m in steps if m), lines   # a step never raises it
 
@@ -299,3 +300,10 @@ def test_tolerance_prior_reports_a_pair_it_cannot_split_as_a_group():
     assert len(groups) >= 1
     alone = {m["name"]: m["value"] for m in groups[0]["members"]}
     assert alone == pytest.approx({"a": 2.0 - 0.98 * 1.5, "b": -1.5 + 0.98 * 2.0})
+
+
+def test_tolerance_prior_says_when_the_linearisations_ran_out(base):
+    ds, fm = base
+    data = _data(ds, fm, {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2}, seed=6)
+    res = calibrate(data, CalibrationSettings(estimator="tolerance-prior", max_linearisations=1), model=fm)
+    assert res.stopped_by == "max_linearisations" and res.linearisations == 2    # the last one gives the intervals
