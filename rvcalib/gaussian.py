@@ -15,9 +15,9 @@ option). This estimator takes that as its prior, for all candidates at once:
 
     minimise  |P (y - f(theta) - R_m b)|^2 / sigma^2 + sum_j (theta_j / s_j)^2 + sum_k (b_k / s_k)^2
 
-(``R_m`` the measurement effects' reading columns), by the trust-region method of :func:`rvcalib.refine.refine`
-within the physical bounds, each iteration on the reducer model's columns at its state (re-linearisation). There is
-one criterion and one search; no candidate is chosen or dropped.
+(``R_m`` the measurement effects' reading columns), by Gauss-Newton through the reducer model: at each state the
+linearised problem's MAP within the physical bounds, on the model's columns there (re-linearisation). There is one
+criterion and one search; no candidate is chosen or dropped.
 
 **Intervals.** Laplace's approximation at the MAP: the covariance ``(X' X / sigma^2 + diag(1 / s^2))^-1`` of all
 parameters at once (``X`` the columns at the MAP), so each interval holds what every other candidate, at its
@@ -34,8 +34,9 @@ instead, each with the size it would have alone; in the always-estimated block l
 (:func:`rvcalib.result.read_block`).
 
 **The empirical block** (orders and load or direction terms no candidate gives) joins after the physics, on its
-residual, with its own Gaussian prior (the typical TE of a tolerance-class Table 4 error); a term whose region
-excludes zero is reported as unexplained structure, never as a physical effect.
+residual: each term Gaussian at ``gamma`` times the typical TE of a tolerance-class Table 4 error, ``gamma`` the
+data's (restricted maximum likelihood, :func:`block_variance`: white noise gives 0 and nothing is reported); a term
+whose region excludes zero is reported as unexplained structure, never as a physical effect.
 
 Reference: the prior is the tolerance stack-up's (each error within its class); the estimator is the linearised
 Bayesian least squares of inverse problems (A. Tarantola, *Inverse Problem Theory*, SIAM 2005, section 3.2),
@@ -154,7 +155,7 @@ def read_named(pb, post: Posterior, level: float) -> tuple[list, list]:
         c = pb.feature_cands[f][0]
         tied = [(float(np.max(np.abs(corr[np.ix_(pos[f], pos[g])]))), g) for g in feats
                 if pb.feature_cands[g][0].effect_name != c.effect_name]
-        tied = [(r, g) for r, g in tied if r > TIE]
+        tied = sorted(((r, g) for r, g in tied if r > TIE), reverse=True)
         if not tied:
             named.append(eff)
             continue
@@ -201,8 +202,9 @@ def block_variance(r: np.ndarray, B: np.ndarray, dof: int) -> tuple[float, float
 
 def _unexplained(pb, r: np.ndarray, Q: np.ndarray, tr: np.ndarray, level: float) -> tuple[list, np.ndarray]:
     """The empirical block on the physics' residual ``r``: each term ``N(0, gamma tr^2)`` with ``gamma`` the
-    data's (:func:`block_variance` on what is orthogonal to the physics' columns, orthonormal ``Q``), its Gaussian posterior, the terms whose region excludes zero (unexplained
-    structure) and the coefficients of every reading column (0 but the empirical ones)."""
+    data's (:func:`block_variance` on what is orthogonal to the physics' columns, orthonormal ``Q``), its Gaussian
+    posterior, the terms whose region excludes zero (unexplained structure) and the coefficients of every reading
+    column (0 but the empirical ones)."""
     b = np.zeros(pb.R.shape[1])
     emp = [f for f in range(len(pb.feature_cands)) if pb.empirical[f]]
     if not emp:
@@ -230,7 +232,7 @@ def _unexplained(pb, r: np.ndarray, Q: np.ndarray, tr: np.ndarray, level: float)
 
 
 def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, sigma: float, settings, pool,
-                 log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 log, J0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, str]:
     """The MAP of the criterion (module docstring) by Gauss-Newton through the reducer model: at each state the
     linearised problem's bounded MAP (``scipy.optimize.lsq_linear`` on the prior-augmented system, within the
     physical bounds), halved while it does not lower the criterion, then the noise of the greatest evidence at the
@@ -238,7 +240,8 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     by at most ``settings.step_tolerance`` of the noise (RMS), or after ``settings.max_linearisations``.
 
     Returns (theta, the measurement coefficients ``b`` of the reading columns ``a_r``, the model TE, sigma, and
-    ``converged`` or ``max_linearisations``: what stopped it)."""
+    ``converged`` or ``max_linearisations``: what stopped it); ``J0`` the model's columns at ``theta`` where known
+    (the first linearisation's)."""
     n_s = model.n_params
     Rm = pb.proj(pb.R[:, a_r])
     lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
@@ -254,7 +257,8 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     phi = objective(x, te, sigma)
     stopped = "max_linearisations"
     for it in range(1, settings.max_linearisations + 1):
-        J = np.column_stack([pb.proj(model.jacobian(x[:n_s], None, None, pool)), Rm])
+        Js = model.jacobian(x[:n_s], None, None, pool) if J0 is None or it > 1 else J0
+        J = np.column_stack([pb.proj(Js), Rm])
         r = pb.proj(pb.y - te) - Rm @ x[n_s:]
         A = np.vstack([J / sigma, np.diag(w)])
         rhs = np.concatenate([r / sigma, -x * w])
@@ -288,19 +292,21 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     return x[:n_s], x[n_s:], te, sigma, stopped
 
 
-def estimate(pb, settings, theta: np.ndarray, scales: tuple, pool, log, t0: float, rms_before: float,
-             start) -> CalibrationResult:
+def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, pool, log, t0: float,
+             rms_before: float, start) -> CalibrationResult:
     """The tolerance-prior estimate (see the module docstring) from ``theta`` (the always-estimated block's own
-    MAP); ``scales`` the prior scales of the solved and the reading parameters; ``start`` the clock."""
+    MAP, ``J0`` the model's columns there); ``scales`` the prior scales of the solved and the reading parameters;
+    ``start`` the clock."""
     ts, tr = scales
     model = _Counted(pb.model)
+    model.jacobians = 1                                 # J0, the first linearisation
     n_s = model.n_params
     sd = prior_sd(pb, ts, tr)
     meas = np.array([k for f, fc in enumerate(pb.feature_cands) if f not in pb.fixed and not pb.empirical[f]
                      and fc[0].family == "measurement" for k in range(pb.starts[f], pb.starts[f + 1])], dtype=int)
     a_r = meas - n_s
     sigma0 = max(float(pb.dataset.noise_arcsec()), 1e-3)
-    theta, b_m, te, sigma1, stopped = map_estimate(model, pb, theta, a_r, sd, sigma0, settings, pool, log)
+    theta, b_m, te, sigma1, stopped = map_estimate(model, pb, theta, a_r, sd, sigma0, settings, pool, log, J0)
     b_r = np.zeros(pb.R.shape[1])
     b_r[a_r] = b_m
     J = pb.proj(model.jacobian(theta, None, None, pool))

@@ -353,8 +353,10 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     with pool_cm as pool:
         theta, te = _global_fit(pb, theta, te, pool, log)
         if settings.estimator == "tolerance-prior":
-            scales = prior_scales(pb.library, m, m.jacobian(theta, None, None, pool), R, pb.readings, dataset)
-            return tolerance_prior_estimate(pb, settings, theta, scales, pool, log, t0, rms_before, time.perf_counter)
+            J = m.jacobian(theta, None, None, pool)
+            scales = prior_scales(pb.library, m, J, R, pb.readings, dataset)
+            return tolerance_prior_estimate(pb, settings, theta, J, scales, pool, log, t0, rms_before,
+                                            time.perf_counter)
         dense = pb.dense_params
         cur = None
         for it in range(1, settings.max_linearisations + 1):
