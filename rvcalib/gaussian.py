@@ -15,8 +15,8 @@ option). This estimator takes that as its prior, for all candidates at once:
 
     minimise  |P (y - f(theta) - R_m b)|^2 / sigma^2 + sum_j (theta_j / s_j)^2 + sum_k (b_k / s_k)^2
 
-(``R_m`` the measurement effects' reading columns), by Gauss-Newton through the reducer model: at each state the
-linearised problem's MAP within the physical bounds, on the model's columns there (re-linearisation). There is one
+(``R_m`` the measurement effects' reading columns), by Levenberg-Marquardt through the reducer model: at each state
+the linearised problem's damped MAP within the physical bounds, on the model's columns there (re-linearisation). There is one
 criterion and one search; no candidate is chosen or dropped.
 
 **Intervals.** Laplace's approximation at the MAP: the covariance ``(X' X / sigma^2 + diag(1 / s^2))^-1`` of all
@@ -40,7 +40,7 @@ whose region excludes zero is reported as unexplained structure, never as a phys
 
 Reference: the prior is the tolerance stack-up's (each error within its class); the estimator is the linearised
 Bayesian least squares of inverse problems (A. Tarantola, *Inverse Problem Theory*, SIAM 2005, section 3.2),
-iterated as Gauss-Newton through the nonlinear model.
+iterated as Levenberg-Marquardt through the nonlinear model (D. W. Marquardt, J. SIAM 11 (1963) 431-441).
 """
 from __future__ import annotations
 
@@ -231,11 +231,31 @@ def _unexplained(pb, r: np.ndarray, Q: np.ndarray, tr: np.ndarray, level: float)
     return out, b
 
 
+DAMPING_START = 10.0
+"""The first step's Levenberg-Marquardt damping, in units of the prior precision: the step is first held to a
+tenth of what the prior alone allows, so the first linearisation (taken far from the MAP) cannot throw the state
+into another basin."""
+DAMPING_UP, DAMPING_DOWN, DAMPING_TRIALS = 10.0, 0.3, 8
+"""Marquardt's rule: the damping times 10 after a step that does not lower the criterion (or leaves the model's
+domain), times 0.3 after one that does; at most 8 trials per linearisation."""
+
+
+def _damped_step(J: np.ndarray, r: np.ndarray, x: np.ndarray, w: np.ndarray, sigma: float, lam: float,
+                 lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The Levenberg-Marquardt step of the linearised criterion: the bounded least-squares solution of
+    ``|r - J d|^2 / sigma^2 + |w (x + d)|^2 + lam |w d|^2`` over ``lo <= x + d <= hi``
+    (``scipy.optimize.lsq_linear``, bvls). ``lam = 0`` is the Gauss-Newton step; a large ``lam`` a short step
+    along the prior-scaled gradient."""
+    A = np.vstack([J / sigma, np.diag(w), math.sqrt(lam) * np.diag(w)])
+    rhs = np.concatenate([r / sigma, -x * w, np.zeros(x.size)])
+    return optimize.lsq_linear(A, rhs, bounds=(lo - x, hi - x), method="bvls").x
+
+
 def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, sigma: float, settings, pool,
                  log, J0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, str]:
-    """The MAP of the criterion (module docstring) by Gauss-Newton through the reducer model: at each state the
-    linearised problem's bounded MAP (``scipy.optimize.lsq_linear`` on the prior-augmented system, within the
-    physical bounds), halved while it does not lower the criterion, then the noise of the greatest evidence at the
+    """The MAP of the criterion (module docstring) by Levenberg-Marquardt through the reducer model: at each state
+    the linearised problem's damped bounded MAP (:func:`_damped_step`, within the physical bounds), the damping
+    raised until the step lowers the criterion and lowered after it does (Marquardt 1963), then the noise of the greatest evidence at the
     new state (:func:`evidence_sigma`, on that linearisation's columns); converged when a step moves the model TE
     by at most ``settings.step_tolerance`` of the noise (RMS), or after ``settings.max_linearisations``.
 
@@ -256,24 +276,24 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
 
     phi = objective(x, te, sigma)
     stopped = "max_linearisations"
+    lam = DAMPING_START
     for it in range(1, settings.max_linearisations + 1):
         Js = model.jacobian(x[:n_s], None, None, pool) if J0 is None or it > 1 else J0
         J = np.column_stack([pb.proj(Js), Rm])
         r = pb.proj(pb.y - te) - Rm @ x[n_s:]
-        A = np.vstack([J / sigma, np.diag(w)])
-        rhs = np.concatenate([r / sigma, -x * w])
-        step = optimize.lsq_linear(A, rhs, bounds=(lo - x, hi - x), method="bvls").x
-        for _ in range(6):
+        for _ in range(DAMPING_TRIALS):
+            step = _damped_step(J, r, x, w, sigma, lam, lo, hi)
             new = np.clip(x + step, lo, hi)
             try:
                 te_new = model.te(new[:n_s])
             except ModelEvaluationError:
-                step = step / 2
+                lam *= DAMPING_UP
                 continue
             phi_new = objective(new, te_new, sigma)
             if phi_new < phi:
+                lam *= DAMPING_DOWN
                 break
-            step = step / 2
+            lam *= DAMPING_UP
         else:
             model.te(x[:n_s])
             log(f"linearisation {it}: no step lowers the criterion")

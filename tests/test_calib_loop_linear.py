@@ -307,3 +307,38 @@ def test_tolerance_prior_says_when_the_linearisations_ran_out(base):
     data = _data(ds, fm, {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2}, seed=6)
     res = calibrate(data, CalibrationSettings(estimator="tolerance-prior", max_linearisations=1), model=fm)
     assert res.stopped_by == "max_linearisations" and res.linearisations == 2    # the last one gives the intervals
+
+
+def test_levenberg_marquardt_reaches_the_map_of_a_nonlinear_model():
+    """On a model nonlinear in its parameters (``a exp(b t)``, started far from the truth, where a full
+    Gauss-Newton step overshoots), the search ends at the MAP of its criterion at the noise it ends with: the point
+    ``scipy.optimize.least_squares`` finds on the same prior-augmented residual; each accepted step lowers it."""
+    from types import SimpleNamespace
+
+    from rvcalib.gaussian import map_estimate
+
+    t = np.linspace(0.0, 1.0, 60)
+    rng = np.random.default_rng(3)
+    y = 2.0 * np.exp(1.5 * t) + rng.normal(0.0, 0.05, t.size)
+
+    def te(th):
+        return th[0] * np.exp(th[1] * t)
+
+    def jacobian(th, *_):
+        e = np.exp(th[1] * t)
+        return np.column_stack([e, th[0] * t * e])
+
+    model = SimpleNamespace(n_params=2, _lower=np.full(2, -50.0), _upper=np.full(2, 50.0), te=te, jacobian=jacobian)
+    pb = SimpleNamespace(proj=lambda v: v, y=y, R=np.zeros((t.size, 0)), tests=[])
+    sd = np.array([10.0, 10.0])
+    lines: list[str] = []
+    settings = CalibrationSettings(estimator="tolerance-prior", max_linearisations=40, step_tolerance=1e-4)
+    theta, b, fit, sigma, stopped = map_estimate(model, pb, np.array([0.2, -2.0]), np.zeros(0, dtype=int), sd, 1.0,
+                                                 settings, None, lines.append)
+    assert stopped == "converged" and b.size == 0
+    want = optimize.least_squares(lambda th: np.concatenate([(y - te(th)) / sigma, th / sd]), [0.2, -2.0],
+                                  xtol=1e-12, ftol=1e-12).x
+    assert theta == pytest.approx(want, rel=1e-4)
+    assert sigma == pytest.approx(0.05, rel=0.25)
+    steps = [re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines]
+    assert all(float(m.group(2)) <= float(m.group(1)) for m in steps if m) and len(steps) >= 3, lines
