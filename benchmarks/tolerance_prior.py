@@ -25,6 +25,8 @@ import math
 import numpy as np
 from scipy import stats
 
+from rvcalib.gaussian import evidence_sigma
+
 
 def posterior(J: np.ndarray, r: np.ndarray, sigma: float, prior_sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean and covariance of ``b`` in ``r = J b + e``, ``e ~ N(0, sigma^2 I)``, ``b_j ~ N(0, prior_sd_j^2)``
@@ -40,18 +42,17 @@ def noise_evidence(J: np.ndarray, r: np.ndarray, dof: int, prior_sd: np.ndarray,
     """The noise standard deviation that maximises the evidence of ``r`` (MacKay's fixed point, D. J. C. MacKay,
     "Bayesian interpolation", Neural Computation 4 (1992) 415-447, eq. 4.10 with the prior fixed):
     ``sigma^2 = |r - J m|^2 / (dof - g)``, ``g = sum_j (1 - C_jj / prior_sd_j^2)`` the parameters the data
-    determine (1 for a flat one); ``dof`` the readings less the constants projected out."""
-    prec = np.where(np.isfinite(prior_sd), 1.0 / np.square(prior_sd), 0.0)
-    s2 = sigma0 ** 2
+    determine (1 for a flat one); ``dof`` the readings less the constants projected out. Each iteration refits the
+    posterior mean at the current noise, then takes one update of the product's own fixed point
+    (:func:`rvcalib.gaussian.evidence_sigma`)."""
+    s = sigma0
     for _ in range(iterations):
-        m, C = posterior(J, r, math.sqrt(s2), prior_sd)
-        g = float(np.sum(1.0 - prec * np.diag(C)))
-        res = r - J @ m
-        new = float(res @ res) / (dof - g)
-        if abs(new - s2) <= 1e-10 * s2:
-            break
-        s2 = new
-    return math.sqrt(s2)
+        m, _ = posterior(J, r, s, prior_sd)
+        new = evidence_sigma(J, r - J @ m, prior_sd, dof, s, iterations=1)[0]
+        if abs(new ** 2 - s ** 2) <= 1e-10 * s ** 2:
+            return new
+        s = new
+    return s
 
 
 def named_effects(candidates: list, mean: np.ndarray, cov: np.ndarray, level: float = 0.95) -> list[dict]:

@@ -50,7 +50,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from rvcalib.reducer_model import ModelEvaluationError
-from rvcalib.result import CalibrationResult, assemble_common, named_effect, read_block
+from rvcalib.result import CalibrationResult, assemble_common, group_member, named_effect, read_block
 
 #: The always-estimated block's prior standard deviation, in prior scales (nearly flat).
 FLAT = 1e3
@@ -123,13 +123,6 @@ class Posterior:
         return self.mean[k], self.cov[np.ix_(k, k)]
 
 
-def _member(c, m: np.ndarray) -> dict:
-    size, ang = c.size(m)
-    inside = all(c.lower <= x <= c.upper for x in m)
-    return {"name": c.effect_name, "key": c.key, "family": c.family, "instance": dict(c.instance), "unit": c.unit,
-            "value": float(size) if inside else "unbounded", "angle_deg": ang, "probability": 1.0}
-
-
 def read_named(pb, post: Posterior, level: float) -> tuple[list, list]:
     """The physical candidates outside the always-estimated block whose posterior region excludes zero (of the
     two sides of one pin-wise error, the side with the larger evidence), and, for such a candidate whose posterior
@@ -164,7 +157,7 @@ def read_named(pb, post: Posterior, level: float) -> tuple[list, list]:
             ia, ib = pos[a], pos[b]
             alone = post.mean[ia] - post.cov[np.ix_(ia, ib)] @ np.linalg.solve(post.cov[np.ix_(ib, ib)],
                                                                                  post.mean[ib])
-            members.append(_member(pb.feature_cands[a][0], alone))
+            members.append(group_member(pb.feature_cands[a][0], alone, np.ones(alone.size), 1.0))
         groups.append({"kind": "physical", "coverage": level, "purity": max(r for r, _ in tied),
                        "reason": "the data fix their combination only (posterior correlation above 0.95)",
                        "members": members})

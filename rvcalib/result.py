@@ -162,7 +162,9 @@ class Laplace:
         return self.mean[k], self.cov[np.ix_(k, k)]
 
 
-def _member(c, mean: np.ndarray, tau: np.ndarray, prob: float) -> dict:
+def group_member(c, mean: np.ndarray, tau: np.ndarray, prob: float) -> dict:
+    """A group's member: candidate ``c`` at ``mean`` times its scales ``tau`` (physical units), its size or
+    ``"unbounded"`` where the value lies beyond the candidate's physical bounds, with probability ``prob``."""
     v = mean * tau
     size, ang = c.size(v)
     bounded = all(c.lower <= x <= c.upper for x in v)
@@ -302,7 +304,7 @@ def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed
         if cs.effect < len(fixed):
             continue
         eff = fit.effects[cs.effect]
-        members = merge_sides([_member(cands[f], eff.mean[F.starts[f]:F.starts[f + 1]],
+        members = merge_sides([group_member(cands[f], eff.mean[F.starts[f]:F.starts[f + 1]],
                                        tau[F.starts[f]:F.starts[f + 1]], p)
                                for f, p in zip(cs.features, cs.probabilities)])
         info = {"members": members, "coverage": cs.coverage, "purity": cs.purity, "log_bf": cs.log_bf}
