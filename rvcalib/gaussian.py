@@ -15,9 +15,9 @@ option). This estimator takes that as its prior, for all candidates at once:
 
     minimise  |P (y - f(theta) - R_m b)|^2 / sigma^2 + sum_j (theta_j / s_j)^2 + sum_k (b_k / s_k)^2
 
-(``R_m`` the measurement effects' reading columns), by Levenberg-Marquardt through the reducer model: at each state
-the linearised problem's damped MAP within the physical bounds, on the model's columns there (re-linearisation). There is one
-criterion and one search; no candidate is chosen or dropped.
+(``R_m`` the measurement effects' reading columns), by Levenberg-Marquardt through the reducer model: at each
+state the linearised problem's damped MAP within the physical bounds, on the model's columns there
+(re-linearisation). There is one criterion and one search; no candidate is chosen or dropped.
 
 **Intervals.** Laplace's approximation at the MAP: the covariance ``(X' X / sigma^2 + diag(1 / s^2))^-1`` of all
 parameters at once (``X`` the columns at the MAP), so each interval holds what every other candidate, at its
@@ -225,9 +225,9 @@ def _unexplained(pb, r: np.ndarray, Q: np.ndarray, tr: np.ndarray, level: float)
 
 
 DAMPING_START = 10.0
-"""The first step's Levenberg-Marquardt damping, in units of the prior precision: the step is first held to a
-tenth of what the prior alone allows, so the first linearisation (taken far from the MAP) cannot throw the state
-into another basin."""
+"""The first step's Levenberg-Marquardt damping, in units of the prior precision: the first linearisation, taken
+far from the MAP, moves a candidate the data determine weakly by about a third of its prior scale at most
+(``1 / sqrt(1 + 10)``)."""
 DAMPING_UP, DAMPING_DOWN, DAMPING_TRIALS = 10.0, 0.3, 8
 """Marquardt's rule: the damping times 10 after a step that does not lower the criterion (or leaves the model's
 domain), times 0.3 after one that does; at most 8 trials per linearisation."""
@@ -248,9 +248,10 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
                  log, J0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, str]:
     """The MAP of the criterion (module docstring) by Levenberg-Marquardt through the reducer model: at each state
     the linearised problem's damped bounded MAP (:func:`_damped_step`, within the physical bounds), the damping
-    raised until the step lowers the criterion and lowered after it does (Marquardt 1963), then the noise of the greatest evidence at the
-    new state (:func:`evidence_sigma`, on that linearisation's columns); converged when a step moves the model TE
-    by at most ``settings.step_tolerance`` of the noise (RMS), or after ``settings.max_linearisations``.
+    raised until the step lowers the criterion and lowered after it does (Marquardt 1963), then the noise of the
+    greatest evidence at the new state (:func:`evidence_sigma`, on that linearisation's columns); converged when a
+    step moves the model TE by at most ``settings.step_tolerance`` of the noise (RMS), or after
+    ``settings.max_linearisations``.
 
     Returns (theta, the measurement coefficients ``b`` of the reading columns ``a_r``, the model TE, sigma, and
     ``converged`` or ``max_linearisations``: what stopped it); ``J0`` the model's columns at ``theta`` where known
