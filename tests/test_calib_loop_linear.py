@@ -340,5 +340,5 @@ def test_levenberg_marquardt_reaches_the_map_of_a_nonlinear_model():
                                   xtol=1e-12, ftol=1e-12).x
     assert theta == pytest.approx(want, rel=1e-4)
     assert sigma == pytest.approx(0.05, rel=0.25)
-    steps = [re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines]
-    assert all(float(m.group(2)) <= float(m.group(1)) for m in steps if m) and len(steps) >= 3, lines
+    steps = [m for m in (re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines) if m]
+    assert len(steps) >= 3 and all(float(m.group(2)) <= float(m.group(1)) for m in steps), lines
