@@ -51,6 +51,12 @@ def _named(res) -> dict:
     return {e.name: e for e in res.effects}
 
 
+def _criterion_steps(lines: list[str]) -> list[tuple[float, float]]:
+    """The (before, after) criterion of every accepted step the loop logged."""
+    found = (re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines)
+    return [(float(m.group(1)), float(m.group(2))) for m in found if m]
+
+
 def test_several_effects_at_once_named_with_intervals_that_cover(base):
     ds, fm = base
     truth = {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2,
@@ -58,8 +64,7 @@ def test_several_effects_at_once_named_with_intervals_that_cover(base):
     lines: list[str] = []
     res = calibrate(_data(ds, fm, truth), CalibrationSettings(), model=fm, log=lines.append)
     got = _named(res)
-    steps = [re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines]
-    steps = [(float(m.group(1)), float(m.group(2))) for m in steps if m]
+    steps = _criterion_steps(lines)
     assert steps and all(b <= a for a, b in steps), lines         # an accepted state never raises the criterion
     assert all(a == b for (_, b), (a, _) in zip(steps, steps[1:])), steps   # and the next starts from it
     for name, v in truth.items():
@@ -233,8 +238,7 @@ def test_tolerance_prior_names_several_effects_with_regions_that_cover(base):
     assert res.rms_after <= 1.2 * 0.2 and res.unexplained == []
     assert res.settings["estimator"] == "tolerance-prior" and res.linearisations >= 2
     assert res.stopped_by == "converged"
-    steps = [re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines]
-    assert all(float(m.group(2)) <= float(m.group(1)) for m in steps if m), lines   # a step never raises it
+    assert all(b <= a for a, b in _criterion_steps(lines)), lines   # a step never raises it
 
 
 def test_tolerance_prior_reports_structure_outside_the_physics_as_unexplained(base):
@@ -340,5 +344,5 @@ def test_levenberg_marquardt_reaches_the_map_of_a_nonlinear_model():
                                   xtol=1e-12, ftol=1e-12).x
     assert theta == pytest.approx(want, rel=1e-4)
     assert sigma == pytest.approx(0.05, rel=0.25)
-    steps = [m for m in (re.search(r"criterion ([-\d.e+]+) -> ([-\d.e+]+)", s) for s in lines) if m]
-    assert len(steps) >= 3 and all(float(m.group(2)) <= float(m.group(1)) for m in steps), lines
+    steps = _criterion_steps(lines)
+    assert len(steps) >= 3 and all(b <= a for a, b in steps), lines
