@@ -244,6 +244,25 @@ def _damped_step(J: np.ndarray, r: np.ndarray, x: np.ndarray, w: np.ndarray, sig
     return optimize.lsq_linear(A, rhs, bounds=(lo - x, hi - x), method="bvls").x
 
 
+def measurement_columns(pb) -> np.ndarray:
+    """The reading columns of the measurement effects (encoder eccentricity and scale): the reading parameters the
+    search estimates beside the solved ones (indices into ``pb.R``)."""
+    n_s = pb.model.n_params
+    meas = np.array([k for f, fc in enumerate(pb.feature_cands) if f not in pb.fixed and not pb.empirical[f]
+                     and fc[0].family == "measurement" for k in range(pb.starts[f], pb.starts[f + 1])], dtype=int)
+    return meas - n_s
+
+
+def criterion(pb, a_r: np.ndarray, sd: np.ndarray, x: np.ndarray, te: np.ndarray, sigma: float) -> float:
+    """The criterion (module docstring) at ``x`` (the solved parameters, then the coefficients of the reading
+    columns ``a_r``), ``te`` the model TE there (arcsec), at the noise ``sigma`` (arcsec); ``sd`` the prior standard
+    deviations of :func:`prior_sd`. Dimensionless: the data term in noise units squared plus the prior term."""
+    n_s = x.size - a_r.size
+    r = pb.proj(pb.y - te) - pb.proj(pb.R[:, a_r]) @ x[n_s:]
+    w = 1.0 / sd[np.concatenate([np.arange(n_s), n_s + a_r])]
+    return float(r @ r) / sigma ** 2 + float(np.sum((x * w) ** 2))
+
+
 def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, sigma: float, settings, pool,
                  log, J0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, str]:
     """The MAP of the criterion (module docstring) by Levenberg-Marquardt through the reducer model: at each state
@@ -265,8 +284,7 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     te = model.te(x[:n_s])
 
     def objective(x, te, sigma) -> float:
-        r = pb.proj(pb.y - te) - Rm @ x[n_s:]
-        return float(r @ r) / sigma ** 2 + float(np.sum((x * w) ** 2))
+        return criterion(pb, a_r, sd, x, te, sigma)
 
     phi = objective(x, te, sigma)
     stopped = "max_linearisations"
@@ -316,9 +334,7 @@ def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, poo
     model.jacobians = 1                                 # J0, the first linearisation
     n_s = model.n_params
     sd = prior_sd(pb, ts, tr)
-    meas = np.array([k for f, fc in enumerate(pb.feature_cands) if f not in pb.fixed and not pb.empirical[f]
-                     and fc[0].family == "measurement" for k in range(pb.starts[f], pb.starts[f + 1])], dtype=int)
-    a_r = meas - n_s
+    a_r = measurement_columns(pb)
     sigma0 = max(float(pb.dataset.noise_arcsec()), 1e-3)
     theta, b_m, te, sigma1, stopped = map_estimate(model, pb, theta, a_r, sd, sigma0, settings, pool, log, J0)
     b_r = np.zeros(pb.R.shape[1])

@@ -142,7 +142,7 @@ def _active(fit, F: Features, n: int, settings, fixed: tuple) -> tuple[np.ndarra
     return idx[idx < n], idx[idx >= n] - n, sd
 
 
-def _global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.ndarray, np.ndarray]:
+def global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.ndarray, np.ndarray]:
     """The always-estimated block's maximum a posteriori alone (no other effect), through the reducer model: the
     state the first linearisation starts from. A clearance or preload of the whole ring changes how every other
     error shows, so the other candidates' columns are taken where the ring's fit already is."""
@@ -351,7 +351,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     stopped = "max_linearisations"
     empirical = False
     with pool_cm as pool:
-        theta, te = _global_fit(pb, theta, te, pool, log)
+        theta, te = global_fit(pb, theta, te, pool, log)
         if settings.estimator == "tolerance-prior":
             J = m.jacobian(theta, None, None, pool)
             scales = prior_scales(pb.library, m, J, R, pb.readings, dataset)
