@@ -6,7 +6,9 @@ dataset, with the product's settings:
 
 * from the estimator's own start (the always-estimated block's fit, :func:`rvcalib.loop.global_fit`), as
   ``rv-calibrate --estimator tolerance-prior`` runs it;
-* from the draw's truth (the draw's errors and compliance as the library's parameters, no measurement effect).
+* from the draw's truth (the draw's errors and compliance as the library's parameters, no measurement effect);
+* with ``--prior-starts K``, from K more starts: the estimator's own start with every Table 4 parameter drawn from
+  its prior (``numpy.random.default_rng(k)``, k = 1..K, clipped to the physical bounds).
 
 It prints the criterion (:func:`rvcalib.gaussian.criterion`, dimensionless) of both ends and of the truth itself,
 all at one noise (where the first search ended), and along the straight line from the first end to the truth
@@ -44,7 +46,8 @@ from rvcalib.loop import Problem, global_fit, prior_scales  # noqa: E402
 from rvrig.dataset import read_dataset  # noqa: E402
 
 
-def basins(seed: int, draws: Path, max_linearisations: int, line: int, log) -> list[tuple[str, float, str]]:
+def basins(seed: int, draws: Path, max_linearisations: int, line: int, prior_starts: int,
+           log) -> list[tuple[str, float, str]]:
     """The figures of one draw (module docstring) as ``(figure, value, unit)``."""
     folder = generate(seed, draws)
     ds = read_dataset(folder / "dataset")
@@ -58,8 +61,14 @@ def basins(seed: int, draws: Path, max_linearisations: int, line: int, log) -> l
     a_r = measurement_columns(pb)
     sigma0 = max(float(ds.noise_arcsec()), 1e-3)
     truth, _ = truth_vector(m, draw(seed))
+    starts = [("own_start", theta, J), ("truth_start", truth, None)]
+    table4 = np.array([c.family == "table4" for c in m.candidates for _ in range(c.n_params)])
+    for k in range(1, prior_starts + 1):
+        drawn = theta.copy()
+        drawn[table4] = np.random.default_rng(k).normal(0.0, sd[:m.n_params][table4])
+        starts.append((f"prior_start_{k}", np.clip(drawn, m._lower, m._upper), None))
     ends, out = {}, []
-    for name, start, J0 in (("own_start", theta, J), ("truth_start", truth, None)):
+    for name, start, J0 in starts:
         t0 = time.perf_counter()
         if J0 is None:
             m.te(start)
@@ -72,8 +81,7 @@ def basins(seed: int, draws: Path, max_linearisations: int, line: int, log) -> l
                 (f"seed{seed}_{name}_converged", float(stopped == "converged"), "1")]
     x_end, te_end, sigma = ends["own_start"]
     x_true = np.concatenate([truth, np.zeros(a_r.size)])
-    crit = {"own_end": criterion(pb, a_r, sd, x_end, te_end, sigma),
-            "truth_end": criterion(pb, a_r, sd, ends["truth_start"][0], ends["truth_start"][1], sigma)}
+    crit = {name.replace("start", "end"): criterion(pb, a_r, sd, x, te_x, sigma) for name, (x, te_x, _) in ends.items()}
     along = []
     for t in np.linspace(0.0, 1.0, line):
         x = (1.0 - t) * x_end + t * x_true
@@ -93,16 +101,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--draws", type=Path, required=True, help="folder of the generated draws (reused)")
     ap.add_argument("--max-linearisations", type=int, default=CalibrationSettings().max_linearisations)
     ap.add_argument("--line", type=int, default=6, help="points on the line from the own end to the truth (>= 2)")
+    ap.add_argument("--prior-starts", type=int, default=0, help="more starts drawn from the prior (>= 0)")
     a = ap.parse_args(argv)
     if a.line < 2:
         ap.error(f"--line = {a.line} is not allowed: an integer >= 2")
+    if a.prior_starts < 0:
+        ap.error(f"--prior-starts = {a.prior_starts} is not allowed: an integer >= 0")
     t0 = time.perf_counter()
 
     def log(s: str) -> None:
         print(f"[{time.perf_counter() - t0:7.1f} s] {s}", flush=True)
 
     for seed in seeds_of(a.set, a.seeds):
-        record("search_basins", basins(seed, a.draws, a.max_linearisations, a.line, log))
+        record("search_basins", basins(seed, a.draws, a.max_linearisations, a.line, a.prior_starts, log))
     return 0
 
 

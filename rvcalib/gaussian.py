@@ -231,6 +231,9 @@ far from the MAP, moves a candidate the data determine weakly by about a third o
 DAMPING_UP, DAMPING_DOWN, DAMPING_TRIALS = 10.0, 0.3, 8
 """Marquardt's rule: the damping times 10 after a step that does not lower the criterion (or leaves the model's
 domain), times 0.3 after one that does; at most 8 trials per linearisation."""
+CRITERION_RESOLUTION = 1.0
+"""The least fall of the criterion the data tell from none: one unit (a likelihood ratio of ``exp(1/2)``). A step
+that lowers it by more is progress however short the damping makes it, so the search goes on."""
 
 
 def _damped_step(J: np.ndarray, r: np.ndarray, x: np.ndarray, w: np.ndarray, sigma: float, lam: float,
@@ -269,8 +272,9 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     the linearised problem's damped bounded MAP (:func:`_damped_step`, within the physical bounds), the damping
     raised until the step lowers the criterion and lowered after it does (Marquardt 1963), then the noise of the
     greatest evidence at the new state (:func:`evidence_sigma`, on that linearisation's columns); converged when a
-    step moves the model TE by at most ``settings.step_tolerance`` of the noise (RMS), or after
-    ``settings.max_linearisations``.
+    step moves the model TE by at most ``settings.step_tolerance`` of the noise (RMS) and lowers the criterion by
+    less than :data:`CRITERION_RESOLUTION` (a short step of a heavily damped search that still lowers it is not
+    convergence), or after ``settings.max_linearisations``.
 
     Returns (theta, the measurement coefficients ``b`` of the reading columns ``a_r``, the model TE, sigma, and
     ``converged`` or ``max_linearisations``: what stopped it); ``J0`` the model's columns at ``theta`` where known
@@ -317,8 +321,9 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
         sigma_new = evidence_sigma(J, r, 1.0 / w, r.size - len(pb.tests), sigma)[0]
         log(f"linearisation {it}: criterion {phi:.4f} -> {phi_new:.4f}, the model TE moved {moved:.3g} arcsec RMS, "
             f"noise of the greatest evidence {sigma_new:.4g} arcsec")
+        fall = phi - phi_new
         sigma, phi = sigma_new, objective(x, te, sigma_new)
-        if moved <= settings.step_tolerance * sigma:
+        if moved <= settings.step_tolerance * sigma and fall < CRITERION_RESOLUTION:
             stopped = "converged"
             break
     return x[:n_s], x[n_s:], te, sigma, stopped

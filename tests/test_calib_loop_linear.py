@@ -313,10 +313,9 @@ def test_tolerance_prior_says_when_the_linearisations_ran_out(base):
     assert res.stopped_by == "max_linearisations" and res.linearisations == 2    # the last one gives the intervals
 
 
-def test_levenberg_marquardt_reaches_the_map_of_a_nonlinear_model():
-    """On a model nonlinear in its parameters (``a exp(b t)``, started far from the truth, where a full
-    Gauss-Newton step overshoots), the search ends at the MAP of its criterion at the noise it ends with: the point
-    ``scipy.optimize.least_squares`` finds on the same prior-augmented residual; each accepted step lowers it."""
+def _exp_search(step_tolerance: float) -> tuple:
+    """The search on ``a exp(b t)`` from far from the truth: (theta, sigma, stopped, logged lines, the MAP of the
+    same prior-augmented residual at that sigma by ``scipy.optimize.least_squares``, the criterion)."""
     from types import SimpleNamespace
 
     from rvcalib.gaussian import map_estimate
@@ -336,13 +335,43 @@ def test_levenberg_marquardt_reaches_the_map_of_a_nonlinear_model():
     pb = SimpleNamespace(proj=lambda v: v, y=y, R=np.zeros((t.size, 0)), tests=[])
     sd = np.array([10.0, 10.0])
     lines: list[str] = []
-    settings = CalibrationSettings(estimator="tolerance-prior", max_linearisations=40, step_tolerance=1e-4)
+    settings = CalibrationSettings(estimator="tolerance-prior", max_linearisations=40, step_tolerance=step_tolerance)
     theta, b, fit, sigma, stopped = map_estimate(model, pb, np.array([0.2, -2.0]), np.zeros(0, dtype=int), sd, 1.0,
                                                  settings, None, lines.append)
-    assert stopped == "converged" and b.size == 0
+    assert b.size == 0
+
+    def crit(th):
+        return float(np.sum(((y - te(th)) / sigma) ** 2) + np.sum((th / sd) ** 2))
+
     want = optimize.least_squares(lambda th: np.concatenate([(y - te(th)) / sigma, th / sd]), [0.2, -2.0],
                                   xtol=1e-12, ftol=1e-12).x
+    return theta, sigma, stopped, lines, want, crit
+
+
+def test_levenberg_marquardt_reaches_the_map_of_a_nonlinear_model():
+    """On a model nonlinear in its parameters (``a exp(b t)``, started far from the truth, where a full
+    Gauss-Newton step overshoots), the search ends at the MAP of its criterion at the noise it ends with: the point
+    ``scipy.optimize.least_squares`` finds on the same prior-augmented residual; each accepted step lowers it."""
+    theta, sigma, stopped, lines, want, _ = _exp_search(1e-4)
+    assert stopped == "converged"
     assert theta == pytest.approx(want, rel=1e-4)
     assert sigma == pytest.approx(0.05, rel=0.25)
     steps = _criterion_steps(lines)
     assert len(steps) >= 3 and all(b <= a for a, b in steps), lines
+
+
+def test_a_short_step_that_still_lowers_the_criterion_is_not_convergence():
+    """With a step tolerance so loose that every step is short by it, the search still goes on while a step lowers
+    the criterion by a unit or more (what the data tell from no change), and ends within a unit of the MAP."""
+    from rvcalib.gaussian import CRITERION_RESOLUTION
+
+    theta, sigma, stopped, lines, want, crit = _exp_search(1e3)
+    steps = _criterion_steps(lines)
+    assert stopped == "converged" and len(steps) >= 3, lines
+    assert _fall_below(steps[-1], CRITERION_RESOLUTION) and not _fall_below(steps[0], CRITERION_RESOLUTION)
+    assert crit(theta) - crit(want) < CRITERION_RESOLUTION
+
+
+def _fall_below(step: tuple, resolution: float) -> bool:
+    """Whether a logged step (criterion before, after) lowered the criterion by less than ``resolution``."""
+    return step[0] - step[1] < resolution
