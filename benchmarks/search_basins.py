@@ -55,7 +55,7 @@ def basins(seed: int, draws: Path, max_linearisations: int, line: int, prior_sta
     pb = Problem(ds, settings)
     m = pb.model
     theta, te = global_fit(pb, np.zeros(m.n_params), m.te(np.zeros(m.n_params)), None, log)
-    J = m.jacobian(theta, None, None, None)
+    J = m.statistical_jacobian(theta, None)
     scales = prior_scales(pb.library, m, J, pb.R, pb.readings, ds)
     sd = prior_sd(pb, *scales)
     a_r = measurement_columns(pb)

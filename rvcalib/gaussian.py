@@ -17,7 +17,10 @@ option). This estimator takes that as its prior, for all candidates at once:
 
 (``R_m`` the measurement effects' reading columns), by Levenberg-Marquardt through the reducer model: at each
 state the linearised problem's damped MAP within the physical bounds, on the model's columns there
-(re-linearisation). There is one criterion and one search; no candidate is chosen or dropped.
+(re-linearisation). The first linearisation, at the start, where the posterior is still the prior, is the
+statistical one over the prior (:meth:`rvcalib.reducer_model.ReducerModel.statistical_jacobian`: each column the
+secant over +- its prior scale), so a response that bends within its tolerance class is not extrapolated from its
+slope at the start. There is one criterion and one search; no candidate is chosen or dropped.
 
 **Intervals.** Laplace's approximation at the MAP: the covariance ``(X' X / sigma^2 + diag(1 / s^2))^-1`` of all
 parameters at once (``X`` the columns at the MAP), so each interval holds what every other candidate, at its

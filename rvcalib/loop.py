@@ -330,7 +330,8 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
         Receives a line per step of progress.
     model : object or None
         The forward model (default :class:`rvcalib.reducer_model.ReducerModel` of the dataset); tests may give a
-        stand-in with the same ``candidates``, ``n_params``, ``te``, ``jacobian``, ``case_dict`` and ``groups``.
+        stand-in with the same ``candidates``, ``n_params``, ``te``, ``jacobian``, ``statistical_jacobian``,
+        ``case_dict`` and ``groups``.
 
     Returns
     -------
@@ -353,7 +354,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     with pool_cm as pool:
         theta, te = global_fit(pb, theta, te, pool, log)
         if settings.estimator == "tolerance-prior":
-            J = m.jacobian(theta, None, None, pool)
+            J = m.statistical_jacobian(theta, pool)
             scales = prior_scales(pb.library, m, J, R, pb.readings, dataset)
             return tolerance_prior_estimate(pb, settings, theta, J, scales, pool, log, t0, rms_before,
                                             time.perf_counter)

@@ -427,7 +427,24 @@ class ReducerModel:
         scale). ``renew`` (n_params,) bool: the columns to solve (default all); the others keep their columns of
         the last call (the form modes are always recombined from the single pins').
         """
+        return self._columns(theta, spread, renew, pool, self.column_kinds())
+
+    def statistical_jacobian(self, theta: np.ndarray, pool: ProcessPoolExecutor | None = None) -> np.ndarray:
+        """The columns of the statistical linearisation over the prior at ``theta`` (n, n_params), at the states of
+        the last :meth:`te` (call it first): every column a secant over +- the parameter's prior scale (within its
+        bounds), the derivative columns' too. Where the response over a tolerance class is not linear (the run
+        means under load are nearly even in a planet's eccentricity at the perfect reducer), the secant is a
+        straight line through the response over that class, where the tangent at one state would extrapolate that
+        state's slope (statistical linear
+        regression, A. F. Garcia-Fernandez, L. Svensson, M. R. Morelande, S. Sarkka, "Posterior linearization
+        filter: principles and implementation using sigma points", IEEE Trans. Signal Process. 63 (2015)
+        5561-5573, with two points per parameter)."""
         kinds = self.column_kinds()
+        return self._columns(theta, None, None, pool, np.where(kinds == "derivative", "kink", kinds))
+
+    def _columns(self, theta: np.ndarray, spread: np.ndarray | None, renew: np.ndarray | None,
+                 pool: ProcessPoolExecutor | None, kinds: np.ndarray) -> np.ndarray:
+        """:meth:`jacobian` with the columns' kinds given."""
         spread = self.steps() * 10.0 if spread is None else np.asarray(spread, dtype=float)
         if renew is None or self._J is None:
             renew = np.ones(self.n_params, dtype=bool)

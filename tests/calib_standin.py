@@ -40,6 +40,9 @@ class FrozenModel:
     def jacobian(self, theta, spread=None, renew=None, pool=None) -> np.ndarray:
         return self.J
 
+    def statistical_jacobian(self, theta, pool=None) -> np.ndarray:
+        return self.J            # linear: every secant is the column
+
     def case_dict(self, group, theta) -> dict:
         return dict(group.base)
 
@@ -128,6 +131,9 @@ class LinearReducer:
 
     def jacobian(self, theta, spread=None, renew=None, pool=None) -> np.ndarray:
         return self.J.copy()
+
+    def statistical_jacobian(self, theta, pool=None) -> np.ndarray:
+        return self.J.copy()     # linear: every secant is the column
 
     def case_dict(self, group, theta: np.ndarray) -> dict:
         t = np.clip(theta, self._lower, self._upper)
