@@ -23,7 +23,7 @@ from typing import Any
 from rvcad import validation as v
 from rvcad.errors import MAX_LOAD_NM, Case
 from rvcalib.reportmd import num, reducer_line, te_formula
-from rvcalib.settings import CONTACTS, ESTIMATORS, CalibrationSettings
+from rvcalib.settings import CONTACTS, ESTIMATORS, MAX_LINEARISATIONS, CalibrationSettings
 
 #: Most single effects (the estimator's own bound on ``max_effects``).
 MAX_EFFECTS = 1000
@@ -78,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimator", default="sparse", metavar="E",
                    help="sparse (the sum of single effects, default) or tolerance-prior (every candidate a Gaussian "
                         "effect at its tolerance class, no selection); docs/calibration.md")
+    p.add_argument("--max-linearisations", dest="max_linearisations", type=int,
+                   default=CalibrationSettings.max_linearisations, metavar="N",
+                   help="most linearisations of the reducer model (default "
+                        f"{CalibrationSettings.max_linearisations}); a tolerance-prior search stopped by it names "
+                        "nothing")
     p.add_argument("--verbose", action="store_true", help="progress on stderr")
     return p
 
@@ -86,6 +91,7 @@ def settings_from(args: argparse.Namespace) -> CalibrationSettings:
     """The options checked (OptionError naming the option, its value and what is allowed) as one settings object."""
     v.option_int(args.workers, "--workers", 1, v.MAX_WORKERS, why="local processes")
     v.option_int(args.max_effects, "--max-effects", 1, MAX_EFFECTS)
+    v.option_int(args.max_linearisations, "--max-linearisations", 1, MAX_LINEARISATIONS)
     if args.max_order is not None:
         v.option_int(args.max_order, "--max-order", 1, MAX_ORDER)
     v.option_real(args.empirical_weight, "--empirical-weight", 0.0, MAX_EMPIRICAL_WEIGHT, lo_open=True)
@@ -99,7 +105,8 @@ def settings_from(args: argparse.Namespace) -> CalibrationSettings:
     v.output_dir(args.out)
     return CalibrationSettings(max_effects=args.max_effects, max_order=args.max_order,
                                empirical_weight=float(args.empirical_weight), workers=args.workers,
-                               contact=args.contact, rated_Nm=args.rated_Nm, estimator=args.estimator).validate()
+                               contact=args.contact, rated_Nm=args.rated_Nm, estimator=args.estimator,
+                               max_linearisations=args.max_linearisations).validate()
 
 
 def _friction(result, dataset, law) -> Any:

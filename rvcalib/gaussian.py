@@ -290,10 +290,7 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     x = np.concatenate([np.clip(theta, model._lower, model._upper), np.zeros(a_r.size)])
     te = model.te(x[:n_s])
 
-    def objective(x, te, sigma) -> float:
-        return criterion(pb, a_r, sd, x, te, sigma)
-
-    phi = objective(x, te, sigma)
+    phi = criterion(pb, a_r, sd, x, te, sigma)
     stopped = "max_linearisations"
     lam = DAMPING_START
     for it in range(1, settings.max_linearisations + 1):
@@ -308,7 +305,9 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
             except ModelEvaluationError:
                 lam *= DAMPING_UP
                 continue
-            phi_new = objective(new, te_new, sigma)
+            phi_new = criterion(pb, a_r, sd, new, te_new, sigma)
+            d = new - x
+            predicted = float(np.sum((r - J @ d) ** 2)) / sigma ** 2 + float(np.sum((w * new) ** 2))
             if phi_new < phi:
                 lam *= DAMPING_DOWN
                 break
@@ -322,10 +321,11 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
         x, te = new, te_new
         r = pb.proj(pb.y - te) - Rm @ x[n_s:]
         sigma_new = evidence_sigma(J, r, 1.0 / w, r.size - len(pb.tests), sigma)[0]
-        log(f"linearisation {it}: criterion {phi:.4f} -> {phi_new:.4f}, the model TE moved {moved:.3g} arcsec RMS, "
+        log(f"linearisation {it}: criterion {phi:.4f} -> {phi_new:.4f} (its linearisation predicted {predicted:.4f}, "
+            f"damping {lam / DAMPING_DOWN:.3g}), the model TE moved {moved:.3g} arcsec RMS, "
             f"noise of the greatest evidence {sigma_new:.4g} arcsec")
         fall = phi - phi_new
-        sigma, phi = sigma_new, objective(x, te, sigma_new)
+        sigma, phi = sigma_new, criterion(pb, a_r, sd, x, te, sigma_new)
         if moved <= settings.step_tolerance * sigma and fall < CRITERION_RESOLUTION:
             stopped = "converged"
             break
@@ -361,9 +361,24 @@ def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, poo
         named, groups = named + n, groups + g
     n, g = read_named(pb, post, settings.coverage)
     named, groups = named + n, groups + g
+    notes = []
+    if stopped != "converged":
+        notes.append(unconverged_note(len(named), len(groups), settings.max_linearisations))
+        named, groups = [], []
     U, sv, _ = np.linalg.svd(X, full_matrices=False)
     Q = U[:, sv > sv[0] * 1e-10]
     unexplained, b_e = _unexplained(pb, r, Q, sd[n_s:], settings.coverage)
     return assemble_common(pb, theta, te, b_r + b_e, named, groups, unexplained, [], sigma, settings,
                            {"rms_before": rms_before, "stopped_by": stopped, "cap_binds": False,
-                            "seconds": start() - t0, "linearisations": model.jacobians})
+                            "seconds": start() - t0, "linearisations": model.jacobians, "notes": notes})
+
+
+def unconverged_note(n_named: int, n_groups: int, max_linearisations: int) -> str:
+    """Why a search stopped by its cap names nothing: Laplace's approximation is the posterior's at its mode, and
+    a state where a step still lowers the criterion by more than :data:`CRITERION_RESOLUTION` is not one, so the
+    regions read there (``n_named`` effects, ``n_groups`` groups) are not the posterior's and can exclude the truth
+    however tight they are."""
+    return (f"no effect is named: the search stopped after {max_linearisations} linearisations while a step still "
+            f"lowered its criterion, so its state is not the criterion's minimum and the 95 % regions read there "
+            f"({n_named} effects and {n_groups} groups excluded zero) are not the posterior's; the fit is the state "
+            f"where it stopped. Raise max_linearisations (rv-calibrate --max-linearisations) to go on")

@@ -364,7 +364,7 @@ def assemble_common(pb, theta: np.ndarray, te: np.ndarray, b_r: np.ndarray, name
     """The result from what an estimator read: the state (``theta``, the model TE ``te`` there, the reading
     coefficients ``b_r``), its named effects, groups, unexplained structure and diffuse sets, the noise standard
     deviation it estimated (arcsec), and ``info`` (``rms_before``, ``stopped_by``, ``cap_binds``, ``seconds``,
-    ``linearisations``)."""
+    ``linearisations``; ``notes``, optional: the estimator's own notes)."""
     dataset = pb.dataset
     resid = pb.y - te - pb.R @ b_r
     consts = pb.proj.constants(resid)
@@ -379,5 +379,5 @@ def assemble_common(pb, theta: np.ndarray, te: np.ndarray, b_r: np.ndarray, name
         noise_arcsec=_noise(dataset, r, offs), sigma_arcsec=float(sigma),
         stopped_by=info["stopped_by"], cap_binds=bool(info["cap_binds"]),
         seconds=float(info["seconds"]), linearisations=info["linearisations"], settings=settings.to_dict(),
-        notes=list(pb.library.notes) + list(pb.ramp_lines), reducer=dataset.reducer(), calibrated_case=case,
+        notes=list(pb.library.notes) + list(pb.ramp_lines) + list(info.get("notes", [])), reducer=dataset.reducer(), calibrated_case=case,
         residuals=[r[offs[i]:offs[i + 1]] for i in range(len(dataset.runs))])

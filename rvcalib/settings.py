@@ -11,6 +11,8 @@ CONTACTS = (None, "physical", "impact")
 #: The estimators: the sum of single effects with its loop (rvcalib.sparse, rvcalib.loop), or the Gaussian
 #: posterior of every candidate at its tolerance class (rvcalib.gaussian).
 ESTIMATORS = ("sparse", "tolerance-prior")
+#: The most linearisations a search may be given.
+MAX_LINEARISATIONS = 100
 
 
 @dataclass(frozen=True)
@@ -80,8 +82,8 @@ class CalibrationSettings:
             bad("empirical_weight", "a finite number > 0")
         if self.max_order is not None and not (isinstance(self.max_order, int) and 1 <= self.max_order <= 5000):
             bad("max_order", "None or an integer in 1..5000")
-        if not (isinstance(self.max_linearisations, int) and 1 <= self.max_linearisations <= 100):
-            bad("max_linearisations", "an integer in 1..100")
+        if not (isinstance(self.max_linearisations, int) and 1 <= self.max_linearisations <= MAX_LINEARISATIONS):
+            bad("max_linearisations", f"an integer in 1..{MAX_LINEARISATIONS}")
         if not (math.isfinite(self.step_tolerance) and self.step_tolerance > 0):
             bad("step_tolerance", "a finite number > 0")
         if not (isinstance(self.swaps, int) and 0 <= self.swaps <= 20):

@@ -30,6 +30,7 @@ SETTINGS = CalibrationSettings(max_order=6, families=FAMILIES, workers=1)
 @pytest.mark.parametrize("args,match", [
     (["--workers", "0"], r"--workers 0 is out of range; allowed: an integer in \[1, 32\]"),
     (["--max-effects", "0"], r"--max-effects 0 is out of range; allowed: an integer in \[1, 1000\]"),
+    (["--max-linearisations", "0"], r"--max-linearisations 0 is out of range; allowed: an integer in \[1, 100\]"),
     (["--max-order", "0"], r"--max-order 0 is out of range; allowed: an integer in \[1, 5000\]"),
     (["--empirical-weight", "0"], r"--empirical-weight 0.0 is out of range; allowed: a number in \(0, 1e\+06\]"),
     (["--empirical-weight", "nan"], r"--empirical-weight nan is not finite"),
@@ -80,10 +81,11 @@ def test_import_is_delegated(capsys, tmp_path):
 def test_the_options_make_one_settings_object(tmp_path):
     args = build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o"), "--max-effects", "12",
                                       "--max-order", "40", "--empirical-weight", "0.5", "--contact", "impact",
-                                      "--rated-Nm", "1568", "--workers", "1", "--estimator", "tolerance-prior"])
+                                      "--rated-Nm", "1568", "--workers", "1", "--estimator", "tolerance-prior",
+                                      "--max-linearisations", "30"])
     assert settings_from(args) == CalibrationSettings(max_effects=12, max_order=40, empirical_weight=0.5,
                                                       contact="impact", rated_Nm=1568.0, workers=1,
-                                                      estimator="tolerance-prior")
+                                                      estimator="tolerance-prior", max_linearisations=30)
     assert settings_from(build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o")])).workers == 2
 
 

@@ -306,11 +306,22 @@ def test_tolerance_prior_reports_a_pair_it_cannot_split_as_a_group():
     assert alone == pytest.approx({"a": 2.0 - 0.98 * 1.5, "b": -1.5 + 0.98 * 2.0})
 
 
-def test_tolerance_prior_says_when_the_linearisations_ran_out(base):
+def test_tolerance_prior_names_nothing_when_the_linearisations_ran_out(base):
+    """A search stopped by its cap, one damped step from the start, is not at the criterion's minimum: where the
+    converged search names the ring offset and the compliance, the stopped one names nothing, says why and how to
+    go on, and still gives its fit."""
     ds, fm = base
     data = _data(ds, fm, {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2}, seed=6)
+    done = calibrate(data, TOLERANCE_PRIOR, model=fm)
+    assert done.stopped_by == "converged"
+    assert {"pin_circle_offset", "torsional_compliance_arcsec_per_Nm"} <= set(_named(done))
     res = calibrate(data, CalibrationSettings(estimator="tolerance-prior", max_linearisations=1), model=fm)
-    assert res.stopped_by == "max_linearisations" and res.linearisations == 2    # the last one gives the intervals
+    assert res.stopped_by == "max_linearisations" and res.linearisations == 2    # the last one gives the regions
+    assert res.effects == [] and res.groups == []
+    note = [n for n in res.notes if n.startswith("no effect is named")]
+    assert len(note) == 1 and "--max-linearisations" in note[0], res.notes
+    assert re.search(r"\(([1-9]\d*) effects and \d+ groups excluded zero\)", note[0]), note[0]
+    assert res.rms_after < res.rms_before
 
 
 def _exp_search(step_tolerance: float) -> tuple:
