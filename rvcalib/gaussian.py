@@ -30,7 +30,10 @@ D. J. C. MacKay, "Bayesian interpolation", Neural Computation 4 (1992) 415-447, 
 data determine).
 
 **What is named.** A candidate whose 95 % posterior region excludes zero (one component: its interval; two
-components: the chi-square(2) ellipse), with its MAP value and that interval. The rest are not told from zero by
+components: the chi-square(2) ellipse), with its MAP value and that interval, and whose exclusion of zero holds
+through the model: with the candidate at zero and the others at their posterior given that, the criterion rises
+above the MAP's by at least the chi-square quantile (:func:`zero_check`; where the response bends, a tangent at the
+MAP can make the ellipse tighter than the data). Only a converged search names anything (:func:`unconverged_note`). The rest are not told from zero by
 the data: they are in the fit at their posterior means, never named. A candidate so named whose posterior
 correlation with another exceeds 0.95 (the data fix their combination only) is reported as a group of the two
 instead, each with the size it would have alone; in the always-estimated block likewise
@@ -126,12 +129,13 @@ class Posterior:
         return self.mean[k], self.cov[np.ix_(k, k)]
 
 
-def read_named(pb, post: Posterior, level: float) -> tuple[list, list]:
+def read_named(pb, post: Posterior, level: float, check=None) -> tuple[list, list]:
     """The physical candidates outside the always-estimated block whose posterior region excludes zero (of the
     two sides of one pin-wise error, the side with the larger evidence), and, for such a candidate whose posterior
     correlation with another candidate exceeds :data:`TIE` (only their combination is determined: the sun's
     eccentricity and the input encoder's, say), a group of the two with the size each would have alone (its
-    posterior mean were the other zero) instead of a name."""
+    posterior mean were the other zero) instead of a name. ``check(positions, name)``, where given, is asked of
+    each candidate whose region excludes zero (its posterior positions) and may refuse it (:func:`zero_check`)."""
     sd = np.sqrt(np.maximum(np.diag(post.cov), 1e-300))
     corr = post.cov / np.outer(sd, sd)
     feats = [f for f in range(len(pb.feature_cands)) if f not in pb.fixed and not pb.empirical[f]
@@ -144,6 +148,8 @@ def read_named(pb, post: Posterior, level: float) -> tuple[list, list]:
         if d2 <= stats.chi2.ppf(level, m.size):
             continue
         c = pb.feature_cands[f][0]
+        if check is not None and not check(pos[f], c.effect_name):
+            continue
         if c.effect_name not in out or out[c.effect_name][0] < d2:
             out[c.effect_name] = (d2, f, named_effect(c, 1.0, m, S, level))
     named, groups = [], []
@@ -355,14 +361,19 @@ def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, poo
     post = Posterior(idx, np.concatenate([theta, b_m]), C)
     log(f"tolerance-prior MAP of {n_s} solved and {a_r.size} reading parameters: {model.jacobians} Jacobians, "
         f"residual RMS {math.sqrt(float(np.mean(r ** 2))):.4g} arcsec, noise of the greatest evidence {sigma:.4g}")
-    named, groups = [], []
+    named, groups, notes = [], [], []
+    converged = stopped == "converged"
+    check = zero_check(pb, model, a_r, sd, post, te, sigma, settings.coverage, notes.append) if converged else None
     for f in pb.fixed:
-        n, g = read_block(pb.feature_cands[f], *post.block(pb.starts[f], pb.starts[f + 1]), settings.coverage)
+        at = [post.pos[j] for j in range(pb.starts[f], pb.starts[f + 1])]
+        n, g = read_block(pb.feature_cands[f], *post.block(pb.starts[f], pb.starts[f + 1]), settings.coverage,
+                          None if check is None else lambda span, name, at=at: check(at[span], name))
         named, groups = named + n, groups + g
-    n, g = read_named(pb, post, settings.coverage)
+    n, g = read_named(pb, post, settings.coverage, check)
     named, groups = named + n, groups + g
-    notes = []
-    if stopped != "converged":
+    if converged:
+        model.te(theta)                                 # the MAP's states again, after the checks' evaluations
+    else:
         notes.append(unconverged_note(len(named), len(groups), settings.max_linearisations))
         named, groups = [], []
     U, sv, _ = np.linalg.svd(X, full_matrices=False)
@@ -371,6 +382,45 @@ def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, poo
     return assemble_common(pb, theta, te, b_r + b_e, named, groups, unexplained, [], sigma, settings,
                            {"rms_before": rms_before, "stopped_by": stopped, "cap_binds": False,
                             "seconds": start() - t0, "linearisations": model.jacobians, "notes": notes})
+
+
+def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: np.ndarray, sigma: float,
+               level: float, note):
+    """The check, through the model, of a region that excludes zero: ``check(positions, name)`` for the
+    parameters at ``positions`` of the posterior ``post`` (at the MAP, ``te`` its model TE, ``sigma`` the noise).
+
+    It evaluates the criterion at the point of the linear posterior where those parameters are zero (every other
+    at its posterior mean given that, within its bounds). That point's criterion bounds from above the least
+    criterion with them at zero (the profile at zero), so when it exceeds the MAP's by less than the chi-square
+    quantile of ``level`` (Wilks' likelihood-ratio region, S. S. Wilks, Ann. Math. Statist. 9 (1938) 60-62),
+    zero is inside the region through the model, whatever Laplace's ellipse says: the candidate is refused
+    (``False``) and ``note`` told why. A rise at or above the quantile leaves Laplace's verdict (the profile could
+    still be lower); so could a point the model cannot evaluate. Where the model is linear the rise is the
+    ellipse's ``d^2`` itself and nothing changes; where it bends (a response even in a parameter, a contact
+    that opens) a tight ellipse can exclude a zero the data do not."""
+    n_s = model.n_params
+    lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
+    hi = np.concatenate([model._upper, np.full(a_r.size, np.inf)])
+    phi = criterion(pb, a_r, sd, post.mean, te, sigma)
+
+    def check(positions: list, name: str) -> bool:
+        k = np.asarray(positions, dtype=int)
+        x = post.mean - post.cov[:, k] @ np.linalg.solve(post.cov[np.ix_(k, k)], post.mean[k])
+        x = np.clip(x, lo, hi)
+        x[k] = 0.0
+        try:
+            rise = criterion(pb, a_r, sd, x, model.te(x[:n_s]), sigma) - phi
+        except ModelEvaluationError:
+            return True
+        limit = float(stats.chi2.ppf(level, k.size))
+        if rise >= limit:
+            return True
+        note(f"{name} is not named: its {level:.0%} region excludes zero, but through the model the criterion with "
+             f"it at zero (the others at their posterior given that) is only {rise:.3g} above the MAP's, below the "
+             f"chi-square quantile {limit:.3g}: the data do not tell it from zero")
+        return False
+
+    return check
 
 
 def unconverged_note(n_named: int, n_groups: int, max_linearisations: int) -> str:

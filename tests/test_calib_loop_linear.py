@@ -5,6 +5,7 @@ what the physics adds beyond a linear response is the subject of tests/test_cali
 from __future__ import annotations
 
 import copy
+import math
 import re
 
 import numpy as np
@@ -386,3 +387,39 @@ def test_a_short_step_that_still_lowers_the_criterion_is_not_convergence():
 def _fall_below(step: tuple, resolution: float) -> bool:
     """Whether a logged step (criterion before, after) lowered the criterion by less than ``resolution``."""
     return step[0] - step[1] < resolution
+
+
+def test_a_region_that_excludes_zero_only_by_the_tangent_is_refused():
+    """``y = a^3 g(t) + b h(t)`` (g, h orthogonal), noise-free at a = b = 1, noise 0.05: at the MAP the tangent
+    of the cubic term is three times its secant to zero, so Laplace's ellipse puts zero at ``d^2`` = 9 x 2.5 for a,
+    while the criterion with a at zero rises by |g|^2 / sigma^2 = 2.5 only (below chi-square(1) 3.84): a is
+    refused, with a note; b, linear, rises by its own ``d^2`` and is kept."""
+    from types import SimpleNamespace
+
+    from rvcalib.gaussian import Posterior, zero_check
+
+    t = np.linspace(0.0, 1.0, 60, endpoint=False)
+    sigma = 0.05
+    g = sigma * math.sqrt(2.5 / 30.0) * np.cos(2 * np.pi * t)          # |g|^2 / sigma^2 = 2.5
+    h = sigma * np.sin(2 * np.pi * t)                                  # |h|^2 / sigma^2 = 30
+
+    def te(th):
+        return th[0] ** 3 * g + th[1] * h
+
+    y = te(np.array([1.0, 1.0]))
+    sd = np.array([10.0, 10.0])
+    pb = SimpleNamespace(proj=lambda v: v, y=y, R=np.zeros((t.size, 0)), tests=[])
+    model = SimpleNamespace(n_params=2, _lower=np.full(2, -50.0), _upper=np.full(2, 50.0), te=te)
+    x = optimize.least_squares(lambda th: np.concatenate([(y - te(th)) / sigma, th / sd]), [0.5, 0.5],
+                               xtol=1e-14, ftol=1e-14).x
+    J = np.column_stack([3 * x[0] ** 2 * g, h])
+    C = np.linalg.inv(J.T @ J / sigma ** 2 + np.diag(1 / sd ** 2))
+    d2 = x ** 2 / np.diag(C)
+    assert d2[0] == pytest.approx(9 * 2.5, rel=0.01) and d2[1] == pytest.approx(30.0, rel=0.01)   # both > 3.84
+    notes: list[str] = []
+    check = zero_check(pb, model, np.zeros(0, dtype=int), sd, Posterior(np.arange(2), x, C), te(x), sigma, 0.95,
+                       notes.append)
+    assert check([0], "a") is False
+    rise = float(re.search(r"only ([\d.e+-]+) above", notes[0]).group(1))
+    assert notes[0].startswith("a is not named") and rise == pytest.approx(2.5, rel=0.01)
+    assert check([1], "b") is True and len(notes) == 1
