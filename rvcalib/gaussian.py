@@ -363,7 +363,8 @@ def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, poo
         f"residual RMS {math.sqrt(float(np.mean(r ** 2))):.4g} arcsec, noise of the greatest evidence {sigma:.4g}")
     named, groups, notes = [], [], []
     converged = stopped == "converged"
-    check = zero_check(pb, model, a_r, sd, post, te, sigma, settings.coverage, notes.append) if converged else None
+    check = zero_check(pb, model, a_r, sd, post, te, sigma, settings.coverage, notes.append, log) \
+        if converged else None
     for f in pb.fixed:
         at = [post.pos[j] for j in range(pb.starts[f], pb.starts[f + 1])]
         n, g = read_block(pb.feature_cands[f], *post.block(pb.starts[f], pb.starts[f + 1]), settings.coverage,
@@ -385,7 +386,7 @@ def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, poo
 
 
 def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: np.ndarray, sigma: float,
-               level: float, note):
+               level: float, note, log=None):
     """The check, through the model, of a region that excludes zero: ``check(positions, name)`` for the
     parameters at ``positions`` of the posterior ``post`` (at the MAP, ``te`` its model TE, ``sigma`` the noise).
 
@@ -395,9 +396,9 @@ def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: 
     quantile of ``level`` (Wilks' likelihood-ratio region, S. S. Wilks, Ann. Math. Statist. 9 (1938) 60-62),
     zero is inside the region through the model, whatever Laplace's ellipse says: the candidate is refused
     (``False``) and ``note`` told why. A rise at or above the quantile leaves Laplace's verdict (the profile could
-    still be lower); so could a point the model cannot evaluate. Where the model is linear the rise is the
-    ellipse's ``d^2`` itself and nothing changes; where it bends (a response even in a parameter, a contact
-    that opens) a tight ellipse can exclude a zero the data do not."""
+    still be lower); so could a point the model cannot evaluate. ``log``, where given, is told every rise.
+    Where the model is linear the rise is the ellipse's ``d^2`` itself and nothing changes; where it bends (a
+    response even in a parameter, a contact that opens) a tight ellipse can exclude a zero the data do not."""
     n_s = model.n_params
     lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
     hi = np.concatenate([model._upper, np.full(a_r.size, np.inf)])
@@ -413,6 +414,8 @@ def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: 
         except ModelEvaluationError:
             return True
         limit = float(stats.chi2.ppf(level, k.size))
+        if log is not None:
+            log(f"{name}: the criterion with it at zero is {rise:.4g} above the MAP's (chi-square quantile {limit:.3g})")
         if rise >= limit:
             return True
         note(f"{name} is not named: its {level:.0%} region excludes zero, but through the model the criterion with "
