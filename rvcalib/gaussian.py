@@ -33,8 +33,9 @@ data determine).
 components: the chi-square(2) ellipse), with its MAP value and that interval, and whose exclusion of zero holds
 through the model: with the candidate at zero and the others at their posterior given that, the criterion rises
 above the MAP's by at least the chi-square quantile (:func:`zero_check`; where the response bends, a tangent at the
-MAP can make the ellipse tighter than the data). Only a converged search names anything (:func:`unconverged_note`). The rest are not told from zero by
-the data: they are in the fit at their posterior means, never named. A candidate so named whose posterior
+MAP can make the ellipse tighter than the data). Only a converged search names anything
+(:func:`unconverged_note`). The rest are not told from zero by the data: they are in the fit at their posterior
+means, never named. A candidate so named whose posterior
 correlation with another exceeds 0.95 (the data fix their combination only) is reported as a group of the two
 instead, each with the size it would have alone; in the always-estimated block likewise
 (:func:`rvcalib.result.read_block`).
@@ -415,7 +416,8 @@ def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: 
             return True
         limit = float(stats.chi2.ppf(level, k.size))
         if log is not None:
-            log(f"{name}: the criterion with it at zero is {rise:.4g} above the MAP's (chi-square quantile {limit:.3g})")
+            log(f"{name}: the criterion with it at zero is {rise:.4g} above the MAP's (chi-square quantile "
+                f"{limit:.3g})")
         if rise >= limit:
             return True
         note(f"{name} is not named: its {level:.0%} region excludes zero, but through the model the criterion with "

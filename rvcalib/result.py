@@ -381,5 +381,6 @@ def assemble_common(pb, theta: np.ndarray, te: np.ndarray, b_r: np.ndarray, name
         noise_arcsec=_noise(dataset, r, offs), sigma_arcsec=float(sigma),
         stopped_by=info["stopped_by"], cap_binds=bool(info["cap_binds"]),
         seconds=float(info["seconds"]), linearisations=info["linearisations"], settings=settings.to_dict(),
-        notes=list(pb.library.notes) + list(pb.ramp_lines) + list(info.get("notes", [])), reducer=dataset.reducer(), calibrated_case=case,
+        notes=list(pb.library.notes) + list(pb.ramp_lines) + list(info.get("notes", [])),
+        reducer=dataset.reducer(), calibrated_case=case,
         residuals=[r[offs[i]:offs[i + 1]] for i in range(len(dataset.runs))])
