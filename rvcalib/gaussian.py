@@ -430,10 +430,10 @@ def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: 
 
 def unconverged_note(n_named: int, n_groups: int, max_linearisations: int) -> str:
     """Why a search stopped by its cap names nothing: Laplace's approximation is the posterior's at its mode, and
-    a state where a step still lowers the criterion by more than :data:`CRITERION_RESOLUTION` is not one, so the
-    regions read there (``n_named`` effects, ``n_groups`` groups) are not the posterior's and can exclude the truth
-    however tight they are."""
-    return (f"no effect is named: the search stopped after {max_linearisations} linearisations while a step still "
-            f"lowered its criterion, so its state is not the criterion's minimum and the 95 % regions read there "
+    a state where the last step still moved the model TE or lowered the criterion beyond the stop rule's bounds
+    (:func:`map_estimate`) is not known to be one, so the regions read there (``n_named`` effects, ``n_groups``
+    groups) are not the posterior's and can exclude the truth however tight they are."""
+    return (f"no effect is named: the search stopped after {max_linearisations} linearisations before its stop "
+            f"rule held, so its state is not known to be the criterion's minimum and the 95 % regions read there "
             f"({n_named} effects and {n_groups} groups excluded zero) are not the posterior's; the fit is the state "
             f"where it stopped. Raise max_linearisations (rv-calibrate --max-linearisations) to go on")
