@@ -313,8 +313,6 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
                 lam *= DAMPING_UP
                 continue
             phi_new = criterion(pb, a_r, sd, new, te_new, sigma)
-            d = new - x
-            predicted = float(np.sum((r - J @ d) ** 2)) / sigma ** 2 + float(np.sum((w * new) ** 2))
             if phi_new < phi:
                 lam *= DAMPING_DOWN
                 break
@@ -325,6 +323,7 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
             stopped = "converged"
             break
         moved = float(np.sqrt(np.mean(pb.proj(te_new - te) ** 2)))
+        predicted = criterion(pb, a_r, sd, new, te + Js @ (new - x)[:n_s], sigma)     # on the linearised TE
         x, te = new, te_new
         r = pb.proj(pb.y - te) - Rm @ x[n_s:]
         sigma_new = evidence_sigma(J, r, 1.0 / w, r.size - len(pb.tests), sigma)[0]
