@@ -108,7 +108,15 @@ def test_a_ramp_is_found_and_a_constant_is_not_a_ramp(tmp_path):
               "measurement": {"output_encoder_scale_ppm": 40.0}}
     res = calibrate(_dataset(tmp_path, hidden), FAST)
     got = _named(res)
-    assert got["output_encoder_scale_error"].value == pytest.approx(40.0, rel=0.1), [e.line() for e in res.effects]
+    lines = [e.line() for e in res.effects]
+    assert got["output_encoder_scale_error"].value == pytest.approx(40.0, rel=0.1), lines
     plain = calibrate(_dataset(tmp_path / "b", {"model": {"torsional_compliance_arcsec_per_Nm": 0.2}}), FAST)
     assert not any(e.key in ("output_encoder_scale_error", "drift_arcsec_per_rev") for e in plain.effects)
     assert any("no ramp" in n for n in plain.notes)
+    assert _named(plain)["torsional_compliance_arcsec_per_Nm"].value == pytest.approx(0.2, rel=0.1)
+    # the rest of the ramp record's answer: the compliance within 10 %, and nothing the reducer does not hold
+    compliance = got.get("torsional_compliance_arcsec_per_Nm")
+    extra = set(got) - {"output_encoder_scale_error", "torsional_compliance_arcsec_per_Nm"}
+    if compliance is None or compliance.value != pytest.approx(0.2, rel=0.1) or extra:
+        pytest.xfail(f"a known limit (docs/calibration.md section 9): with a ramp in the record, the first fit of "
+                     f"the always-estimated block takes the ramp for its own; named: {lines}")
