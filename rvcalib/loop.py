@@ -38,7 +38,7 @@ import numpy as np
 
 from rvdyn.solver import law_from_model
 
-from rvcalib.gaussian import estimate as tolerance_prior_estimate
+from rvcalib.gaussian import estimate as tolerance_prior_estimate, measurement_columns
 from rvcalib.library import Library, build_library
 from rvcalib.readings import nuisance_columns, ramp_shown, reading_columns
 from rvcalib.reducer_model import ReducerModel
@@ -145,15 +145,21 @@ def _active(fit, F: Features, n: int, settings, fixed: tuple) -> tuple[np.ndarra
 def global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.ndarray, np.ndarray]:
     """The always-estimated block's maximum a posteriori alone (no other effect), through the reducer model: the
     state the first linearisation starts from. A clearance or preload of the whole ring changes how every other
-    error shows, so the other candidates' columns are taken where the ring's fit already is."""
+    error shows, so the other candidates' columns are taken where the ring's fit already is.
+
+    The tolerance-prior estimator always estimates the measurement effects too (the encoders' eccentricities, and
+    the scale error and drift where a record shows a ramp), so its start estimates them with the block, each at
+    its prior scale: left out, a ramp of tens of arcsec over the record is met by the block's compliance and
+    friction."""
     m, dense = pb.model, pb.dense_params
     if dense.size == 0:
         return theta, te
     tau = np.array([c.prior_scale for c in m.candidates for _ in range(c.n_params)])
+    tr = np.array([c.prior_scale for c in pb.readings for _ in range(c.n_params)])
+    meas = measurement_columns(pb) if pb.settings.estimator == "tolerance-prior" else np.zeros(0, int)
     sigma = max(float(pb.dataset.noise_arcsec()), 1e-3)
-    sd = np.concatenate([tau, np.ones(pb.R.shape[1])])
-    theta, _, te, _ = refine(m, pb.y, pb.proj, pb.R, theta, np.zeros(pb.R.shape[1]), dense, np.zeros(0, int), sd,
-                             sigma, pool=pool, log=log)
+    theta, _, te, _ = refine(m, pb.y, pb.proj, pb.R, theta, np.zeros(pb.R.shape[1]), dense, meas,
+                             np.concatenate([tau, tr]), sigma, pool=pool, log=log)
     return theta, te
 
 

@@ -14,7 +14,7 @@ from scipy import optimize
 
 from calib_standin import frozen_model, rig_data
 from rvrig.dataset import read_dataset
-from rvcalib.loop import Problem, propose, prior_scales, LoopState, calibrate, criterion
+from rvcalib.loop import Problem, propose, prior_scales, LoopState, calibrate, criterion, global_fit
 from rvcalib.refine import refine
 from rvcalib.settings import CalibrationSettings
 from rvcalib.simulate import simulate_dataset, standard_runs
@@ -323,6 +323,29 @@ def test_tolerance_prior_names_nothing_when_the_linearisations_ran_out(base):
     assert len(note) == 1 and "--max-linearisations" in note[0], res.notes
     assert re.search(r"\(([1-9]\d*) effects and \d+ groups excluded zero\)", note[0]), note[0]
     assert res.rms_after < res.rms_before
+
+
+def test_the_tolerance_priors_start_estimates_a_ramp_with_the_ring_and_the_compliance(base):
+    """A record with an output-encoder scale error of 40 ppm (a ramp of 52 arcsec over a revolution) beside a
+    compliance: the tolerance prior's start, the always-estimated block's MAP, estimates the measurement effects
+    with the block, so the ring's fit stays within its tolerance class and the compliance is the reducer's. The
+    same fit without them (the sparse estimator's start) meets the ramp with the ring's fit: the record does
+    test what the measurement columns are there for."""
+    ds, fm = base
+    ramp = np.concatenate([r.output_deg * 3600.0 * 40e-6 for r in ds.runs])
+    data = _data(ds, fm, {"torsional_compliance_arcsec_per_Nm": 0.2}, extra=ramp, seed=8)
+    names = [c.name for c in fm.candidates for _ in range(c.n_params)]
+    scale = {c.name: c.prior_scale for c in fm.candidates}
+    start = {}
+    for est in ("tolerance-prior", "sparse"):
+        pb = Problem(data, CalibrationSettings(estimator=est), fm)
+        assert "output_encoder_scale_error" in [c.name for c in pb.readings]
+        theta, _ = global_fit(pb, np.zeros(fm.n_params), fm.te(np.zeros(fm.n_params)), None, lambda s: None)
+        start[est] = {names[i]: float(theta[i]) for i in pb.dense_params}
+    assert start["tolerance-prior"].pop("torsional_compliance_arcsec_per_Nm") == pytest.approx(0.2, rel=0.02)
+    assert {k: abs(v) < scale[k] for k, v in start["tolerance-prior"].items()} == \
+        {k: True for k in start["tolerance-prior"]}, start
+    assert any(abs(v) > scale[k] for k, v in start["sparse"].items() if k in scale), start
 
 
 def _exp_search(step_tolerance: float) -> tuple:
