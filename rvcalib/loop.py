@@ -149,8 +149,8 @@ def global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.nda
 
     The tolerance-prior estimator always estimates the measurement effects too (the encoders' eccentricities, and
     the scale error and drift where a record shows a ramp), so its start estimates them with the block, each at
-    its prior scale: left out, a ramp of tens of arcsec over the record is met by the block's compliance and
-    friction."""
+    its prior scale: left out, a ramp of tens of arcsec over the record is met by the ring's fit and the
+    compliance."""
     m, dense = pb.model, pb.dense_params
     if dense.size == 0:
         return theta, te
