@@ -35,10 +35,9 @@ through the model: with the candidate at zero and the others at their posterior 
 above the MAP's by at least the chi-square quantile (:func:`zero_check`; where the response bends, a tangent at the
 MAP can make the ellipse tighter than the data). Only a converged search names anything
 (:func:`unconverged_note`). The rest are not told from zero by the data: they are in the fit at their posterior
-means, never named. A candidate so named whose posterior
-correlation with another exceeds 0.95 (the data fix their combination only) is reported as a group of the two
-instead, each with the size it would have alone; in the always-estimated block likewise
-(:func:`rvcalib.result.read_block`).
+means, never named. A candidate so named whose posterior correlation with another exceeds 0.95 (the data fix their
+combination only) is reported as a group of the two instead, each with the size it would have alone; in the
+always-estimated block likewise (:func:`rvcalib.result.read_block`).
 
 **The empirical block** (orders and load or direction terms no candidate gives) joins after the physics, on its
 residual: each term Gaussian at ``gamma`` times the typical TE of a tolerance-class Table 4 error, ``gamma`` the

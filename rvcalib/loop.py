@@ -73,13 +73,17 @@ class Projector:
         return (self.N.T @ r) / self.counts
 
 
+def class_scales(candidates: list) -> np.ndarray:
+    """Each parameter's prior scale, its candidate's tolerance class (in the candidate's unit), in order."""
+    return np.array([c.prior_scale for c in candidates for _ in range(c.n_params)])
+
+
 def prior_scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.ndarray, readings: list,
                  dataset) -> tuple:
     """Prior scales of the solved and the reading parameters, with the two taken from the model's response: the
     compliance's (the model's own compliance at the runs: the TE per N m of friction torque, which is load) and
     the empirical terms' (the median RMS TE of a tolerance-class Table 4 effect)."""
-    ts = np.array([c.prior_scale for c in model.candidates for _ in range(c.n_params)])
-    tr = np.array([c.prior_scale for c in readings for _ in range(c.n_params)])
+    ts, tr = class_scales(model.candidates), class_scales(readings)
     names = [c.name for c in model.candidates for _ in range(c.n_params)]
     if "friction_torque_Nm" in names and "torsional_compliance_arcsec_per_Nm" in names:
         loaded = np.concatenate([np.full(r.n, r.load_Nm > 0) for r in dataset.runs])
@@ -154,8 +158,7 @@ def global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.nda
     m, dense = pb.model, pb.dense_params
     if dense.size == 0:
         return theta, te
-    tau = np.array([c.prior_scale for c in m.candidates for _ in range(c.n_params)])
-    tr = np.array([c.prior_scale for c in pb.readings for _ in range(c.n_params)])
+    tau, tr = class_scales(m.candidates), class_scales(pb.readings)
     meas = measurement_columns(pb) if pb.settings.estimator == "tolerance-prior" else np.zeros(0, int)
     sigma = max(float(pb.dataset.noise_arcsec()), 1e-3)
     theta, _, te, _ = refine(m, pb.y, pb.proj, pb.R, theta, np.zeros(pb.R.shape[1]), dense, meas,
