@@ -54,11 +54,11 @@ def basins(seed: int, draws: Path, max_linearisations: int, line: int, prior_sta
     settings = CalibrationSettings(estimator="tolerance-prior", max_linearisations=max_linearisations).validate()
     pb = Problem(ds, settings)
     m = pb.model
-    theta, te = global_fit(pb, np.zeros(m.n_params), m.te(np.zeros(m.n_params)), None, log)
+    a_r = measurement_columns(pb)
+    theta, te = global_fit(pb, np.zeros(m.n_params), m.te(np.zeros(m.n_params)), None, log, a_r)
     J = m.statistical_jacobian(theta, None)
     scales = prior_scales(pb.library, m, J, pb.R, pb.readings, ds)
     sd = prior_sd(pb, *scales)
-    a_r = measurement_columns(pb)
     sigma0 = max(float(ds.noise_arcsec()), 1e-3)
     truth, _ = truth_vector(m, draw(seed))
     starts = [("own_start", theta, J), ("truth_start", truth, None)]

@@ -146,22 +146,23 @@ def _active(fit, F: Features, n: int, settings, fixed: tuple) -> tuple[np.ndarra
     return idx[idx < n], idx[idx >= n] - n, sd
 
 
-def global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log) -> tuple[np.ndarray, np.ndarray]:
+def global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log,
+               reading: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The always-estimated block's maximum a posteriori alone (no other effect), through the reducer model: the
     state the first linearisation starts from. A clearance or preload of the whole ring changes how every other
     error shows, so the other candidates' columns are taken where the ring's fit already is.
 
-    The tolerance-prior estimator always estimates the measurement effects too (the encoders' eccentricities, and
-    the scale error and drift where a record shows a ramp), so its start estimates them with the block, each at
-    its prior scale: left out, a ramp of tens of arcsec over the record is met by the ring's fit and the
-    compliance."""
+    ``reading`` are the reading columns estimated with the block, each at its prior scale (None: none). The tolerance-prior
+    estimator gives its measurement effects (the encoders' eccentricities, and the scale error and drift where a
+    record shows a ramp; :func:`rvcalib.gaussian.measurement_columns`), which it estimates at every step: left
+    out, a ramp of tens of arcsec over the record is met by the ring's fit and the compliance."""
     m, dense = pb.model, pb.dense_params
     if dense.size == 0:
         return theta, te
     tau, tr = class_scales(m.candidates), class_scales(pb.readings)
-    meas = measurement_columns(pb) if pb.settings.estimator == "tolerance-prior" else np.zeros(0, int)
     sigma = max(float(pb.dataset.noise_arcsec()), 1e-3)
-    theta, _, te, _ = refine(m, pb.y, pb.proj, pb.R, theta, np.zeros(pb.R.shape[1]), dense, meas,
+    reading = np.zeros(0, int) if reading is None else reading
+    theta, _, te, _ = refine(m, pb.y, pb.proj, pb.R, theta, np.zeros(pb.R.shape[1]), dense, reading,
                              np.concatenate([tau, tr]), sigma, pool=pool, log=log)
     return theta, te
 
@@ -361,8 +362,9 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     stopped = "max_linearisations"
     empirical = False
     with pool_cm as pool:
-        theta, te = global_fit(pb, theta, te, pool, log)
-        if settings.estimator == "tolerance-prior":
+        tolerance_prior = settings.estimator == "tolerance-prior"
+        theta, te = global_fit(pb, theta, te, pool, log, measurement_columns(pb) if tolerance_prior else None)
+        if tolerance_prior:
             J = m.statistical_jacobian(theta, pool)
             scales = prior_scales(pb.library, m, J, R, pb.readings, dataset)
             return tolerance_prior_estimate(pb, settings, theta, J, scales, pool, log, t0, rms_before,

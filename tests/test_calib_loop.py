@@ -106,11 +106,12 @@ def test_three_cranks_a_cam_phase_on_crank_2(tmp_path):
 def test_a_ramp_is_found_and_a_constant_is_not_a_ramp(tmp_path):
     hidden = {"model": {"torsional_compliance_arcsec_per_Nm": 0.2},
               "measurement": {"output_encoder_scale_ppm": 40.0}}
-    res = calibrate(_dataset(tmp_path, hidden), FAST)
+    res = calibrate(_dataset(tmp_path, hidden, per_rev=60), FAST)
     got = _named(res)
     lines = [e.line() for e in res.effects]
     assert got["output_encoder_scale_error"].value == pytest.approx(40.0, rel=0.1), lines
-    plain = calibrate(_dataset(tmp_path / "b", {"model": {"torsional_compliance_arcsec_per_Nm": 0.2}}), FAST)
+    plain = calibrate(_dataset(tmp_path / "b", {"model": {"torsional_compliance_arcsec_per_Nm": 0.2}}, per_rev=60),
+                      FAST)
     assert not any(e.key in ("output_encoder_scale_error", "drift_arcsec_per_rev") for e in plain.effects)
     assert any("no ramp" in n for n in plain.notes)
     assert _named(plain)["torsional_compliance_arcsec_per_Nm"].value == pytest.approx(0.2, rel=0.1)

@@ -15,6 +15,7 @@ from scipy import optimize
 from calib_standin import frozen_model, rig_data
 from rvrig.dataset import read_dataset
 from rvcalib.loop import Problem, propose, prior_scales, LoopState, calibrate, criterion, global_fit
+from rvcalib.gaussian import measurement_columns
 from rvcalib.refine import refine
 from rvcalib.settings import CalibrationSettings
 from rvcalib.simulate import simulate_dataset, standard_runs
@@ -340,7 +341,8 @@ def test_the_tolerance_priors_start_estimates_a_ramp_with_the_ring_and_the_compl
     for est in ("tolerance-prior", "sparse"):
         pb = Problem(data, CalibrationSettings(estimator=est), fm)
         assert "output_encoder_scale_error" in [c.name for c in pb.readings]
-        theta, _ = global_fit(pb, np.zeros(fm.n_params), fm.te(np.zeros(fm.n_params)), None, lambda s: None)
+        reading = measurement_columns(pb) if est == "tolerance-prior" else None
+        theta, _ = global_fit(pb, np.zeros(fm.n_params), fm.te(np.zeros(fm.n_params)), None, lambda s: None, reading)
         start[est] = {names[i]: float(theta[i]) for i in pb.dense_params}
     assert start["tolerance-prior"].pop("torsional_compliance_arcsec_per_Nm") == pytest.approx(0.2, rel=0.02)
     assert {k: abs(v) < scale[k] for k, v in start["tolerance-prior"].items()} == \
