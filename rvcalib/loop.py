@@ -152,10 +152,10 @@ def global_fit(pb, theta: np.ndarray, te: np.ndarray, pool, log,
     state the first linearisation starts from. A clearance or preload of the whole ring changes how every other
     error shows, so the other candidates' columns are taken where the ring's fit already is.
 
-    ``reading`` are the reading columns estimated with the block, each at its prior scale (None: none). The tolerance-prior
-    estimator gives its measurement effects (the encoders' eccentricities, and the scale error and drift where a
-    record shows a ramp; :func:`rvcalib.gaussian.measurement_columns`), which it estimates at every step: left
-    out, a ramp of tens of arcsec over the record is met by the ring's fit and the compliance."""
+    ``reading`` are the reading columns estimated with the block, each at its prior scale (None: none). The
+    tolerance-prior estimator gives its measurement effects (the encoders' eccentricities, and the scale error and
+    drift where a record shows a ramp; :func:`rvcalib.gaussian.measurement_columns`), which it estimates at every
+    step: left out, a ramp of tens of arcsec over the record is met by the ring's fit and the compliance."""
     m, dense = pb.model, pb.dense_params
     if dense.size == 0:
         return theta, te
