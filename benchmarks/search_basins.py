@@ -8,7 +8,11 @@ dataset, with the product's settings:
   ``rv-calibrate --estimator tolerance-prior`` runs it;
 * from the draw's truth (the draw's errors and compliance as the library's parameters, no measurement effect);
 * with ``--prior-starts K``, from K more starts: the estimator's own start with every Table 4 parameter drawn from
-  its prior (``numpy.random.default_rng(k)``, k = 1..K, clipped to the physical bounds).
+  its prior (``numpy.random.default_rng(k)``, k = 1..K, clipped to the physical bounds);
+* with ``--half-turn``, from the half-turn image of the first search's end (:func:`half_turn_image`): the instances
+  of one crank-indexed Table 4 error move the discs alike to first order (their columns are nearly parallel), so
+  which instance carries an error shows only through the load sharing between the cranks, and each arrangement
+  can be a minimum of its own.
 
 It prints the criterion (:func:`rvcalib.gaussian.criterion`, dimensionless) of both ends and of the truth itself,
 all at one noise (where the first search ended), and along the straight line from the first end to the truth
@@ -18,11 +22,13 @@ all at one noise (where the first search ended), and along the straight line fro
   search's (it ended in another minimum);
 * the second search ending near the truth, with the lower criterion: the truth's own basin is a minimum the search
   holds once in it;
-* a maximum along the line above both ends: the two are separate minima, with that barrier between them.
+* a maximum along the line above both ends: the two are separate minima, with that barrier between them;
+* the half-turn start's end below the first end's: a restart over the crank-indexed errors' arrangements would
+  reach a better minimum than the search alone.
 
 The figures go to ``results.csv`` (benchmark ``search_basins``, figures ``seed<N>_...``). Usage::
 
-    python benchmarks/search_basins.py --set dev --seeds 103 --draws DIR
+    python benchmarks/search_basins.py --set dev --seeds 103 --draws DIR [--half-turn]
 """
 from __future__ import annotations
 
@@ -46,7 +52,33 @@ from rvcalib.loop import Problem, global_fit, prior_scales  # noqa: E402
 from rvrig.dataset import read_dataset  # noqa: E402
 
 
-def basins(seed: int, draws: Path, max_linearisations: int, line: int, prior_starts: int,
+def half_turn_image(candidates: list, theta: np.ndarray, crank_angles_deg) -> np.ndarray | None:
+    """``theta`` with every crank-indexed Table 4 error moved half a turn: the value of the instance at crank c (or
+    at crank c's hole) given to the same error's instance at the crank 180 deg from it, its sign reversed (a
+    crank's hole moved outwards and the opposite crank's moved inwards shift the disc alike). None where no crank
+    stands 180 deg from another (an odd number of evenly spaced cranks)."""
+    angles = [float(a) % 360.0 for a in crank_angles_deg]
+    opposite = {}
+    for c, a in enumerate(angles):
+        match = [d for d, b in enumerate(angles) if abs((b - a) % 360.0 - 180.0) < 1e-6]
+        if match:
+            opposite[c] = match[0]
+    if len(opposite) < len(angles):
+        return None
+    where, k = {}, 0
+    for cand in candidates:
+        where[(cand.key, tuple(cand.instance))] = slice(k, k + cand.n_params)
+        k += cand.n_params
+    out = np.array(theta, dtype=float)
+    for cand in candidates:
+        if cand.family != "table4" or not any(s in ("crank", "hole") for s, _ in cand.instance):
+            continue
+        image = tuple((s, opposite[v] if s in ("crank", "hole") else v) for s, v in cand.instance)
+        out[where[(cand.key, image)]] = -np.asarray(theta, dtype=float)[where[(cand.key, tuple(cand.instance))]]
+    return out
+
+
+def basins(seed: int, draws: Path, max_linearisations: int, line: int, prior_starts: int, half_turn: bool,
            log) -> list[tuple[str, float, str]]:
     """The figures of one draw (module docstring) as ``(figure, value, unit)``."""
     folder = generate(seed, draws)
@@ -68,7 +100,14 @@ def basins(seed: int, draws: Path, max_linearisations: int, line: int, prior_sta
         drawn[table4] = np.random.default_rng(k).normal(0.0, sd[:m.n_params][table4])
         starts.append((f"prior_start_{k}", np.clip(drawn, m._lower, m._upper), None))
     ends, out = {}, []
+    if half_turn:
+        starts.append(("half_turn_start", None, None))
     for name, start, J0 in starts:
+        if name == "half_turn_start":
+            start = half_turn_image(m.candidates, ends["own_start"][0][:m.n_params], ds.design.crank_angles_deg)
+            if start is None:
+                log(f"seed {seed}: no crank stands half a turn from another; no half-turn start")
+                continue
         t0 = time.perf_counter()
         if J0 is None:
             m.te(start)
@@ -102,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-linearisations", type=int, default=CalibrationSettings().max_linearisations)
     ap.add_argument("--line", type=int, default=6, help="points on the line from the own end to the truth (>= 2)")
     ap.add_argument("--prior-starts", type=int, default=0, help="more starts drawn from the prior (>= 0)")
+    ap.add_argument("--half-turn", action="store_true",
+                    help="one more start: the half-turn image of the first search's end")
     a = ap.parse_args(argv)
     if a.line < 2:
         ap.error(f"--line = {a.line} is not allowed: an integer >= 2")
@@ -113,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{time.perf_counter() - t0:7.1f} s] {s}", flush=True)
 
     for seed in seeds_of(a.set, a.seeds):
-        record("search_basins", basins(seed, a.draws, a.max_linearisations, a.line, a.prior_starts, log))
+        record("search_basins", basins(seed, a.draws, a.max_linearisations, a.line, a.prior_starts, a.half_turn,
+                                       log))
     return 0
 
 
