@@ -22,6 +22,11 @@ OFFSET_LIMIT_REASON = ("a pin-circle offset under the impact law is not named: t
                        "modes absorb it")
 
 
+def _rig_zeros(loads) -> dict:
+    """The rig's zero of each test (one per load), arcsec."""
+    return {f"{L:g}Nm": 25.0 * (-1) ** i for i, L in enumerate(loads)}
+
+
 def _dataset(tmp_path, hidden, design=None, per_rev=72, loads=(10.0, 30.0), seed=11, **kw):
     out = tmp_path / "ds"
     hidden = {"model": {"contact": "impact"}} | hidden if "model" not in hidden else \
@@ -29,12 +34,20 @@ def _dataset(tmp_path, hidden, design=None, per_rev=72, loads=(10.0, 30.0), seed
     runs = [dict(r, test=f"{r['load_Nm']:g}Nm") for r in standard_runs(loads, (1, -1))]
     simulate_dataset(out, runs, hidden, noise_arcsec=0.2, input_noise_arcsec=1.0,
                      samples_per_rev=per_rev, start_deg=0.41, seed=seed, design=design,
-                     test_offsets={f"{L:g}Nm": 25.0 * (-1) ** i for i, L in enumerate(loads)}, **kw)
+                     test_offsets=_rig_zeros(loads), **kw)
     return read_dataset(out)
 
 
 def _named(res) -> dict:
     return {e.name: e for e in res.effects}
+
+
+def _assert_rig_zeros(res, loads=(10.0, 30.0)) -> None:
+    """Each test's rig zero (:func:`_rig_zeros`) reported as a nuisance within 1 arcsec."""
+    want = _rig_zeros(loads)
+    assert sorted(t["test"] for t in res.nuisance) == sorted(want)
+    for t in res.nuisance:
+        assert t["constant_arcsec"] == pytest.approx(want[t["test"]], abs=1.0), t
 
 
 def test_several_effects_of_each_kind_named_within_ten_percent(tmp_path):
@@ -49,9 +62,7 @@ def test_several_effects_of_each_kind_named_within_ten_percent(tmp_path):
         (SimpleNamespace(**m) for g in res.groups for m in g["members"] if m["name"] == "output_encoder_eccentricity"),
         None)
     assert enc is not None and enc.value == pytest.approx(12.0, rel=0.1), (lines, res.groups)
-    assert sorted(t["test"] for t in res.nuisance) == ["10Nm", "30Nm"]
-    for t in res.nuisance:                                  # the rigs' zeros, +-25 arcsec
-        assert t["constant_arcsec"] == pytest.approx(25.0 if t["test"] == "10Nm" else -25.0, abs=1.0), t
+    _assert_rig_zeros(res)
     # the rest of the answer: each effect within 10 %, the residual at the noise
     off = [name for name, want in (("pin_pitch[pin=7]", 0.008), ("pin_circle_offset", 4.0),
                                    ("torsional_compliance_arcsec_per_Nm", 0.2))
@@ -78,9 +89,7 @@ def test_ratio_81_design(tmp_path):
     ds = _dataset(tmp_path, hidden, design=design)
     assert ds.ratio == 81
     res = calibrate(ds, FAST)
-    assert sorted(t["test"] for t in res.nuisance) == ["10Nm", "30Nm"]
-    for t in res.nuisance:                                  # the rigs' zeros, +-25 arcsec
-        assert t["constant_arcsec"] == pytest.approx(25.0 if t["test"] == "10Nm" else -25.0, abs=1.0), t
+    _assert_rig_zeros(res)
     got = _named(res)
     off = [name for name, want in (("pin_circle_offset", 5.0), ("torsional_compliance_arcsec_per_Nm", 0.25))
            if name not in got or got[name].value != pytest.approx(want, rel=0.1)]
