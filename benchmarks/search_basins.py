@@ -65,16 +65,16 @@ def half_turn_image(candidates: list, theta: np.ndarray, crank_angles_deg) -> np
             opposite[c] = match[0]
     if len(opposite) < len(angles):
         return None
-    where, k = {}, 0
+    where, k = {}, 0                                # the crank-indexed Table 4 candidates' parameters
     for cand in candidates:
-        where[(cand.key, tuple(cand.instance))] = slice(k, k + cand.n_params)
+        if cand.family == "table4" and any(s in ("crank", "hole") for s, _ in cand.instance):
+            where[(cand.key, tuple(cand.instance))] = slice(k, k + cand.n_params)
         k += cand.n_params
-    out = np.array(theta, dtype=float)
-    for cand in candidates:
-        if cand.family != "table4" or not any(s in ("crank", "hole") for s, _ in cand.instance):
-            continue
-        image = tuple((s, opposite[v] if s in ("crank", "hole") else v) for s, v in cand.instance)
-        out[where[(cand.key, image)]] = -np.asarray(theta, dtype=float)[where[(cand.key, tuple(cand.instance))]]
+    src = np.asarray(theta, dtype=float)
+    out = src.copy()
+    for (key, instance), at in where.items():
+        image = tuple((s, opposite[v] if s in ("crank", "hole") else v) for s, v in instance)
+        out[where[(key, image)]] = -src[at]
     return out
 
 
