@@ -9,10 +9,10 @@ dataset, with the product's settings:
 * from the draw's truth (the draw's errors and compliance as the library's parameters, no measurement effect);
 * with ``--prior-starts K``, from K more starts: the estimator's own start with every Table 4 parameter drawn from
   its prior (``numpy.random.default_rng(k)``, k = 1..K, clipped to the physical bounds);
-* with ``--half-turn``, from the half-turn image of the first search's end (:func:`half_turn_image`): the instances
-  of one crank-indexed Table 4 error move the discs alike to first order (their columns are nearly parallel), so
-  which instance carries an error shows only through the load sharing between the cranks, and each arrangement
-  can be a minimum of its own.
+* with ``--half-turn``, from the half-turn image of the first search's end
+  (:func:`rvcalib.arrangements.half_turn_image`): the instances of one crank-indexed Table 4 error move the discs
+  alike to first order (their columns are nearly parallel), so which instance carries an error shows only
+  through the load sharing between the cranks, and each arrangement can be a minimum of its own.
 
 It prints the criterion (:func:`rvcalib.gaussian.criterion`, dimensionless) of both ends and of the truth itself,
 all at one noise (where the first search ended), and along the straight line from the first end to the truth
@@ -47,35 +47,10 @@ from coverage_linear import truth_vector  # noqa: E402
 from realistic import draw, generate, seeds_of  # noqa: E402
 from results_log import record  # noqa: E402
 from rvcalib import CalibrationSettings  # noqa: E402
+from rvcalib.arrangements import half_turn_image  # noqa: E402
 from rvcalib.gaussian import criterion, map_estimate, measurement_columns, prior_sd  # noqa: E402
 from rvcalib.loop import Problem, global_fit, prior_scales  # noqa: E402
 from rvrig.dataset import read_dataset  # noqa: E402
-
-
-def half_turn_image(candidates: list, theta: np.ndarray, crank_angles_deg) -> np.ndarray | None:
-    """``theta`` with every crank-indexed Table 4 error moved half a turn: the value of the instance at crank c (or
-    at crank c's hole) given to the same error's instance at the crank 180 deg from it, its sign reversed (a
-    crank's hole moved outwards and the opposite crank's moved inwards shift the disc alike). None where no crank
-    stands 180 deg from another (an odd number of evenly spaced cranks)."""
-    angles = [float(a) % 360.0 for a in crank_angles_deg]
-    opposite = {}
-    for c, a in enumerate(angles):
-        match = [d for d, b in enumerate(angles) if abs((b - a) % 360.0 - 180.0) < 1e-6]
-        if match:
-            opposite[c] = match[0]
-    if len(opposite) < len(angles):
-        return None
-    where, k = {}, 0                                # the crank-indexed Table 4 candidates' parameters
-    for cand in candidates:
-        if cand.family == "table4" and any(s in ("crank", "hole") for s, _ in cand.instance):
-            where[(cand.key, tuple(cand.instance))] = slice(k, k + cand.n_params)
-        k += cand.n_params
-    src = np.asarray(theta, dtype=float)
-    out = src.copy()
-    for (key, instance), at in where.items():
-        image = tuple((s, opposite[v] if s in ("crank", "hole") else v) for s, v in instance)
-        out[where[(key, image)]] = -src[at]
-    return out
 
 
 def basins(seed: int, draws: Path, max_linearisations: int, line: int, prior_starts: int, half_turn: bool,

@@ -39,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="rv-calibrate",
         usage="%(prog)s DATASET --out DIR [--reducer DESIGN.json] [--json] [--workers N] [--max-effects L] "
               "[--max-order K] [--empirical-weight W] [--contact physical|impact] [--rated-Nm T] [--holdout-loads] "
-              "[--estimator sparse|tolerance-prior] [--verbose]\n       %(prog)s import FILES... --out DATASET_DIR [--ratio N | --reducer DESIGN.json] "
+              "[--estimator sparse|tolerance-prior] [--max-linearisations N] [--no-half-turn] [--verbose]\n       %(prog)s import FILES... --out DATASET_DIR [--ratio N | --reducer DESIGN.json] "
               "[options of rv-calibrate import --help]",
         description="Calibrate the reducer model on measured TE: what the rig shows, the effects the declared model "
                     "lacks (named with 95 % intervals, or grouped where the data cannot split them), what no "
@@ -83,6 +83,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="most linearisations of the reducer model (default "
                         f"{CalibrationSettings.max_linearisations}); a tolerance-prior search stopped by it names "
                         "nothing")
+    p.add_argument("--no-half-turn", dest="half_turn", action="store_false",
+                   help="tolerance-prior: search once, not again from the half-turn image of the crank-indexed "
+                        "errors (halves the time; the answer then holds one arrangement only)")
     p.add_argument("--verbose", action="store_true", help="progress on stderr")
     return p
 
@@ -106,7 +109,8 @@ def settings_from(args: argparse.Namespace) -> CalibrationSettings:
     return CalibrationSettings(max_effects=args.max_effects, max_order=args.max_order,
                                empirical_weight=float(args.empirical_weight), workers=args.workers,
                                contact=args.contact, rated_Nm=args.rated_Nm, estimator=args.estimator,
-                               max_linearisations=args.max_linearisations).validate()
+                               max_linearisations=args.max_linearisations,
+                               half_turn=args.half_turn).validate()
 
 
 def _friction(result, dataset, law) -> Any:

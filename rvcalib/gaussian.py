@@ -20,14 +20,17 @@ state the linearised problem's damped MAP within the physical bounds, on the mod
 (re-linearisation). The first linearisation, at the start, where the posterior is still the prior, is the
 statistical one over the prior (:meth:`rvcalib.reducer_model.ReducerModel.statistical_jacobian`: each column the
 secant over +- its prior scale), so a response that bends within its tolerance class is not extrapolated from its
-slope at the start. There is one criterion and one search; no candidate is chosen or dropped.
+slope at the start. There is one criterion; no candidate is chosen or dropped. The search runs a second time from
+the half-turn image of its end, and one answer is read over both ends (:mod:`rvcalib.arrangements`): the
+crank-indexed errors' arrangements can be minima of their own.
 
 **Intervals.** Laplace's approximation at the MAP: the covariance ``(X' X / sigma^2 + diag(1 / s^2))^-1`` of all
 parameters at once (``X`` the columns at the MAP), so each interval holds what every other candidate, at its
-tolerance class, could move it. ``sigma`` is the noise of the greatest evidence (MacKay's fixed point,
-D. J. C. MacKay, "Bayesian interpolation", Neural Computation 4 (1992) 415-447, eq. 4.10:
-``sigma^2 = |r|^2 / (n - k - g)``, ``k`` the tests' constants, ``g = sum_j (1 - C_jj / s_j^2)`` the parameters the
-data determine).
+tolerance class, could move it; a named effect's interval is then widened through the model where the criterion
+rises more slowly than its curvature at the MAP says (:mod:`rvcalib.regions`). ``sigma`` is the noise of the
+greatest evidence (MacKay's fixed point, D. J. C. MacKay, "Bayesian interpolation", Neural Computation 4 (1992)
+415-447, eq. 4.10: ``sigma^2 = |r|^2 / (n - k - g)``, ``k`` the tests' constants, ``g = sum_j (1 - C_jj / s_j^2)``
+the parameters the data determine).
 
 **What is named.** A candidate whose 95 % posterior region excludes zero (one component: its interval; two
 components: the chi-square(2) ellipse), with its MAP value and that interval, and whose exclusion of zero holds
@@ -55,7 +58,9 @@ import math
 import numpy as np
 from scipy import optimize, stats
 
+from rvcalib.arrangements import Minimum, combine, half_turn_image
 from rvcalib.reducer_model import ModelEvaluationError
+from rvcalib.regions import widen_all
 from rvcalib.result import CalibrationResult, assemble_common, group_member, named_effect, read_block
 
 #: The always-estimated block's prior standard deviation, in prior scales (nearly flat).
@@ -66,17 +71,19 @@ TIE = 0.95
 
 
 class _Counted:
-    """The forward model, counting its Jacobians (the linearisations)."""
+    """The forward model, counting its Jacobians (the linearisations) and keeping the last it computed
+    (``last``)."""
 
-    def __init__(self, model) -> None:
-        self.model, self.jacobians = model, 0
+    def __init__(self, model, J0: np.ndarray | None = None) -> None:
+        self.model, self.jacobians, self.last = model, 0, J0
 
     def __getattr__(self, name):
         return getattr(self.model, name)
 
     def jacobian(self, *a, **k):
         self.jacobians += 1
-        return self.model.jacobian(*a, **k)
+        self.last = self.model.jacobian(*a, **k)
+        return self.last
 
 
 def prior_sd(pb, ts: np.ndarray, tr: np.ndarray) -> np.ndarray:
@@ -286,8 +293,9 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     convergence), or after ``settings.max_linearisations``.
 
     Returns (theta, the measurement coefficients ``b`` of the reading columns ``a_r``, the model TE, sigma, and
-    ``converged`` or ``max_linearisations``: what stopped it); ``J0`` the model's columns at ``theta`` where known
-    (the first linearisation's)."""
+    what stopped it: ``converged``, ``max_linearisations``, or ``no_columns`` where the model's columns cannot be
+    computed at a state the search reached, a perturbed case rvdyn cannot solve); ``J0`` the model's columns at
+    ``theta`` where known (the first linearisation's)."""
     n_s = model.n_params
     Rm = pb.proj(pb.R[:, a_r])
     lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
@@ -300,7 +308,12 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     stopped = "max_linearisations"
     lam = DAMPING_START
     for it in range(1, settings.max_linearisations + 1):
-        Js = model.jacobian(x[:n_s], None, None, pool) if J0 is None or it > 1 else J0
+        try:
+            Js = model.jacobian(x[:n_s], None, None, pool) if J0 is None or it > 1 else J0
+        except ModelEvaluationError as exc:
+            log(f"linearisation {it}: the model's columns cannot be computed at this state: {exc}")
+            stopped = "no_columns"
+            break
         J = np.column_stack([pb.proj(Js), Rm])
         r = pb.proj(pb.y - te) - Rm @ x[n_s:]
         for _ in range(DAMPING_TRIALS):
@@ -337,51 +350,107 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     return x[:n_s], x[n_s:], te, sigma, stopped
 
 
-def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, pool, log, t0: float,
-             rms_before: float, start) -> CalibrationResult:
-    """The tolerance-prior estimate (see the module docstring) from ``theta`` (the always-estimated block's own
-    MAP, ``J0`` the model's columns there); ``scales`` the prior scales of the solved and the reading parameters;
-    ``start`` the clock."""
-    ts, tr = scales
-    model = _Counted(pb.model)
-    model.jacobians = 1                                 # J0, the first linearisation
+def _minimum(pb, settings, model, label: str, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, sigma0: float,
+             pool, log, J0: np.ndarray | None = None) -> Minimum:
+    """The search (:func:`map_estimate`) from ``theta`` and what its end names: its Laplace posterior, the
+    always-estimated block's effects and groups (:func:`rvcalib.result.read_block`), the others'
+    (:func:`read_named`), each exclusion of zero checked through the model where the search converged."""
     n_s = model.n_params
-    sd = prior_sd(pb, ts, tr)
-    a_r = measurement_columns(pb)
-    sigma0 = max(float(pb.dataset.noise_arcsec()), 1e-3)
     theta, b_m, te, sigma1, stopped = map_estimate(model, pb, theta, a_r, sd, sigma0, settings, pool, log, J0)
     b_r = np.zeros(pb.R.shape[1])
     b_r[a_r] = b_m
-    J = pb.proj(model.jacobian(theta, None, None, pool))
+    if stopped != "no_columns":
+        try:
+            model.jacobian(theta, None, None, pool)
+        except ModelEvaluationError as exc:
+            log(f"the model's columns cannot be computed at the search's end: {exc}")
+            stopped = "no_columns"
+    J = pb.proj(model.last)             # at the end; where they cannot be computed there, the last state's
     X = np.column_stack([J, pb.proj(pb.R[:, a_r])])
     idx = np.concatenate([np.arange(n_s), n_s + a_r])
     r = pb.proj(pb.y - te - pb.R @ b_r)
     sigma, C = evidence_sigma(X, r, sd[idx], r.size - len(pb.tests), sigma1)
     post = Posterior(idx, np.concatenate([theta, b_m]), C)
-    log(f"tolerance-prior MAP of {n_s} solved and {a_r.size} reading parameters: {model.jacobians} Jacobians, "
-        f"residual RMS {math.sqrt(float(np.mean(r ** 2))):.4g} arcsec, noise of the greatest evidence {sigma:.4g}")
+    log(f"tolerance-prior MAP from the {label}: {stopped}, residual RMS {math.sqrt(float(np.mean(r ** 2))):.4g} "
+        f"arcsec, noise of the greatest evidence {sigma:.4g}")
     named, groups, notes = [], [], []
-    converged = stopped == "converged"
     check = zero_check(pb, model, a_r, sd, post, te, sigma, settings.coverage, notes.append, log) \
-        if converged else None
+        if stopped == "converged" else None
     for f in pb.fixed:
         at = [post.pos[j] for j in range(pb.starts[f], pb.starts[f + 1])]
         n, g = read_block(pb.feature_cands[f], *post.block(pb.starts[f], pb.starts[f + 1]), settings.coverage,
                           None if check is None else lambda span, name, at=at: check(at[span], name))
         named, groups = named + n, groups + g
     n, g = read_named(pb, post, settings.coverage, check)
-    named, groups = named + n, groups + g
-    if converged:
-        model.te(theta)                                 # the MAP's states again, after the checks' evaluations
+    named = named + n
+    if check is not None:
+        rise = rise_function(pb, model, a_r, sd, post, te, sigma)
+        named = widen_all(pb, post, named, rise, settings.coverage, notes.append, log)
+    return Minimum(label, theta, b_m, te, sigma, stopped, named, groups + g, notes,
+                   {"b_r": b_r, "X": X, "r": r})
+
+
+def estimate(pb, settings, theta: np.ndarray, J0: np.ndarray, scales: tuple, pool, log, t0: float,
+             rms_before: float, start) -> CalibrationResult:
+    """The tolerance-prior estimate (see the module docstring) from ``theta`` (the always-estimated block's own
+    MAP, ``J0`` the model's columns there); ``scales`` the prior scales of the solved and the reading parameters;
+    ``start`` the clock. With ``settings.half_turn``, the search again from the half-turn image of its end and
+    one answer over both ends (:mod:`rvcalib.arrangements`)."""
+    ts, tr = scales
+    model = _Counted(pb.model, J0)
+    model.jacobians = 1                                 # J0, the first linearisation
+    n_s = model.n_params
+    sd = prior_sd(pb, ts, tr)
+    a_r = measurement_columns(pb)
+    sigma0 = max(float(pb.dataset.noise_arcsec()), 1e-3)
+    ends = [_minimum(pb, settings, model, "start", theta, a_r, sd, sigma0, pool, log, J0)]
+    image = half_turn_image(model.candidates, ends[0].theta, pb.dataset.design.crank_angles_deg) \
+        if settings.half_turn else None
+    if image is not None:
+        ends.append(_minimum(pb, settings, model, "half-turn image", image, a_r, sd, sigma0, pool, log))
+    answer = combine(ends, lambda m, s: criterion(pb, a_r, sd, np.concatenate([m.theta, m.b_m]), m.te, s),
+                     settings.coverage)
+    best = answer.best
+    named, groups, notes = answer.named, answer.groups, answer.notes
+    stops = {m.stopped for m in answer.kept}
+    stopped = "no_columns" if "no_columns" in stops else \
+        "converged" if stops == {"converged"} else "max_linearisations"
+    if stopped == "converged":
+        model.te(best.theta)                            # the MAP's states again, after the other evaluations
     else:
-        notes.append(unconverged_note(len(named), len(groups), settings.max_linearisations))
+        notes.append(unconverged_note(len(named), len(groups), settings.max_linearisations, stopped))
         named, groups = [], []
+    X, r = best.extra["X"], best.extra["r"]
     U, sv, _ = np.linalg.svd(X, full_matrices=False)
     Q = U[:, sv > sv[0] * 1e-10]
     unexplained, b_e = _unexplained(pb, r, Q, sd[n_s:], settings.coverage)
-    return assemble_common(pb, theta, te, b_r + b_e, named, groups, unexplained, [], sigma, settings,
+    return assemble_common(pb, best.theta, best.te, best.extra["b_r"] + b_e, named, groups, unexplained, [],
+                           best.sigma, settings,
                            {"rms_before": rms_before, "stopped_by": stopped, "cap_binds": False,
                             "seconds": start() - t0, "linearisations": model.jacobians, "notes": notes})
+
+
+def rise_function(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: np.ndarray, sigma: float):
+    """``rise(k, values)``: the criterion, through the model, at the point of the linear posterior ``post`` (at the
+    MAP, ``te`` its model TE, ``sigma`` the noise) where the parameters at positions ``k`` take ``values`` and
+    every other its posterior mean given that (within its bounds), less the MAP's; None where the model cannot be
+    evaluated there. That point's criterion bounds from above the least criterion with those values (the profile),
+    so a rise below the chi-square quantile puts the values inside the likelihood-ratio region."""
+    n_s = model.n_params
+    lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
+    hi = np.concatenate([model._upper, np.full(a_r.size, np.inf)])
+    phi = criterion(pb, a_r, sd, post.mean, te, sigma)
+
+    def rise(k: np.ndarray, values: np.ndarray) -> float | None:
+        x = post.mean + post.cov[:, k] @ np.linalg.solve(post.cov[np.ix_(k, k)], values - post.mean[k])
+        x = np.clip(x, lo, hi)
+        x[k] = values
+        try:
+            return criterion(pb, a_r, sd, x, model.te(x[:n_s]), sigma) - phi
+        except ModelEvaluationError:
+            return None
+
+    return rise
 
 
 def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: np.ndarray, sigma: float,
@@ -398,19 +467,12 @@ def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: 
     still be lower); so could a point the model cannot evaluate. ``log``, where given, is told every rise.
     Where the model is linear the rise is the ellipse's ``d^2`` itself and nothing changes; where it bends (a
     response even in a parameter, a contact that opens) a tight ellipse can exclude a zero the data do not."""
-    n_s = model.n_params
-    lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
-    hi = np.concatenate([model._upper, np.full(a_r.size, np.inf)])
-    phi = criterion(pb, a_r, sd, post.mean, te, sigma)
+    rise_at = rise_function(pb, model, a_r, sd, post, te, sigma)
 
     def check(positions: list, name: str) -> bool:
         k = np.asarray(positions, dtype=int)
-        x = post.mean - post.cov[:, k] @ np.linalg.solve(post.cov[np.ix_(k, k)], post.mean[k])
-        x = np.clip(x, lo, hi)
-        x[k] = 0.0
-        try:
-            rise = criterion(pb, a_r, sd, x, model.te(x[:n_s]), sigma) - phi
-        except ModelEvaluationError:
+        rise = rise_at(k, np.zeros(k.size))
+        if rise is None:
             return True
         limit = float(stats.chi2.ppf(level, k.size))
         if log is not None:
@@ -426,11 +488,18 @@ def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: 
     return check
 
 
-def unconverged_note(n_named: int, n_groups: int, max_linearisations: int) -> str:
-    """Why a search stopped by its cap names nothing: Laplace's approximation is the posterior's at its mode, and
-    a state where the last step still moved the model TE or lowered the criterion beyond the stop rule's bounds
-    (:func:`map_estimate`) is not known to be one, so the regions read there (``n_named`` effects, ``n_groups``
-    groups) are not the posterior's and can exclude the truth however tight they are."""
+def unconverged_note(n_named: int, n_groups: int, max_linearisations: int, stopped: str = "max_linearisations") \
+        -> str:
+    """Why a search stopped before its stop rule held names nothing: Laplace's approximation is the posterior's at
+    its mode, and a state where the last step still moved the model TE or lowered the criterion beyond the stop
+    rule's bounds (:func:`map_estimate`) is not known to be one, so the regions read there (``n_named`` effects,
+    ``n_groups`` groups) are not the posterior's and can exclude the truth however tight they are. ``stopped``:
+    ``max_linearisations`` (the cap) or ``no_columns`` (the model's columns could not be computed)."""
+    if stopped == "no_columns":
+        return ("no effect is named: the reducer model's columns could not be computed at a state the search "
+                "reached (a perturbed case rvdyn cannot solve), so the search stopped before its stop rule held and "
+                "its state is not known to be the criterion's minimum; the fit is the state where it stopped, its "
+                "noise and unexplained structure read on the last columns computed")
     return (f"no effect is named: the search stopped after {max_linearisations} linearisations before its stop "
             f"rule held, so its state is not known to be the criterion's minimum and the 95 % regions read there "
             f"({n_named} effects and {n_groups} groups excluded zero) are not the posterior's; the fit is the state "

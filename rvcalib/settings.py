@@ -55,6 +55,9 @@ class CalibrationSettings:
         class, their joint maximum a posteriori through the reducer model and its Laplace posterior, no selection
         (:mod:`rvcalib.gaussian`). ``max_effects``, ``min_purity``, ``max_linearisations``, ``step_tolerance`` and
         ``swaps`` are the sparse estimator's.
+    half_turn : bool
+        The tolerance-prior estimator's second search, from the half-turn image of its first end, and its one answer
+        over both ends (:mod:`rvcalib.arrangements`); no effect where no crank stands half a turn from another.
     """
 
     max_effects: int = 30
@@ -70,6 +73,7 @@ class CalibrationSettings:
     rated_Nm: float | None = None
     families: tuple = FAMILIES
     estimator: str = "sparse"
+    half_turn: bool = True
 
     def validate(self) -> "CalibrationSettings":
         """Return self, or raise ValueError naming the field, its value and what is allowed."""
@@ -98,6 +102,8 @@ class CalibrationSettings:
             bad("families", f"a non-empty tuple from {list(FAMILIES)}")
         if self.estimator not in ESTIMATORS:
             bad("estimator", f"one of {list(ESTIMATORS)}")
+        if not isinstance(self.half_turn, bool):
+            bad("half_turn", "True or False")
         return self
 
     def sparse(self) -> SparseSettings:

@@ -304,26 +304,3 @@ def test_tolerance_prior_names_only_what_its_region_excludes_zero():
     assert got[0]["ci95"] == pytest.approx([2.5 - 1.959964, 2.5 + 1.959964], abs=1e-5)
     got = tp.named_effects([one, two], np.array([1.5, 2.0, 1.8]), cov)     # 1.5 < 1.96; 7.24 > 5.99
     assert [e["name"] for e in got] == ["b"]
-
-
-# ---------------------------------------------------------------------------------------------- search_basins
-def _cand(key, family="table4", n=1, **instance):
-    return SimpleNamespace(key=key, family=family, n_params=n, instance=tuple(instance.items()))
-
-
-def test_half_turn_image_moves_crank_errors_to_the_opposite_crank_with_the_sign_reversed():
-    import search_basins
-
-    cands = [_cand("torsional_compliance_arcsec_per_Nm", family="model"),
-             _cand("carrier_hole_eccentricity", crank=0), _cand("carrier_hole_eccentricity", crank=1),
-             _cand("disc_hole_eccentricity", disc=1, hole=0), _cand("disc_hole_eccentricity", disc=1, hole=1),
-             _cand("planet_eccentricity", n=2, crank=0), _cand("planet_eccentricity", n=2, crank=1),
-             _cand("pin_pitch", pin=3)]
-    theta = np.array([0.2, 7.0, 0.5, -3.0, 0.0, 1.0, 2.0, 0.0, 0.0, 0.004])
-    image = search_basins.half_turn_image(cands, theta, (0.0, 180.0))
-    np.testing.assert_array_equal(image, [0.2, -0.5, -7.0, -0.0, 3.0, -0.0, -0.0, -1.0, -2.0, 0.004])
-    np.testing.assert_array_equal(search_basins.half_turn_image(cands, image, (0.0, 180.0)), theta)
-    assert search_basins.half_turn_image(cands, theta, (0.0, 120.0, 240.0)) is None
-    four = [_cand("cam_phase", crank=c, disc=0) for c in range(4)]
-    np.testing.assert_array_equal(search_basins.half_turn_image(four, np.arange(1.0, 5.0), (90, 180, 270, 0)),
-                                  [-3.0, -4.0, -1.0, -2.0])

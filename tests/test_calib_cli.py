@@ -82,11 +82,13 @@ def test_the_options_make_one_settings_object(tmp_path):
     args = build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o"), "--max-effects", "12",
                                       "--max-order", "40", "--empirical-weight", "0.5", "--contact", "impact",
                                       "--rated-Nm", "1568", "--workers", "1", "--estimator", "tolerance-prior",
-                                      "--max-linearisations", "30"])
+                                      "--max-linearisations", "30", "--no-half-turn"])
     assert settings_from(args) == CalibrationSettings(max_effects=12, max_order=40, empirical_weight=0.5,
                                                       contact="impact", rated_Nm=1568.0, workers=1,
-                                                      estimator="tolerance-prior", max_linearisations=30)
-    assert settings_from(build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o")])).workers == 2
+                                                      estimator="tolerance-prior", max_linearisations=30,
+                                                      half_turn=False)
+    default = settings_from(build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o")]))
+    assert default.workers == 2 and default.half_turn is True
 
 
 @pytest.fixture(scope="module")

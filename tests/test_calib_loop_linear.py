@@ -202,7 +202,8 @@ def test_a_swap_is_accepted_only_beyond_chi2_1(base):
     ("max_effects", 0, "max_effects = 0"), ("empirical_weight", -1.0, "empirical_weight = -1.0"),
     ("contact", "soft", "contact = 'soft'"), ("rated_Nm", 0.0, "rated_Nm = 0.0"),
     ("families", ("table4", "magic"), "families"), ("workers", 0, "workers = 0"), ("swaps", -1, "swaps = -1"),
-    ("estimator", "ridge", "estimator = 'ridge' is not allowed: one of")])
+    ("estimator", "ridge", "estimator = 'ridge' is not allowed: one of"),
+    ("half_turn", "yes", "half_turn = 'yes' is not allowed: True or False")])
 def test_settings_refused_naming_the_field(field, value, match):
     with pytest.raises(ValueError, match=match):
         CalibrationSettings(**{field: value}).validate()
@@ -241,6 +242,11 @@ def test_tolerance_prior_names_several_effects_with_regions_that_cover(base):
     assert res.settings["estimator"] == "tolerance-prior" and res.linearisations >= 2
     assert res.stopped_by == "converged"
     assert all(b <= a for a, b in _criterion_steps(lines)), lines   # a step never raises it
+    # the stand-in is linear: the search from the half-turn image ends at the same minimum, so nothing is split
+    assert any(n.startswith("2 minima are within") for n in res.notes), res.notes
+    assert not any(g["kind"] == "arrangement" for g in res.groups), res.groups
+    # and linear: the criterion along each named effect's posterior path is Laplace's, so no interval moves
+    assert not any(n.startswith("the interval of") for n in res.notes), res.notes
 
 
 def test_tolerance_prior_reports_structure_outside_the_physics_as_unexplained(base):
@@ -317,7 +323,8 @@ def test_tolerance_prior_names_nothing_when_the_linearisations_ran_out(base):
     done = calibrate(data, TOLERANCE_PRIOR, model=fm)
     assert done.stopped_by == "converged"
     assert {"pin_circle_offset", "torsional_compliance_arcsec_per_Nm"} <= set(_named(done))
-    res = calibrate(data, CalibrationSettings(estimator="tolerance-prior", max_linearisations=1), model=fm)
+    once = CalibrationSettings(estimator="tolerance-prior", max_linearisations=1, half_turn=False)
+    res = calibrate(data, once, model=fm)
     assert res.stopped_by == "max_linearisations" and res.linearisations == 2    # the last one gives the regions
     assert res.effects == [] and res.groups == []
     note = [n for n in res.notes if n.startswith("no effect is named")]
@@ -448,3 +455,40 @@ def test_a_region_that_excludes_zero_only_by_the_tangent_is_refused():
     rise = float(re.search(r"only ([\d.e+-]+) above", notes[0]).group(1))
     assert notes[0].startswith("a is not named") and rise == pytest.approx(2.5, rel=0.01)
     assert check([1], "b") is True and len(notes) == 1
+
+
+class _NoColumns:
+    """The stand-in whose columns cannot be computed once the estimator's search has begun (a perturbed case rvdyn
+    cannot solve): after the start's statistical columns, every call of ``jacobian`` raises."""
+
+    def __init__(self, model) -> None:
+        self.model, self.searching = model, False
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+    def statistical_jacobian(self, *a, **k):
+        self.searching = True
+        return self.model.statistical_jacobian(*a, **k)
+
+    def jacobian(self, *a, **k):
+        from rvcalib.reducer_model import ModelEvaluationError
+
+        if self.searching:
+            raise ModelEvaluationError("no secant can be solved along the stand-in's columns from this state")
+        return self.model.jacobian(*a, **k)
+
+
+def test_tolerance_prior_names_nothing_where_the_models_columns_fail(base):
+    """A search that reaches a state where the model's columns cannot be computed stops there: the result names
+    nothing, says why, and keeps the fit it reached, instead of failing the calibration."""
+    ds, fm = base
+    data = _data(ds, fm, {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2}, seed=6)
+    lines: list[str] = []
+    res = calibrate(data, TOLERANCE_PRIOR, model=_NoColumns(fm), log=lines.append)
+    assert res.stopped_by == "no_columns"
+    assert res.effects == [] and res.groups == []
+    note = [n for n in res.notes if n.startswith("no effect is named: the reducer model's columns")]
+    assert len(note) == 1, res.notes
+    assert any("cannot be computed at this state: no secant can be solved" in s for s in lines), lines
+    assert res.rms_after < res.rms_before
