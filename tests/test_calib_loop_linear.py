@@ -211,6 +211,9 @@ def test_settings_refused_naming_the_field(field, value, match):
 
 # ---------------------------------------------------------------------------------------------- tolerance prior
 TOLERANCE_PRIOR = CalibrationSettings(estimator="tolerance-prior")
+#: One search: the stand-in is linear, so the search from the half-turn image ends where the first did
+#: (test_tolerance_prior_names_several_effects_with_regions_that_cover checks it); half the time.
+ONE_SEARCH = CalibrationSettings(estimator="tolerance-prior", half_turn=False)
 
 
 def _covers(e, v) -> bool:
@@ -254,7 +257,7 @@ def test_tolerance_prior_reports_structure_outside_the_physics_as_unexplained(ba
     th = np.concatenate([np.radians(r.output_deg) for r in ds.runs])
     load = np.concatenate([np.full(r.n, r.load_Nm) for r in ds.runs])
     extra = 0.05 * load * np.cos(7 * th + 0.4)                # order 7, proportional to the load: 0.5 / 1.5 arcsec
-    res = calibrate(_data(ds, fm, {"torsional_compliance_arcsec_per_Nm": 0.2}, extra), TOLERANCE_PRIOR, model=fm)
+    res = calibrate(_data(ds, fm, {"torsional_compliance_arcsec_per_Nm": 0.2}, extra), ONE_SEARCH, model=fm)
     assert "order 7 (load)" in [u["label"] for u in res.unexplained], res.unexplained
     assert res.rms_after <= 1.2 * 0.2
 
@@ -320,7 +323,7 @@ def test_tolerance_prior_names_nothing_when_the_linearisations_ran_out(base):
     go on, and still gives its fit."""
     ds, fm = base
     data = _data(ds, fm, {"pin_circle_offset": (-3.0, 1.0), "torsional_compliance_arcsec_per_Nm": 0.2}, seed=6)
-    done = calibrate(data, TOLERANCE_PRIOR, model=fm)
+    done = calibrate(data, ONE_SEARCH, model=fm)
     assert done.stopped_by == "converged"
     assert {"pin_circle_offset", "torsional_compliance_arcsec_per_Nm"} <= set(_named(done))
     once = CalibrationSettings(estimator="tolerance-prior", max_linearisations=1, half_turn=False)
