@@ -60,7 +60,7 @@ from scipy import optimize, stats
 
 from rvcalib.arrangements import Minimum, combine, half_turn_image
 from rvcalib.reducer_model import ModelEvaluationError
-from rvcalib.regions import widen_all
+from rvcalib.regions import widener
 from rvcalib.result import CalibrationResult, assemble_common, group_member, named_effect, read_block
 
 #: The always-estimated block's prior standard deviation, in prior scales (nearly flat).
@@ -136,13 +136,15 @@ class Posterior:
         return self.mean[k], self.cov[np.ix_(k, k)]
 
 
-def read_named(pb, post: Posterior, level: float, check=None) -> tuple[list, list]:
+def read_named(pb, post: Posterior, level: float, check=None, widen=None) -> tuple[list, list]:
     """The physical candidates outside the always-estimated block whose posterior region excludes zero (of the
     two sides of one pin-wise error, the side with the larger evidence), and, for such a candidate whose posterior
     correlation with another candidate exceeds :data:`TIE` (only their combination is determined: the sun's
     eccentricity and the input encoder's, say), a group of the two with the size each would have alone (its
     posterior mean were the other zero) instead of a name. ``check(positions, name)``, where given, is asked of
-    each candidate whose region excludes zero (its posterior positions) and may refuse it (:func:`zero_check`)."""
+    each candidate whose region excludes zero (its posterior positions) and may refuse it (:func:`zero_check`);
+    ``widen(effect, candidate, positions)``, where given, returns each named effect with its interval widened
+    through the model (:func:`rvcalib.regions.widener`)."""
     sd = np.sqrt(np.maximum(np.diag(post.cov), 1e-300))
     corr = post.cov / np.outer(sd, sd)
     feats = [f for f in range(len(pb.feature_cands)) if f not in pb.fixed and not pb.empirical[f]
@@ -166,7 +168,7 @@ def read_named(pb, post: Posterior, level: float, check=None) -> tuple[list, lis
                 if pb.feature_cands[g][0].effect_name != c.effect_name]
         tied = sorted(((r, g) for r, g in tied if r > TIE), reverse=True)
         if not tied:
-            named.append(eff)
+            named.append(eff if widen is None else widen(eff, c, pos[f]))
             continue
         members = []
         for a, b in [(f, g) for _, g in tied[:1]] + [(g, f) for _, g in tied]:
@@ -374,19 +376,19 @@ def _minimum(pb, settings, model, label: str, theta: np.ndarray, a_r: np.ndarray
     log(f"tolerance-prior MAP from the {label}: {stopped}, residual RMS {math.sqrt(float(np.mean(r ** 2))):.4g} "
         f"arcsec, noise of the greatest evidence {sigma:.4g}")
     named, groups, notes = [], [], []
-    check = zero_check(pb, model, a_r, sd, post, te, sigma, settings.coverage, notes.append, log) \
-        if stopped == "converged" else None
+    check = widen = None
+    if stopped == "converged":
+        check = zero_check(pb, model, a_r, sd, post, te, sigma, settings.coverage, notes.append, log)
+        widen = widener(post, rise_function(pb, model, a_r, sd, post, te, sigma), settings.coverage, notes.append,
+                        log)
     for f in pb.fixed:
-        at = [post.pos[j] for j in range(pb.starts[f], pb.starts[f + 1])]
+        at = np.array([post.pos[j] for j in range(pb.starts[f], pb.starts[f + 1])])
         n, g = read_block(pb.feature_cands[f], *post.block(pb.starts[f], pb.starts[f + 1]), settings.coverage,
-                          None if check is None else lambda span, name, at=at: check(at[span], name))
+                          None if check is None else lambda span, name, at=at: check(at[span], name),
+                          None if widen is None else lambda eff, c, span, at=at: widen(eff, c, at[span]))
         named, groups = named + n, groups + g
-    n, g = read_named(pb, post, settings.coverage, check)
-    named = named + n
-    if check is not None:
-        rise = rise_function(pb, model, a_r, sd, post, te, sigma)
-        named = widen_all(pb, post, named, rise, settings.coverage, notes.append, log)
-    return Minimum(label, theta, b_m, te, sigma, stopped, named, groups + g, notes,
+    n, g = read_named(pb, post, settings.coverage, check, widen)
+    return Minimum(label, theta, b_m, te, sigma, stopped, named + n, groups + g, notes,
                    {"b_r": b_r, "X": X, "r": r})
 
 

@@ -30,22 +30,6 @@ DOUBLINGS = 4
 BISECTIONS = 6
 
 
-def positions_of(pb, post, eff) -> tuple:
-    """The candidate of the named effect ``eff`` and its parameters' positions in the posterior ``post`` (the
-    candidate of that name whose posterior mean is the effect's components); (None, None) where none is."""
-    for f, fc in enumerate(pb.feature_cands):
-        j = pb.starts[f]
-        for c in fc:
-            span = range(j, j + c.n_params)
-            j += c.n_params
-            if c.effect_name != eff.name or any(i not in post.pos for i in span):
-                continue
-            k = np.array([post.pos[i] for i in span])
-            if np.allclose(post.mean[k], eff.components, rtol=0.0, atol=1e-12 * (1.0 + np.abs(post.mean[k]).max())):
-                return c, k
-    return None, None
-
-
 def _end(inside_of: Callable[[float], bool], centre: float, end: float, floor: float | None) -> tuple[float, int]:
     """The farthest value on the side of ``end`` (Laplace's) found inside the region (module docstring), and the
     evaluations spent; ``floor`` a bound the value may not pass (a size's zero)."""
@@ -107,22 +91,19 @@ def widen(eff, cand, k: np.ndarray, mean_k: np.ndarray, rise, level: float) -> t
     return replace(eff, ci95=ci), n_lo + n_hi
 
 
-def widen_all(pb, post, named: list, rise, level: float, note, log=None) -> list:
-    """Every named effect with its interval widened through the model (:func:`widen`); ``note`` told of each
-    interval that moved, ``log``, where given, of the evaluations spent."""
-    out, spent = [], 0
-    for eff in named:
-        cand, k = positions_of(pb, post, eff)
-        if cand is None:
-            out.append(eff)
-            continue
+def widener(post, rise, level: float, note, log=None):
+    """``widen_one(eff, cand, positions)``: the named effect ``eff`` of candidate ``cand`` (its parameters at
+    ``positions`` of the posterior ``post``) with its interval widened through the model (:func:`widen`);
+    ``note`` is told of each interval that moved, ``log``, where given, of the evaluations each spent."""
+    def widen_one(eff, cand, positions):
+        k = np.asarray(positions, dtype=int)
         new, n = widen(eff, cand, k, post.mean[k], rise, level)
-        spent += n
+        if log is not None:
+            log(f"{eff.name}: its interval through the model in {n} model evaluations")
         if new.ci95 != list(eff.ci95):
             note(f"the interval of {eff.name} is widened through the model from [{eff.ci95[0]:.4g}, "
                  f"{eff.ci95[1]:.4g}] to [{new.ci95[0]:.4g}, {new.ci95[1]:.4g}] {eff.unit}: along its posterior "
                  f"path the criterion rises more slowly than Laplace's curvature says")
-        out.append(new)
-    if log is not None:
-        log(f"intervals through the model: {spent} model evaluations for {len(named)} named effects")
-    return out
+        return new
+
+    return widen_one

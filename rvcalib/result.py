@@ -253,12 +253,13 @@ def read_dense(fc: list, e, F, tau: np.ndarray, level: float, laplace: Laplace |
     return read_block(fc, m, S, level)
 
 
-def read_block(fc: list, m: np.ndarray, S: np.ndarray, level: float, check=None) -> tuple[list, list]:
+def read_block(fc: list, m: np.ndarray, S: np.ndarray, level: float, check=None, widen=None) -> tuple[list, list]:
     """The candidates ``fc`` with the joint posterior mean ``m`` and covariance ``S`` of their parameters
     (physical units): each named where its interval excludes zero, unless its posterior correlation with another
     is so strong (|r| > 0.95) that only their combination is determined: such a pair is a group with the size each
     would have alone. ``check(span, name)``, where given, is asked of each candidate about to be named (``span``
-    its parameters' slice of ``m``) and may refuse it."""
+    its parameters' slice of ``m``) and may refuse it; ``widen(effect, candidate, span)``, where given, returns each
+    named effect with its interval widened (:func:`rvcalib.regions.widener`)."""
     sd = np.sqrt(np.maximum(np.diag(S), 1e-300))
     corr = S / np.outer(sd, sd)
     named, groups = [], []
@@ -288,7 +289,7 @@ def read_block(fc: list, m: np.ndarray, S: np.ndarray, level: float, check=None)
         eff = named_effect(c, 1.0, m[spans[i]], S[spans[i], spans[i]], level)
         if (eff.ci95[0] > 0 or eff.ci95[1] < 0 or (c.polar and eff.ci95[0] > 0)) and \
                 (check is None or check(spans[i], c.effect_name)):
-            named.append(eff)
+            named.append(eff if widen is None else widen(eff, c, spans[i]))
     return named, groups
 
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 from scipy import optimize
 
 from rvcalib.gaussian import Posterior, rise_function
-from rvcalib.regions import BISECTIONS, positions_of, widen, widen_all
+from rvcalib.regions import BISECTIONS, widen, widener
 from rvcalib.result import named_effect
 
 SIGMA = 0.05
@@ -76,14 +77,32 @@ def test_a_polar_size_widens_along_its_direction_and_not_below_zero():
     assert rise(np.array([0, 1]), post.mean * wide.ci95[0] / eff.value) < 3.841459
 
 
-def test_widen_all_finds_each_effect_and_says_which_moved():
+def test_the_widener_says_which_interval_moved():
     pb, post, rise = _problem(lambda th: th[0] ** 3 * G + th[1] * H, 2, [0.5, 0.5])
-    pb.feature_cands, pb.starts = [[_cand("a")], [_cand("b")]], np.arange(3)
     named = [named_effect(_cand(n), 1.0, post.mean[i:i + 1], post.cov[i:i + 1, i:i + 1], 0.95)
              for i, n in enumerate("ab")]
-    assert positions_of(pb, post, named[1])[1].tolist() == [1]
     notes, lines = [], []
-    out = widen_all(pb, post, named, rise, 0.95, notes.append, lines.append)
-    assert [e.name for e in out] == ["a", "b"] and out[0].ci95[0] < named[0].ci95[0] and out[1] == named[1]
+    widen = widener(post, rise, 0.95, notes.append, lines.append)
+    out = [widen(eff, _cand(eff.name), [i]) for i, eff in enumerate(named)]
+    assert out[0].ci95[0] < named[0].ci95[0] and out[1] == named[1]
     assert len(notes) == 1 and notes[0].startswith("the interval of a is widened through the model from [0.58")
-    assert lines and "model evaluations for 2 named effects" in lines[0]
+    assert [re.fullmatch(r"(\w): its interval through the model in \d+ model evaluations", x).group(1)
+            for x in lines] == ["a", "b"]
+
+
+def test_read_named_gives_the_widened_interval():
+    """The estimator's reading of the named effects passes each through ``widen`` with its posterior positions."""
+    from rvcalib.gaussian import read_named
+
+    pb, post, rise = _problem(lambda th: th[0] ** 3 * G + th[1] * H, 2, [0.5, 0.5])
+    pb.feature_cands, pb.starts, pb.fixed = [[_cand("a")], [_cand("b")]], np.arange(3), ()
+    pb.empirical = np.zeros(2, dtype=bool)
+    seen = []
+
+    def widen(eff, cand, positions):
+        seen.append((eff.name, cand.effect_name, list(positions)))
+        return eff
+
+    named, _ = read_named(pb, post, 0.95, None, widen)
+    assert sorted(e.name for e in named) == ["a", "b"]
+    assert sorted(seen) == [("a", "a", [0]), ("b", "b", [1])]
