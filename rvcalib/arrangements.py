@@ -50,11 +50,12 @@ class Minimum:
     sigma : float
         The noise of the greatest evidence there (arcsec).
     stopped : str
-        ``converged`` or ``max_linearisations``.
+        ``converged``, ``max_linearisations`` or ``no_columns`` (:func:`rvcalib.gaussian.map_estimate`).
     named, groups, notes : list
         The effects whose 95 % region excludes zero there, the groups and the notes read there.
     extra : dict
-        What the caller keeps of this end (the posterior, the columns, the residual).
+        What the caller keeps of this end (the estimator: the reading coefficients ``b_r``, the columns ``X`` and
+        the residual ``r``).
     """
 
     label: str

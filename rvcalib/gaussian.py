@@ -378,9 +378,9 @@ def _minimum(pb, settings, model, label: str, theta: np.ndarray, a_r: np.ndarray
     named, groups, notes = [], [], []
     check = widen = None
     if stopped == "converged":
-        check = zero_check(pb, model, a_r, sd, post, te, sigma, settings.coverage, notes.append, log)
-        widen = widener(post, rise_function(pb, model, a_r, sd, post, te, sigma), settings.coverage, notes.append,
-                        log)
+        rise = rise_function(pb, model, a_r, sd, post, te, sigma)
+        check = zero_check(rise, settings.coverage, notes.append, log)
+        widen = widener(post, rise, settings.coverage, notes.append, log)
     for f in pb.fixed:
         at = np.array([post.pos[j] for j in range(pb.starts[f], pb.starts[f + 1])])
         n, g = read_block(pb.feature_cands[f], *post.block(pb.starts[f], pb.starts[f + 1]), settings.coverage,
@@ -455,10 +455,9 @@ def rise_function(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, t
     return rise
 
 
-def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: np.ndarray, sigma: float,
-               level: float, note, log=None):
+def zero_check(rise_at, level: float, note, log=None):
     """The check, through the model, of a region that excludes zero: ``check(positions, name)`` for the
-    parameters at ``positions`` of the posterior ``post`` (at the MAP, ``te`` its model TE, ``sigma`` the noise).
+    parameters at ``positions`` of the posterior whose :func:`rise_function` is ``rise_at``.
 
     It evaluates the criterion at the point of the linear posterior where those parameters are zero (every other
     at its posterior mean given that, within its bounds). That point's criterion bounds from above the least
@@ -469,7 +468,6 @@ def zero_check(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, te: 
     still be lower); so could a point the model cannot evaluate. ``log``, where given, is told every rise.
     Where the model is linear the rise is the ellipse's ``d^2`` itself and nothing changes; where it bends (a
     response even in a parameter, a contact that opens) a tight ellipse can exclude a zero the data do not."""
-    rise_at = rise_function(pb, model, a_r, sd, post, te, sigma)
 
     def check(positions: list, name: str) -> bool:
         k = np.asarray(positions, dtype=int)

@@ -431,7 +431,7 @@ def test_a_region_that_excludes_zero_only_by_the_tangent_is_refused():
     refused, with a note; b, linear, rises by its own ``d^2`` and is kept."""
     from types import SimpleNamespace
 
-    from rvcalib.gaussian import Posterior, zero_check
+    from rvcalib.gaussian import Posterior, rise_function, zero_check
 
     t = np.linspace(0.0, 1.0, 60, endpoint=False)
     sigma = 0.05
@@ -452,8 +452,8 @@ def test_a_region_that_excludes_zero_only_by_the_tangent_is_refused():
     d2 = x ** 2 / np.diag(C)
     assert d2[0] == pytest.approx(9 * 2.5, rel=0.01) and d2[1] == pytest.approx(30.0, rel=0.01)   # both > 3.84
     notes: list[str] = []
-    check = zero_check(pb, model, np.zeros(0, dtype=int), sd, Posterior(np.arange(2), x, C), te(x), sigma, 0.95,
-                       notes.append)
+    rise = rise_function(pb, model, np.zeros(0, dtype=int), sd, Posterior(np.arange(2), x, C), te(x), sigma)
+    check = zero_check(rise, 0.95, notes.append)
     assert check([0], "a") is False
     rise = float(re.search(r"only ([\d.e+-]+) above", notes[0]).group(1))
     assert notes[0].startswith("a is not named") and rise == pytest.approx(2.5, rel=0.01)
