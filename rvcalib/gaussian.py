@@ -336,13 +336,15 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
             log(f"linearisation {it}: no step lowers the criterion")
             stopped = "converged"
             break
+        gn = np.clip(x + _damped_step(J, r, x, w, sigma, 0.0, lo, hi), lo, hi)
+        undamped = criterion(pb, a_r, sd, gn, te + Js @ (gn - x)[:n_s], sigma)
         moved = float(np.sqrt(np.mean(pb.proj(te_new - te) ** 2)))
         predicted = criterion(pb, a_r, sd, new, te + Js @ (new - x)[:n_s], sigma)     # on the linearised TE
         x, te = new, te_new
         r = pb.proj(pb.y - te) - Rm @ x[n_s:]
         sigma_new = evidence_sigma(J, r, 1.0 / w, r.size - len(pb.tests), sigma)[0]
         log(f"linearisation {it}: criterion {phi:.4f} -> {phi_new:.4f} (its linearisation predicted {predicted:.4f}, "
-            f"damping {lam / DAMPING_DOWN:.3g}), the model TE moved {moved:.3g} arcsec RMS, "
+            f"undamped {undamped:.4f}, damping {lam / DAMPING_DOWN:.3g}), the model TE moved {moved:.3g} arcsec RMS, "
             f"noise of the greatest evidence {sigma_new:.4g} arcsec")
         fall = phi - phi_new
         sigma, phi = sigma_new, criterion(pb, a_r, sd, x, te, sigma_new)

@@ -405,6 +405,12 @@ def test_levenberg_marquardt_reaches_the_map_of_a_nonlinear_model():
     assert sigma == pytest.approx(0.05, rel=0.25)
     steps = _criterion_steps(lines)
     assert len(steps) >= 3 and all(b <= a for a, b in steps), lines
+    # the undamped step is the linearised criterion's own minimum: no damped step's prediction lies below it, and
+    # the first (far from the MAP, where the damping shortens the step) lies above it
+    pred = [re.search(r"predicted ([-\d.e+]+), undamped ([-\d.e+]+)", s) for s in lines]
+    pred = [(float(m.group(1)), float(m.group(2))) for m in pred if m]
+    assert len(pred) == len(steps) and all(u <= p + 1e-9 * abs(p) for p, u in pred), lines
+    assert pred[0][1] < pred[0][0], lines
 
 
 def test_a_short_step_that_still_lowers_the_criterion_is_not_convergence():
