@@ -254,7 +254,7 @@ CRITERION_RESOLUTION = 1.0
 that lowers it by more is progress however short the damping makes it, so the search goes on."""
 
 
-def _damped_step(J: np.ndarray, r: np.ndarray, x: np.ndarray, w: np.ndarray, sigma: float, lam: float,
+def damped_step(J: np.ndarray, r: np.ndarray, x: np.ndarray, w: np.ndarray, sigma: float, lam: float,
                  lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The Levenberg-Marquardt step of the linearised criterion: the bounded least-squares solution of
     ``|r - J d|^2 / sigma^2 + |w (x + d)|^2 + lam |w d|^2`` over ``lo <= x + d <= hi``
@@ -287,7 +287,7 @@ def criterion(pb, a_r: np.ndarray, sd: np.ndarray, x: np.ndarray, te: np.ndarray
 def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, sigma: float, settings, pool,
                  log, J0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, str]:
     """The MAP of the criterion (module docstring) by Levenberg-Marquardt through the reducer model: at each state
-    the linearised problem's damped bounded MAP (:func:`_damped_step`, within the physical bounds), the damping
+    the linearised problem's damped bounded MAP (:func:`damped_step`, within the physical bounds), the damping
     raised until the step lowers the criterion and lowered after it does (Marquardt 1963), then the noise of the
     greatest evidence at the new state (:func:`evidence_sigma`, on that linearisation's columns); converged when a
     step moves the model TE by at most ``settings.step_tolerance`` of the noise (RMS) and lowers the criterion by
@@ -319,7 +319,7 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
         J = np.column_stack([pb.proj(Js), Rm])
         r = pb.proj(pb.y - te) - Rm @ x[n_s:]
         for _ in range(DAMPING_TRIALS):
-            step = _damped_step(J, r, x, w, sigma, lam, lo, hi)
+            step = damped_step(J, r, x, w, sigma, lam, lo, hi)
             new = np.clip(x + step, lo, hi)
             try:
                 te_new = model.te(new[:n_s])
@@ -336,7 +336,7 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
             log(f"linearisation {it}: no step lowers the criterion")
             stopped = "converged"
             break
-        gn = np.clip(x + _damped_step(J, r, x, w, sigma, 0.0, lo, hi), lo, hi)
+        gn = np.clip(x + damped_step(J, r, x, w, sigma, 0.0, lo, hi), lo, hi)
         undamped = criterion(pb, a_r, sd, gn, te + Js @ (gn - x)[:n_s], sigma)
         moved = float(np.sqrt(np.mean(pb.proj(te_new - te) ** 2)))
         predicted = criterion(pb, a_r, sd, new, te + Js @ (new - x)[:n_s], sigma)     # on the linearised TE
