@@ -255,7 +255,7 @@ that lowers it by more is progress however short the damping makes it, so the se
 
 
 def damped_step(J: np.ndarray, r: np.ndarray, x: np.ndarray, w: np.ndarray, sigma: float, lam: float,
-                 lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+                lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The Levenberg-Marquardt step of the linearised criterion: the bounded least-squares solution of
     ``|r - J d|^2 / sigma^2 + |w (x + d)|^2 + lam |w d|^2`` over ``lo <= x + d <= hi``
     (``scipy.optimize.lsq_linear``, bvls). ``lam = 0`` is the Gauss-Newton step; a large ``lam`` a short step
