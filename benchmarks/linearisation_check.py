@@ -42,6 +42,7 @@ from results_log import record  # noqa: E402
 from rvcalib import CalibrationSettings  # noqa: E402
 from rvcalib.gaussian import damped_step, criterion, map_estimate, measurement_columns, prior_sd  # noqa: E402
 from rvcalib.loop import Problem, global_fit, prior_scales  # noqa: E402
+from rvcalib.reducer_model import ModelEvaluationError  # noqa: E402
 from rvrig.dataset import read_dataset  # noqa: E402
 
 KINDS = ("all", "derivative", "pin", "form", "kink")
@@ -88,7 +89,11 @@ def check(seed: int, draws: Path, max_linearisations: int, fractions: list[float
                 for t in fractions:
                     xn = x + t * np.where(sel, d, 0.0)
                     lin = te + Js @ (xn - x)[:n_s]
-                    act = m.te(xn[:n_s])
+                    try:
+                        act = m.te(xn[:n_s])
+                    except ModelEvaluationError as exc:
+                        log(f"  {label} columns, {kind} step x {t:g}: the model cannot be evaluated there ({exc})")
+                        continue
                     pred, mis = _rms(pb, lin - te), _rms(pb, act - lin)
                     c_lin, c_act = criterion(pb, a_r, sd, xn, lin, sigma), criterion(pb, a_r, sd, xn, act, sigma)
                     log(f"  {label} columns, {kind} step x {t:g}: predicted change {pred:.4f}, misprediction "
