@@ -37,7 +37,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from realistic import generate, seeds_of  # noqa: E402
+from realistic import add_search_arguments, generate, seeds_of  # noqa: E402
 from results_log import record  # noqa: E402
 from rvcalib import CalibrationSettings  # noqa: E402
 from rvcalib.gaussian import damped_step, criterion, map_estimate, measurement_columns, prior_sd  # noqa: E402
@@ -107,10 +107,7 @@ def check(seed: int, draws: Path, max_linearisations: int, fractions: list[float
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--set", default="dev", choices=["dev", "heldout"])
-    ap.add_argument("--seeds", type=int, nargs="*", default=None, help="a subset of the set's seeds")
-    ap.add_argument("--draws", type=Path, required=True, help="folder of the generated draws (reused)")
-    ap.add_argument("--max-linearisations", type=int, default=CalibrationSettings().max_linearisations)
+    add_search_arguments(ap)
     ap.add_argument("--fractions", type=float, nargs="+", default=[0.1, 0.3, 1.0],
                     help="fractions t of the undamped step (each > 0)")
     ap.add_argument("--workers", type=int, default=2)

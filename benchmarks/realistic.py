@@ -46,6 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from rvcad.atomic import atomic_path  # noqa: E402
 from rvcad.errors import ERROR_TYPES  # noqa: E402
 from rvcad.params import Design  # noqa: E402
+from rvcalib import CalibrationSettings  # noqa: E402
 from rvcalib.simulate import simulate_dataset  # noqa: E402
 
 #: Development seeds: a method may be tuned on these draws.
@@ -185,6 +186,15 @@ def generate(seed: int, root: str | Path) -> Path:
     with atomic_path(ap) as tmp:
         Path(tmp).write_text(json.dumps(ans, indent=2), encoding="utf-8")
     return folder
+
+
+def add_search_arguments(ap) -> None:
+    """The arguments of a benchmark that runs the tolerance-prior search on realistic draws: ``--set``,
+    ``--seeds``, ``--draws`` (required) and ``--max-linearisations``."""
+    ap.add_argument("--set", default="dev", choices=sorted(SETS))
+    ap.add_argument("--seeds", type=int, nargs="*", default=None, help="a subset of the set's seeds")
+    ap.add_argument("--draws", type=Path, required=True, help="folder of the generated draws (reused)")
+    ap.add_argument("--max-linearisations", type=int, default=CalibrationSettings().max_linearisations)
 
 
 def seeds_of(set_name: str, seeds: list[int] | None = None) -> list[int]:

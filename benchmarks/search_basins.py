@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from coverage_linear import truth_vector  # noqa: E402
-from realistic import draw, generate, seeds_of  # noqa: E402
+from realistic import add_search_arguments, draw, generate, seeds_of  # noqa: E402
 from results_log import record  # noqa: E402
 from rvcalib import CalibrationSettings  # noqa: E402
 from rvcalib.arrangements import half_turn_image  # noqa: E402
@@ -110,10 +110,7 @@ def basins(seed: int, draws: Path, max_linearisations: int, line: int, prior_sta
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--set", default="dev", choices=["dev", "heldout"])
-    ap.add_argument("--seeds", type=int, nargs="*", default=None, help="a subset of the set's seeds")
-    ap.add_argument("--draws", type=Path, required=True, help="folder of the generated draws (reused)")
-    ap.add_argument("--max-linearisations", type=int, default=CalibrationSettings().max_linearisations)
+    add_search_arguments(ap)
     ap.add_argument("--line", type=int, default=6, help="points on the line from the own end to the truth (>= 2)")
     ap.add_argument("--prior-starts", type=int, default=0, help="more starts drawn from the prior (>= 0)")
     ap.add_argument("--half-turn", action="store_true",
