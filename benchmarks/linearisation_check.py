@@ -40,7 +40,8 @@ sys.path.insert(0, str(ROOT))
 from realistic import add_search_arguments, generate, seeds_of  # noqa: E402
 from results_log import record  # noqa: E402
 from rvcalib import CalibrationSettings  # noqa: E402
-from rvcalib.gaussian import damped_step, criterion, map_estimate, measurement_columns, prior_sd  # noqa: E402
+from rvcalib.gaussian import (criterion, damped_step, map_estimate, measurement_columns, prior_sd,  # noqa: E402
+                              search_bounds)
 from rvcalib.loop import Problem, global_fit, prior_scales  # noqa: E402
 from rvcalib.reducer_model import ModelEvaluationError  # noqa: E402
 from rvrig.dataset import read_dataset  # noqa: E402
@@ -75,8 +76,7 @@ def check(seed: int, draws: Path, max_linearisations: int, fractions: list[float
         out += [(f"seed{seed}_end_criterion", phi, "1"), (f"seed{seed}_end_noise", sigma, "arcsec")]
         kinds = m.column_kinds()
         w = 1.0 / sd[np.concatenate([np.arange(n_s), n_s + a_r])]
-        lo = np.concatenate([m._lower, np.full(a_r.size, -np.inf)])
-        hi = np.concatenate([m._upper, np.full(a_r.size, np.inf)])
+        lo, hi = search_bounds(m, a_r)
         Rm = pb.proj(pb.R[:, a_r])
         for label, spread in (("prior", None), ("tenth", m.steps())):
             Js = m.jacobian(th, spread, None, pool)

@@ -274,6 +274,13 @@ def measurement_columns(pb) -> np.ndarray:
     return meas - n_s
 
 
+def search_bounds(model, a_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of the search's parameters (the solved ones, then the coefficients of the reading columns
+    ``a_r``): the model's physical bounds, the reading coefficients unbounded."""
+    return (np.concatenate([model._lower, np.full(a_r.size, -np.inf)]),
+            np.concatenate([model._upper, np.full(a_r.size, np.inf)]))
+
+
 def criterion(pb, a_r: np.ndarray, sd: np.ndarray, x: np.ndarray, te: np.ndarray, sigma: float) -> float:
     """The criterion (module docstring) at ``x`` (the solved parameters, then the coefficients of the reading
     columns ``a_r``), ``te`` the model TE there (arcsec), at the noise ``sigma`` (arcsec); ``sd`` the prior standard
@@ -300,8 +307,7 @@ def map_estimate(model, pb, theta: np.ndarray, a_r: np.ndarray, sd: np.ndarray, 
     ``theta`` where known (the first linearisation's)."""
     n_s = model.n_params
     Rm = pb.proj(pb.R[:, a_r])
-    lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
-    hi = np.concatenate([model._upper, np.full(a_r.size, np.inf)])
+    lo, hi = search_bounds(model, a_r)
     w = 1.0 / sd[np.concatenate([np.arange(n_s), n_s + a_r])]
     x = np.concatenate([np.clip(theta, model._lower, model._upper), np.zeros(a_r.size)])
     te = model.te(x[:n_s])
@@ -441,8 +447,7 @@ def rise_function(pb, model, a_r: np.ndarray, sd: np.ndarray, post: Posterior, t
     evaluated there. That point's criterion bounds from above the least criterion with those values (the profile),
     so a rise below the chi-square quantile puts the values inside the likelihood-ratio region."""
     n_s = model.n_params
-    lo = np.concatenate([model._lower, np.full(a_r.size, -np.inf)])
-    hi = np.concatenate([model._upper, np.full(a_r.size, np.inf)])
+    lo, hi = search_bounds(model, a_r)
     phi = criterion(pb, a_r, sd, post.mean, te, sigma)
 
     def rise(k: np.ndarray, values: np.ndarray) -> float | None:
