@@ -78,7 +78,7 @@ def test_several_effects_of_each_kind_named_within_ten_percent(tmp_path):
 def test_a_load_dependent_order_outside_the_library_is_unexplained(tmp_path):
     hidden = {"model": {"torsional_compliance_arcsec_per_Nm": 0.2},
               "harmonics": [{"order": 7, "amplitude_arcsec": 0.06, "phase_deg": 20.0, "per_Nm": True}]}
-    res = calibrate(_dataset(tmp_path, hidden), FAST)
+    res = calibrate(_dataset(tmp_path, hidden, per_rev=36), FAST)
     labels = [u["label"] for u in res.unexplained] + [m["name"] for g in res.groups for m in g["members"]
                                                       if m["family"] == "empirical"]
     assert any(lbl.startswith("order 7") for lbl in labels), (labels, [e.line() for e in res.effects])
@@ -89,7 +89,7 @@ def test_ratio_81_design(tmp_path):
     design = {"z_sun": 18, "z_planet": 36}
     hidden = {"errors": {"cam_phase": {"value": 3.0, "crank": 1, "disc": 0}},
               "model": {"torsional_compliance_arcsec_per_Nm": 0.25}}
-    ds = _dataset(tmp_path, hidden, design=design)
+    ds = _dataset(tmp_path, hidden, design=design, per_rev=36)
     assert ds.ratio == 81
     res = calibrate(ds, FAST)
     _assert_rig_zeros(res)
@@ -107,7 +107,7 @@ def test_thirty_pins_design(tmp_path):
     design = {"z_pins": 30, "z_disc": 29}                          # ratio 1 + 36 / 12 * 30 = 91
     hidden = {"errors": {"pin_pitch": {"value": -0.01, "pin": 11}},
               "model": {"torsional_compliance_arcsec_per_Nm": 0.2}}
-    res = calibrate(_dataset(tmp_path, hidden, design=design, per_rev=66), FAST)
+    res = calibrate(_dataset(tmp_path, hidden, design=design, per_rev=34), FAST)
     # two cranks half a turn apart: pins 11 and 26 give the same TE to rounding, so the pin is a group of the two
     twins = [g for g in res.groups if {m["name"] for m in g["members"]} >= {"pin_pitch[pin=11]", "pin_pitch[pin=26]"}]
     assert len(twins) == 1, ([e.line() for e in res.effects], res.groups)
@@ -131,14 +131,14 @@ def test_three_cranks_a_cam_phase_on_crank_2(tmp_path):
 def test_a_ramp_is_found_and_a_constant_is_not_a_ramp(tmp_path):
     hidden = {"model": {"torsional_compliance_arcsec_per_Nm": 0.2},
               "measurement": {"output_encoder_scale_ppm": 40.0}}
-    res = calibrate(_dataset(tmp_path, hidden, per_rev=60), NO_ERRORS)
+    res = calibrate(_dataset(tmp_path, hidden, per_rev=30), NO_ERRORS)
     got = _named(res)
     lines = [e.line() for e in res.effects]
     assert got["output_encoder_scale_error"].value == pytest.approx(40.0, rel=0.1), lines
     assert got["torsional_compliance_arcsec_per_Nm"].value == pytest.approx(0.2, rel=0.1), lines
     assert set(got) == {"output_encoder_scale_error", "torsional_compliance_arcsec_per_Nm"}, lines
     _assert_rig_zeros(res)
-    plain = calibrate(_dataset(tmp_path / "b", {"model": {"torsional_compliance_arcsec_per_Nm": 0.2}}, per_rev=60),
+    plain = calibrate(_dataset(tmp_path / "b", {"model": {"torsional_compliance_arcsec_per_Nm": 0.2}}, per_rev=30),
                       NO_ERRORS)
     assert not any(e.key in ("output_encoder_scale_error", "drift_arcsec_per_rev") for e in plain.effects)
     assert any("no ramp" in n for n in plain.notes)
