@@ -15,7 +15,9 @@ stops. The records are development data: never copied into the project, never re
    and the fixed-frequency lines (the rig line near 490 Hz), :func:`rvrig.spectrum.separate`.
 4. The loop (:func:`rvcalib.calibrate`) on the imported dataset with the design ``--design`` (default
    ``examples/designs/rv160n.json``, three cranks; ``--no-loop`` skips it): the rig's zero of each test, what it
-   names, what stays unexplained.
+   names, what stays unexplained. ``--loop-samples-per-rev K`` imports the records again at K readings per
+   revolution for the loop alone (a model evaluation costs in proportion to the readings; the anti-alias low-pass
+   then keeps the orders below K / 2).
 
 The design. ``examples/designs/rv160n.json`` holds the published RV-160N sizes (sun 22, planets 44, 40 pins, 39
 lobes, pin circle 223 mm, eccentricity 2.0 mm, module 1.5 mm) with three cranks at 0, 120 and 240 deg; its
@@ -26,7 +28,7 @@ a two-crank design, so its spectrum reports them at a fixed frequency.
 Figures are appended to ``benchmarks/results.csv`` (:mod:`results_log`).
 
 Run: ``python benchmarks/real_rv160n.py [--data DIR] [--design DESIGN.json] [--rated-Nm T] [--out DIR]
-[--no-loop] [--workers N]``.
+[--no-loop] [--loop-samples-per-rev K] [--workers N]``.
 """
 from __future__ import annotations
 
@@ -192,6 +194,8 @@ def main() -> int:
                    help="rated output torque, N m (default 1568, the RV-160N class)")
     p.add_argument("--out", type=Path, default=None, help="folder for the figure (default: a temporary folder)")
     p.add_argument("--no-loop", action="store_true", help="skip the loop")
+    p.add_argument("--loop-samples-per-rev", dest="loop_per_rev", type=int, default=None,
+                   help="readings per revolution of the loop's import (default: the import's default)")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--estimator", default="sparse", choices=("sparse", "tolerance-prior"),
                    help="the loop's estimator (rv-calibrate --estimator)")
@@ -217,7 +221,12 @@ def main() -> int:
         figs += spectrum_section(read_dataset(full))
         if not args.no_loop:
             print("4. the loop (rvcalib.calibrate) on the imported dataset")
+            if args.loop_per_rev is not None:
+                coarse = Path(tmp) / "loop"
+                import_dataset(folder, coarse, args.design, args.loop_per_rev)
+                ds = read_dataset(coarse)
             figs += loop_section(ds, args.workers, args.rated_Nm, args.estimator)
+            figs.append(("loop_samples_per_rev", float(ds.runs[0].n / ds.runs[0].revolutions), "readings/rev"))
     record("real_rv160n", [(n, float(v), u) for n, v, u in figs])
     return 0
 
