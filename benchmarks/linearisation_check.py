@@ -2,10 +2,12 @@
 realistic draws (:mod:`realistic`).
 
 For each draw the script runs the estimator's search (:func:`rvcalib.gaussian.map_estimate`, the product's
-settings) from the estimator's own start, then, at the state where it stops, linearises the model twice:
+settings) from the estimator's own start, then, at the state where it stops, linearises the model three ways:
 
 * ``prior``: the product's columns (:meth:`rvcalib.reducer_model.ReducerModel.jacobian` with its default spread:
   each pin or kinked column a secant over +- the parameter's prior scale);
+* ``tangent``: the model's tangent at the state (:meth:`rvcalib.reducer_model.ReducerModel.tangent_jacobian`:
+  every column the derivative there, the single pins' too);
 * ``tenth``: the same with every secant over +- a tenth of the prior scale (the derivative columns' difference
   step, ``ReducerModel.steps``).
 
@@ -78,8 +80,8 @@ def check(seed: int, draws: Path, max_linearisations: int, fractions: list[float
         w = 1.0 / sd[np.concatenate([np.arange(n_s), n_s + a_r])]
         lo, hi = search_bounds(m, a_r)
         Rm = pb.proj(pb.R[:, a_r])
-        for label, spread in (("prior", None), ("tenth", m.steps())):
-            Js = m.jacobian(th, spread, None, pool)
+        for label, spread in (("prior", None), ("tangent", None), ("tenth", m.steps())):
+            Js = m.tangent_jacobian(th, pool) if label == "tangent" else m.jacobian(th, spread, None, pool)
             r = pb.proj(pb.y - te) - Rm @ b
             d = np.clip(x + damped_step(np.column_stack([pb.proj(Js), Rm]), r, x, w, sigma, 0.0, lo, hi), lo, hi) - x
             for kind in KINDS:

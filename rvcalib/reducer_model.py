@@ -429,6 +429,19 @@ class ReducerModel:
         """
         return self._columns(theta, spread, renew, pool, self.column_kinds())
 
+    def tangent_jacobian(self, theta: np.ndarray, pool: ProcessPoolExecutor | None = None) -> np.ndarray:
+        """The tangent of the model at ``theta`` (n, n_params), at the states of the last :meth:`te` (call it
+        first): every column the derivative there (``jacobian_fn``, rvdyn's implicit differentiation of the
+        equilibrium), the single pins' too; the kinked parameters of every pin or bearing keep their converged
+        secant and the form modes are recombined from the single pins' columns.
+
+        A single pin's derivative is that of the contacts as they stand at ``theta`` (a pin in contact responds, one
+        lifted off does not), so it describes the model for steps that keep the contacts as they are, where the
+        secant over the pin's spread (:meth:`jacobian`) describes the whole class. It costs one factorisation of
+        each condition's equilibrium for all the pins, where the secants cost two solves per pin."""
+        kinds = self.column_kinds()
+        return self._columns(theta, None, None, pool, np.where(kinds == "pin", "derivative", kinds))
+
     def statistical_jacobian(self, theta: np.ndarray, pool: ProcessPoolExecutor | None = None) -> np.ndarray:
         """The columns of the statistical linearisation over the prior at ``theta`` (n, n_params), at the states of
         the last :meth:`te` (call it first): every column a secant over +- the parameter's prior scale (within its
