@@ -15,7 +15,8 @@ stops. The records are development data: never copied into the project, never re
    and the fixed-frequency lines (the rig line near 490 Hz), :func:`rvrig.spectrum.separate`.
 4. The loop (:func:`rvcalib.calibrate`) on the imported dataset with the design ``--design`` (default
    ``examples/designs/rv160n.json``, three cranks; ``--no-loop`` skips it): the rig's zero of each test, what it
-   names, what stays unexplained. ``--loop-samples-per-rev K`` imports the records again at K readings per
+   names, what stays unexplained, the datasheet as declared and as calibrated, and with ``--holdout`` each load
+   left out of the fit and predicted. ``--loop-samples-per-rev K`` imports the records again at K readings per
    revolution for the loop alone (a model evaluation costs in proportion to the readings; the anti-alias low-pass
    then keeps the orders below K / 2).
 
@@ -28,7 +29,7 @@ a two-crank design, so its spectrum reports them at a fixed frequency.
 Figures are appended to ``benchmarks/results.csv`` (:mod:`results_log`).
 
 Run: ``python benchmarks/real_rv160n.py [--data DIR] [--design DESIGN.json] [--rated-Nm T] [--out DIR]
-[--no-loop] [--loop-samples-per-rev K] [--workers N]``.
+[--no-loop] [--holdout] [--loop-samples-per-rev K] [--workers N]``.
 """
 from __future__ import annotations
 
@@ -155,14 +156,19 @@ def spectrum_section(ds) -> list:
     return figs
 
 
-def loop_section(ds, workers: int, rated_Nm: float, estimator: str = "sparse") -> list:
-    """The loop on the imported dataset: RMS before/after against the noise, what it named, the tests' zeros
+def loop_section(ds, workers: int, rated_Nm: float, estimator: str = "sparse", holdout: bool = False) -> list:
+    """The loop on the imported dataset: RMS before/after against the noise, what it named, the tests' zeros, the
+    datasheet as declared and as calibrated, and with ``holdout`` the prediction of each load left out of the fit
     (figures named ``loop_...``, ``loop_tolerance_prior_...`` for that estimator)."""
     from rvcalib import CalibrationSettings, calibrate
 
     t0 = time.perf_counter()
-    res = calibrate(ds, CalibrationSettings(workers=workers, rated_Nm=rated_Nm, estimator=estimator),
-                    log=lambda s: print(f"    [{time.perf_counter() - t0:6.0f} s] {s}", flush=True))
+    settings = CalibrationSettings(workers=workers, rated_Nm=rated_Nm, estimator=estimator)
+
+    def log(s: str) -> None:
+        print(f"    [{time.perf_counter() - t0:6.0f} s] {s}", flush=True)
+
+    res = calibrate(ds, settings, log=log)
     sec = time.perf_counter() - t0
     print(f"  {sec:.0f} s; RMS before {res.rms_before:.2f}, after {res.rms_after:.2f} arcsec, noise "
           f"{res.noise_arcsec:.2f} (records' own density: see the import), estimator's {res.sigma_arcsec:.2f}; "
@@ -179,11 +185,40 @@ def loop_section(ds, workers: int, rated_Nm: float, estimator: str = "sparse") -
         print(f"    note: {n}")
     names = [e.key for e in res.effects]
     pre = "loop_" if estimator == "sparse" else "loop_" + estimator.replace("-", "_") + "_"
-    return [(pre + "rms_before", res.rms_before, "arcsec"), (pre + "rms_after", res.rms_after, "arcsec"),
+    return [*after_loop(ds, res, settings, holdout, log, pre),
+            (pre + "rms_before", res.rms_before, "arcsec"), (pre + "rms_after", res.rms_after, "arcsec"),
             (pre + "noise", res.noise_arcsec, "arcsec"), (pre + "sigma", res.sigma_arcsec, "arcsec"),
             (pre + "effects", len(res.effects), "count"), (pre + "seconds", sec, "s"),
             (pre + "ramp_or_scale_named", float(any(k in ("output_encoder_scale_error", "drift_arcsec_per_rev")
                                                     for k in names)), "bool")]
+
+
+def after_loop(ds, res, settings, holdout: bool, log, pre: str) -> list:
+    """The datasheet of the reducer as declared and as calibrated (:func:`rvcalib.datasheet.reducer_datasheet`)
+    and, with ``holdout``, each load left out of the fit and predicted (:func:`rvcalib.holdout.holdout_loads`)."""
+    from rvcalib.datasheet import reducer_datasheet
+    from rvcalib.holdout import holdout_loads
+
+    figs = []
+    sheet = reducer_datasheet(res, ds, settings.rated_Nm)
+    if not sheet["computed"]:
+        print(f"  datasheet: not computed: {sheet['rated_source']}")
+    else:
+        m, c = sheet["model"], sheet["calibrated"]
+        for key, unit in (("torsional_rigidity_Nm_per_arcmin", "N m/arcmin"), ("lost_motion_arcmin", "arcmin"),
+                          ("backlash_arcmin", "arcmin")):
+            print(f"  datasheet at {sheet['rated_torque_Nm']:g} N m: {key} {m[key]:.4g} declared -> {c[key]:.4g} "
+                  f"calibrated {unit}")
+            figs += [(f"{pre}declared_{key}", m[key], unit), (f"{pre}calibrated_{key}", c[key], unit)]
+    if holdout:
+        held = holdout_loads(ds, settings, log, full=res)
+        for r in held["rows"]:
+            print(f"  load {r['load_Nm']:g} N m left out: prediction RMS {r['rms_prediction_arcsec']} arcsec "
+                  f"(reducer alone {r['rms_reducer_arcsec']}, fit on every load {r['rms_full_fit_arcsec']}) "
+                  f"against its noise {r['noise_arcsec']:.3g}; {r['status']}")
+            if r["rms_prediction_arcsec"] is not None:
+                figs.append((f"{pre}holdout_{r['load_Nm']:g}Nm_rms_prediction", r["rms_prediction_arcsec"], "arcsec"))
+    return figs
 
 
 def main() -> int:
@@ -194,6 +229,7 @@ def main() -> int:
                    help="rated output torque, N m (default 1568, the RV-160N class)")
     p.add_argument("--out", type=Path, default=None, help="folder for the figure (default: a temporary folder)")
     p.add_argument("--no-loop", action="store_true", help="skip the loop")
+    p.add_argument("--holdout", action="store_true", help="after the loop, predict each load left out of the fit")
     p.add_argument("--loop-samples-per-rev", dest="loop_per_rev", type=int, default=None,
                    help="readings per revolution of the loop's import (default: the import's default)")
     p.add_argument("--workers", type=int, default=2)
@@ -225,7 +261,7 @@ def main() -> int:
                 coarse = Path(tmp) / "loop"
                 import_dataset(folder, coarse, args.design, args.loop_per_rev)
                 ds = read_dataset(coarse)
-            figs += loop_section(ds, args.workers, args.rated_Nm, args.estimator)
+            figs += loop_section(ds, args.workers, args.rated_Nm, args.estimator, args.holdout)
             figs.append(("loop_samples_per_rev", float(ds.runs[0].n / ds.runs[0].revolutions), "readings/rev"))
     record("real_rv160n", [(n, float(v), u) for n, v, u in figs])
     return 0
