@@ -80,8 +80,10 @@ def check(seed: int, draws: Path, max_linearisations: int, fractions: list[float
         w = 1.0 / sd[np.concatenate([np.arange(n_s), n_s + a_r])]
         lo, hi = search_bounds(m, a_r)
         Rm = pb.proj(pb.R[:, a_r])
-        for label, spread in (("prior", None), ("tangent", None), ("tenth", m.steps())):
-            Js = m.tangent_jacobian(th, pool) if label == "tangent" else m.jacobian(th, spread, None, pool)
+        columns = {"prior": lambda: m.jacobian(th, None, None, pool), "tangent": lambda: m.tangent_jacobian(th, pool),
+                   "tenth": lambda: m.jacobian(th, m.steps(), None, pool)}
+        for label, linearise in columns.items():
+            Js = linearise()
             r = pb.proj(pb.y - te) - Rm @ b
             d = np.clip(x + damped_step(np.column_stack([pb.proj(Js), Rm]), r, x, w, sigma, 0.0, lo, hi), lo, hi) - x
             for kind in KINDS:
