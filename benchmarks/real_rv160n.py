@@ -13,10 +13,11 @@ stops. The records are development data: never copied into the project, never re
    mean TE per direction against load.
 3. The spectrum of every reading (a second import with ``--samples-per-rev 0``): the main order-locked lines
    and the fixed-frequency lines (the rig line near 490 Hz), :func:`rvrig.spectrum.separate`.
-4. The loop (:func:`rvcalib.calibrate`) on the imported dataset with the design ``--design`` (default
-   ``examples/designs/rv160n.json``, three cranks; ``--no-loop`` skips it): the rig's zero of each test, what it
-   names, what stays unexplained, the datasheet as declared and as calibrated, and with ``--holdout`` each load
-   left out of the fit and predicted. ``--loop-samples-per-rev K`` imports the records again at K readings per
+4. The loop on the imported dataset as ``rv-calibrate`` runs it (:func:`rvcalib.cli.run`) with the design
+   ``--design`` (default ``examples/designs/rv160n.json``, three cranks; ``--no-loop`` skips it), its summary
+   printed as the command prints it and its report written to ``OUT/calibration``: the rig's zero of each test,
+   what it names, what stays unexplained, the datasheet as declared and as calibrated, and with ``--holdout`` each
+   load left out of the fit and predicted. ``--loop-samples-per-rev K`` imports the records again at K readings per
    revolution for the loop alone (a model evaluation costs in proportion to the readings; the anti-alias low-pass
    then keeps the orders below K / 2).
 
@@ -156,11 +157,14 @@ def spectrum_section(ds) -> list:
     return figs
 
 
-def loop_section(ds, workers: int, rated_Nm: float, estimator: str = "sparse", holdout: bool = False) -> list:
-    """The loop on the imported dataset: RMS before/after against the noise, what it named, the tests' zeros, the
-    datasheet as declared and as calibrated, and with ``holdout`` the prediction of each load left out of the fit
-    (figures named ``loop_...``, ``loop_tolerance_prior_...`` for that estimator)."""
-    from rvcalib import CalibrationSettings, calibrate
+def loop_section(ds, workers: int, rated_Nm: float, out: Path, estimator: str = "sparse",
+                 holdout: bool = False) -> list:
+    """The loop on the imported dataset as ``rv-calibrate`` runs it (:func:`rvcalib.cli.run`: the loop, the
+    datasheet as declared and as calibrated, and with ``holdout`` each load left out of the fit and predicted), its
+    summary printed as the command prints it, the report in ``out`` (figures named ``loop_...``,
+    ``loop_tolerance_prior_...`` for that estimator)."""
+    from rvcalib import CalibrationSettings
+    from rvcalib.cli import run, summary
 
     t0 = time.perf_counter()
     settings = CalibrationSettings(workers=workers, rated_Nm=rated_Nm, estimator=estimator)
@@ -168,56 +172,26 @@ def loop_section(ds, workers: int, rated_Nm: float, estimator: str = "sparse", h
     def log(s: str) -> None:
         print(f"    [{time.perf_counter() - t0:6.0f} s] {s}", flush=True)
 
-    res = calibrate(ds, settings, log=log)
+    obj = run(ds, settings, str(out), holdout, log)["object"]
     sec = time.perf_counter() - t0
-    print(f"  {sec:.0f} s; RMS before {res.rms_before:.2f}, after {res.rms_after:.2f} arcsec, noise "
-          f"{res.noise_arcsec:.2f} (records' own density: see the import), estimator's {res.sigma_arcsec:.2f}; "
-          f"stopped: {res.stopped_by}")
-    for e in res.effects:
-        print(f"    named {e.line()}")
-    for g in res.groups:
-        print(f"    group ({g.get('kind')}): " + ", ".join(f"{m['name']} {m['value']}" for m in g["members"][:6]))
-    for u in res.unexplained:
-        print(f"    unexplained {u['label']}: {u['amplitude_arcsec']:.3g} arcsec")
-    for t in res.nuisance:
-        print(f"    the rig's zero of test {t['test']}: {t['constant_arcsec']:+.2f} arcsec (nuisance)")
-    for n in res.notes:
-        print(f"    note: {n}")
-    names = [e.key for e in res.effects]
+    print(f"  {sec:.0f} s (loop {obj['seconds']:.0f} s); stopped: {obj['stopped_by']}; report: {obj['report']}")
+    print("\n".join("  " + line for line in summary(obj).splitlines()))
     pre = "loop_" if estimator == "sparse" else "loop_" + estimator.replace("-", "_") + "_"
-    return [*after_loop(ds, res, settings, holdout, log, pre),
-            (pre + "rms_before", res.rms_before, "arcsec"), (pre + "rms_after", res.rms_after, "arcsec"),
-            (pre + "noise", res.noise_arcsec, "arcsec"), (pre + "sigma", res.sigma_arcsec, "arcsec"),
-            (pre + "effects", len(res.effects), "count"), (pre + "seconds", sec, "s"),
+    names = [e["key"] for e in obj["effects"]]
+    figs = [(pre + "rms_before", obj["rms_before"], "arcsec"), (pre + "rms_after", obj["rms_after"], "arcsec"),
+            (pre + "noise", obj["noise_arcsec"], "arcsec"), (pre + "sigma", obj["sigma_arcsec"], "arcsec"),
+            (pre + "effects", len(obj["effects"]), "count"), (pre + "seconds", sec, "s"),
             (pre + "ramp_or_scale_named", float(any(k in ("output_encoder_scale_error", "drift_arcsec_per_rev")
                                                     for k in names)), "bool")]
-
-
-def after_loop(ds, res, settings, holdout: bool, log, pre: str) -> list:
-    """The datasheet of the reducer as declared and as calibrated (:func:`rvcalib.datasheet.reducer_datasheet`)
-    and, with ``holdout``, each load left out of the fit and predicted (:func:`rvcalib.holdout.holdout_loads`)."""
-    from rvcalib.datasheet import reducer_datasheet
-    from rvcalib.holdout import holdout_loads
-
-    figs = []
-    sheet = reducer_datasheet(res, ds, settings.rated_Nm)
-    if not sheet["computed"]:
-        print(f"  datasheet: not computed: {sheet['rated_source']}")
-    else:
-        m, c = sheet["model"], sheet["calibrated"]
+    sheet = obj["datasheet"] or {}
+    if sheet.get("computed"):
         for key, unit in (("torsional_rigidity_Nm_per_arcmin", "N m/arcmin"), ("lost_motion_arcmin", "arcmin"),
                           ("backlash_arcmin", "arcmin")):
-            print(f"  datasheet at {sheet['rated_torque_Nm']:g} N m: {key} {m[key]:.4g} declared -> {c[key]:.4g} "
-                  f"calibrated {unit}")
-            figs += [(f"{pre}declared_{key}", m[key], unit), (f"{pre}calibrated_{key}", c[key], unit)]
-    if holdout:
-        held = holdout_loads(ds, settings, log, full=res)
-        for r in held["rows"]:
-            print(f"  load {r['load_Nm']:g} N m left out: prediction RMS {r['rms_prediction_arcsec']} arcsec "
-                  f"(reducer alone {r['rms_reducer_arcsec']}, fit on every load {r['rms_full_fit_arcsec']}) "
-                  f"against its noise {r['noise_arcsec']:.3g}; {r['status']}")
-            if r["rms_prediction_arcsec"] is not None:
-                figs.append((f"{pre}holdout_{r['load_Nm']:g}Nm_rms_prediction", r["rms_prediction_arcsec"], "arcsec"))
+            figs += [(f"{pre}declared_{key}", sheet["model"][key], unit),
+                     (f"{pre}calibrated_{key}", sheet["calibrated"][key], unit)]
+    for r in (obj["holdout"] or {}).get("rows", []):
+        if r["rms_prediction_arcsec"] is not None:
+            figs.append((f"{pre}holdout_{r['load_Nm']:g}Nm_rms_prediction", r["rms_prediction_arcsec"], "arcsec"))
     return figs
 
 
@@ -256,12 +230,13 @@ def main() -> int:
         import_dataset(folder, full, args.design, 0)
         figs += spectrum_section(read_dataset(full))
         if not args.no_loop:
-            print("4. the loop (rvcalib.calibrate) on the imported dataset")
+            print("4. the loop (rv-calibrate, rvcalib.cli.run) on the imported dataset")
             if args.loop_per_rev is not None:
                 coarse = Path(tmp) / "loop"
                 import_dataset(folder, coarse, args.design, args.loop_per_rev)
                 ds = read_dataset(coarse)
-            figs += loop_section(ds, args.workers, args.rated_Nm, args.estimator, args.holdout)
+            figs += loop_section(ds, args.workers, args.rated_Nm, out / "calibration", args.estimator,
+                                 args.holdout)
             figs.append(("loop_samples_per_rev", float(ds.runs[0].n / ds.runs[0].revolutions), "readings/rev"))
     record("real_rv160n", [(n, float(v), u) for n, v, u in figs])
     return 0

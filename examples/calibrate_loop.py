@@ -8,7 +8,7 @@ missing, with its size. The figure sets the residual RMS before and after the lo
 and the size of each named effect against the hidden one.
 
 Run: ``python examples/calibrate_loop.py [--small] [--out DIR]``; writes ``DIR/calibrate_loop.png`` and the
-simulated record in ``DIR/record`` (default DIR ``examples-out``). ``--small``: two runs at one load, 60 readings
+simulated record in ``DIR/record`` (default DIR ``examples-out``). ``--small``: two runs at one load, 36 readings
 per output revolution.
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ NOISE_ARCSEC = 0.15
 
 def main(argv: list[str] | None = None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--small", action="store_true", help="two runs at 20 N m, 60 readings per revolution")
+    ap.add_argument("--small", action="store_true", help="two runs at 20 N m, 36 readings per revolution")
     ap.add_argument("--out", type=Path, default=Path("examples-out"), help="output folder (default examples-out)")
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> Path:
 
     record = a.out / "record"          # runs.csv + samples.csv, as a rig's record (the truth is kept apart)
     rvcalib.simulate_dataset(record, runs, hidden=HIDDEN, noise_arcsec=NOISE_ARCSEC,
-                             samples_per_rev=60 if a.small else 360, seed=1)
+                             samples_per_rev=36 if a.small else 360, seed=1)
     result = rvcalib.calibrate(rvcalib.read_dataset(record)).to_dict()
     before, after = result["rms_before"], result["rms_after"]
     print(f"{len(runs)} runs; residual RMS {before:.4g} -> {after:.4g} arcsec (simulated noise {NOISE_ARCSEC})")
