@@ -247,8 +247,11 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     b = (1.0 - LOST_MOTION_FRACTION) * rated
     rig = 0.5 * (b / (m_r_plus - lm_plus) + b / (lm_minus - m_r_minus))
     zero = sides[1][0][1], sides[-1][0][1]                                     # the f = 0 rows
-    # a preloaded case has no play (the rigid limit found an interference): backlash 0
-    backlash = 0.0 if preloaded else (zero[0].te_rad[0] - zero[1].te_rad[0]) * ARCSEC_PER_RAD / 60.0
+    # a preloaded case has no play (the rigid limit found an interference): backlash 0; a play within the two
+    # solves' convergence (each to solver_angle_rad of output angle) is not resolved: backlash 0, not rounding
+    play_rad = zero[0].te_rad[0] - zero[1].te_rad[0]
+    resolved = abs(play_rad) > 2.0 * s.tol.solver_angle_rad
+    backlash = play_rad * ARCSEC_PER_RAD / 60.0 if resolved and not preloaded else 0.0
     budget = {k: float(np.mean(v)) for k, v in budget_acc.items()}
     figures: dict[str, Any] = {
         "torsional_rigidity_Nm_per_arcmin": float(rig),
