@@ -18,6 +18,12 @@ included: a half-turn twin acts with the opposite sign) and the reading coeffici
 is worse by less than the 95 % quantile of chi-square with one degree of freedom (``Delta chi^2 < 3.84``, a
 likelihood ratio the data cannot tell from chance), ``g`` is a twin and ``f`` is reported as a group with it
 instead of a name.
+
+Look-alikes can also come as a set: two crank-indexed effects (a pin and a cam of a two-crank reducer) each moved
+alone to its look-alike change how the cranks share the load and fit worse, while both moved together give the
+same TE (the half-turn image of the pair). So the chosen effects that have look-alikes but no twin alone are moved
+together, each to its best single swap (on the first linearisation's columns, where none of them was in the
+model), and where that fits as well by the same test, each is reported as a group with its look-alike.
 """
 from __future__ import annotations
 
@@ -77,6 +83,7 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
     C = X0 / np.maximum(np.linalg.norm(X0, axis=0), 1e-300)
     base = chi2(theta)
     out: dict[int, list[tuple[int, float, float]]] = {}
+    alone: dict[int, int] = {}                      # chosen feature -> its best single swap, where none fits
     for f in chosen:
         j = pb.starts[f]
         others = [g for g in single if g != f and pb.starts[g] not in on]
@@ -88,15 +95,26 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
             for k in np.argsort(d)[:MOST]:
                 if d[k] < DELTA_CHI2:
                     near.setdefault(others[k], X_last)
-        found = []
+        found, tried = [], []
         for g, X in list(near.items())[:2 * MOST]:
             k = pb.starts[g]
-            th = _moved(X, theta, j, k, active_s, n + active_r, tau, m._lower, m._upper)
+            th = _moved(X, theta, [j], [k], active_s, n + active_r, tau, m._lower, m._upper)
             dchi = chi2(th) - base
+            tried.append((dchi, g))
             if dchi < DELTA_CHI2:
                 found.append((g, float(dchi), float(th[k])))
         if found:
             out[f] = sorted(found, key=lambda t: t[1])
+        elif tried:
+            alone[f] = min(tried)[1]
+    if len(alone) > 1 and len(set(alone.values())) == len(alone):                              # the look-alikes of several chosen effects, moved together
+        fs = list(alone)
+        th = _moved(X0, theta, [pb.starts[f] for f in fs], [pb.starts[alone[f]] for f in fs], active_s,
+                    n + active_r, tau, m._lower, m._upper)
+        dchi = chi2(th) - base
+        if dchi < DELTA_CHI2:
+            for f in fs:
+                out[f] = [(alone[f], float(dchi), float(th[pb.starts[alone[f]]]))]
     m.te(theta)                                     # the model's states are the estimate's again
     return out
 
@@ -115,16 +133,17 @@ def _moved_chi2(X: np.ndarray, j: int, c: float, active_s: np.ndarray, reading_c
     return float(t @ t) - (G.T @ t) ** 2 / gg
 
 
-def _moved(X: np.ndarray, theta: np.ndarray, j: int, k: int, active_s: np.ndarray, reading_cols: np.ndarray,
+def _moved(X: np.ndarray, theta: np.ndarray, js: list, ks: list, active_s: np.ndarray, reading_cols: np.ndarray,
            tau: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """The state with parameter ``j``'s effect moved to ``k``: the least-squares move of ``j``'s linearised TE onto
-    ``k`` and the other chosen solved parameters (the reading columns take their part; the chi-square refits them),
-    within the parameters' bounds."""
-    B = active_s[active_s != j].astype(int)
-    D = X[:, np.concatenate([[k], B, reading_cols]).astype(int)]
-    coef = np.linalg.lstsq(D, X[:, j] * theta[j] / tau[j], rcond=None)[0]
+    """The state with the effects of parameters ``js`` moved to ``ks`` (pairwise, together): the least-squares
+    move of their linearised TE onto ``ks`` and the other chosen solved parameters (the reading columns take their
+    part; the chi-square refits them), within the parameters' bounds."""
+    js, ks = np.asarray(js, dtype=int), np.asarray(ks, dtype=int)
+    B = np.setdiff1d(active_s, js).astype(int)
+    D = X[:, np.concatenate([ks, B, reading_cols]).astype(int)]
+    coef = np.linalg.lstsq(D, X[:, js] @ (theta[js] / tau[js]), rcond=None)[0]
     th = theta.copy()
-    th[k] = coef[0] * tau[k]
-    th[B] = theta[B] + coef[1:1 + B.size] * tau[B]
-    th[j] = 0.0
+    th[ks] = coef[:ks.size] * tau[ks]
+    th[B] = theta[B] + coef[ks.size:ks.size + B.size] * tau[B]
+    th[js] = 0.0
     return np.clip(th, lower, upper)

@@ -117,3 +117,33 @@ def test_a_partial_alias_with_another_chosen_parameter_refitted_is_a_twin():
     assert [g for g, *_ in got[2]] == [1]                   # three dependent columns: h = 2 a - 2 (a - h / 2)
     assert got[2][0][2] == pytest.approx(-2.0)
     assert np.allclose(pb.model.te(theta), shapes @ theta)
+
+
+class CoupledModel(LinearModel):
+    """te(theta) = shapes theta + q (theta_0 theta_2 + theta_1 theta_3): two pairs of look-alikes (0, 1) and
+    (2, 3) whose members interact within their arrangement, as a pin and a cam share the load of their crank."""
+
+    def __init__(self, shapes: np.ndarray, q: np.ndarray) -> None:
+        super().__init__(shapes)
+        self.q = q
+
+    def te(self, theta: np.ndarray) -> np.ndarray:
+        return super().te(theta) + self.q * (theta[0] * theta[2] + theta[1] * theta[3])
+
+
+def test_look_alikes_that_fit_only_moved_together_are_twins():
+    """Each of two chosen effects moved alone to its look-alike loses their interaction and fits worse; both moved
+    together give the same TE, so each is a twin of its look-alike."""
+    a, b, q = np.cos(3 * PHI), np.sin(7 * PHI), 0.5 * np.sin(5 * PHI)
+    shapes = np.column_stack([a, a, b, b])
+    pb = _problem(shapes, np.zeros(4), sigma=0.05)
+    pb.model = CoupledModel(shapes, q)
+    theta = np.array([2.0, 0.0, 1.5, 0.0])
+    pb.y = pb.model.te(theta) + np.random.default_rng(3).normal(0.0, 0.05, N)
+    alone = np.array([0.0, 2.0, 1.5, 0.0])                  # the first moved alone: the interaction is lost
+    assert float(np.sum(pb.proj(pb.model.te(alone) - pb.model.te(theta)) ** 2)) / 0.05 ** 2 > 100 * DELTA_CHI2
+    got = swap_twins(pb, pb.proj(shapes), theta, 0.05, np.array([0, 2]), np.zeros(0, int))
+    assert {f: [g for g, *_ in t] for f, t in got.items()} == {0: [1], 2: [3]}
+    assert got[0][0][2] == pytest.approx(2.0) and got[2][0][2] == pytest.approx(1.5)
+    assert got[0][0][1] == pytest.approx(0.0, abs=1e-6)
+    assert np.allclose(pb.model.te(theta), shapes @ theta + q * 3.0)    # the model left at the estimate
