@@ -124,7 +124,7 @@ def test_three_cranks_a_cam_phase_on_crank_2(tmp_path):
     design = {"crank_angles_deg": [0, 120, 240]}
     hidden = {"errors": {"cam_phase": {"value": 3.0, "crank": 2, "disc": 1}},
               "model": {"torsional_compliance_arcsec_per_Nm": 0.2}}
-    res = calibrate(_dataset(tmp_path, hidden, design=design), FAST)
+    res = calibrate(_dataset(tmp_path, hidden, design=design, per_rev=48), FAST)
     got = _named(res)
     assert "cam_phase[crank=2,disc=1]" in got, ([e.line() for e in res.effects], res.groups)
     assert got["cam_phase[crank=2,disc=1]"].value == pytest.approx(3.0, rel=0.1)
