@@ -23,6 +23,7 @@ from typing import Any
 from rvcad import validation as v
 from rvcad.errors import MAX_LOAD_NM, Case
 from rvcalib.reportmd import num, reducer_line, te_formula
+from rvcalib.result import scales_text
 from rvcalib.settings import CONTACTS, ESTIMATORS, MAX_LINEARISATIONS, CalibrationSettings
 
 #: Most single effects (the estimator's own bound on ``max_effects``).
@@ -205,7 +206,7 @@ def summary(obj: dict) -> str:
     for e in obj["effects"]:
         ang = f" at {e['angle_deg']:.1f} deg" if e["angle_deg"] is not None else ""
         lines.append(f"  {e['name']} = {e['value']:.5g} {e['unit']}{ang} [{e['ci95'][0]:.5g}, {e['ci95'][1]:.5g}] "
-                     f"(probability {e['probability']:.3f})")
+                     f"(probability {e['probability']:.3f}{scales_text(e['value'], e.get('prior_scale'))})")
         for q in eq["effects"].get(e["name"], []):
             lines.append(f"    or, as Coulomb friction, {q['parameter']} = {q['value']:.4g} (default {q['default']:g})"
                          if "default" in q else f"    the same TE as {q['parameter']} = {q['value']:+.4g} {q['unit']}")

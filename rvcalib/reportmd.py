@@ -116,13 +116,18 @@ def _effects(obj: dict) -> list[str]:
     if not obj["effects"]:
         return L + ["None: no credible set holds a single physical candidate.", ""]
     rows = [[f"`{e['name']}`", e["family"], num(e["value"], 5), e["unit"], num(e["angle_deg"]),
-             f"[{num(e['ci95'][0], 5)}, {num(e['ci95'][1], 5)}]", num(e["probability"], 3)] for e in obj["effects"]]
-    L += _table(["effect", "family", "value", "unit", "angle (deg)", "95 % interval", "probability"], rows)
+             f"[{num(e['ci95'][0], 5)}, {num(e['ci95'][1], 5)}]", num(e["probability"], 3),
+             num(abs(e["value"]) / e["prior_scale"], 2) if e.get("prior_scale") else "-"] for e in obj["effects"]]
+    L += _table(["effect", "family", "value", "unit", "angle (deg)", "95 % interval", "probability",
+                 "prior scales"], rows)
     for e in obj["effects"]:
         L.append(f"- `{e['name']}`: {e['meaning']}")
         L += _eq_lines(obj["equivalents"]["effects"].get(e["name"], []))
     L += ["", "A two-component effect (an eccentricity) is a magnitude at an angle. The 95 % interval is that of the "
-          "marginal posterior: the chance that it is no effect at all is in it.", ""]
+          "marginal posterior: the chance that it is no effect at all is in it. Prior scales: the size over the "
+          "candidate's prior scale (a third of the paper's Table 4 value for a Table 4 error, the stated class of a "
+          "model or measurement effect); a size of many prior scales is more likely a stand-in for an effect the "
+          "library lacks than a reducer built within its tolerances.", ""]
     return L
 
 

@@ -44,6 +44,7 @@ class NamedEffect:
     ci95: list
     probability: float
     meaning: str
+    prior_scale: float | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -51,7 +52,13 @@ class NamedEffect:
     def line(self) -> str:
         ang = f" at {self.angle_deg:.1f} deg" if self.angle_deg is not None else ""
         return (f"{self.name} = {self.value:+.4g} {self.unit}{ang} [{self.ci95[0]:.4g}, {self.ci95[1]:.4g}] "
-                f"(probability {self.probability:.3f})")
+                f"(probability {self.probability:.3f}{scales_text(self.value, self.prior_scale)})")
+
+
+def scales_text(value: float, prior_scale: float | None) -> str:
+    """``; N prior scales``: the size of a named effect in its candidate's prior scale (the tolerance class the
+    library assumes, docs/calibration.md section 2), empty where the effect has none."""
+    return "" if not prior_scale else f"; {abs(value) / prior_scale:.2g} prior scales"
 
 
 @dataclass
@@ -204,7 +211,7 @@ def named_effect(c, alpha: float, m: np.ndarray, S: np.ndarray, level: float) ->
     else:
         ci = list(mixture_interval(alpha, float(m[0]), math.sqrt(max(float(S[0, 0]), 0.0)), level))
     return NamedEffect(c.effect_name, c.key, c.family, dict(c.instance), c.unit, float(size), ang,
-                       [float(x) for x in m], S.tolist(), ci, float(alpha), c.meaning)
+                       [float(x) for x in m], S.tolist(), ci, float(alpha), c.meaning, float(c.prior_scale))
 
 
 def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float, laplace: Laplace | None) -> NamedEffect:

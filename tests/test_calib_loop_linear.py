@@ -77,6 +77,7 @@ def test_several_effects_at_once_named_with_intervals_that_cover(base):
         assert e.value == pytest.approx(want, rel=0.1), e.line()
         if not isinstance(v, tuple):
             assert e.ci95[0] <= v <= e.ci95[1], e.line()
+        assert e.prior_scale == next(c.prior_scale for c in fm.candidates if c.effect_name == name), e.line()
     assert res.rms_after <= 1.2 * 0.2
     assert len(res.nuisance) == 2 and all(abs(c["constant_arcsec"]) < 200 for c in res.nuisance)
     assert res.settings["max_effects"] == 30 and res.stopped_by == "converged"

@@ -45,7 +45,7 @@ def hand_result(ds, rated_Nm=None) -> CalibrationResult:
                            "Table 4: radius of all pins"),
                NamedEffect("output_encoder_eccentricity", "output_encoder_eccentricity", "measurement", {}, "um", 8.0,
                            30.0, [8.0 * math.cos(math.radians(30.0)), 4.0], [[0.01, 0.0], [0.0, 0.01]], [7.8, 8.2], 1.0,
-                           "eccentricity of the output encoder's scale")]
+                           "eccentricity of the output encoder's scale", 2.5)]
 
     def member(name: str, key: str, unit: str, value, p: float) -> dict:
         return {"name": name, "key": key, "family": "table4", "instance": {}, "unit": unit, "value": value,
@@ -199,3 +199,17 @@ def test_the_two_sides_of_one_pin_are_one_group_member():
     assert got[1] == member("pin_pitch[pin=9]", 0.002, 0.1)
     both = merge_sides([member("pin_radius[pin=8]", "unbounded", 0.5), member("pin_radius[pin=8]", "unbounded", 0.4)])
     assert len(both) == 1 and both[0]["value"] == "unbounded"
+
+
+def test_a_named_size_is_given_in_prior_scales(written):
+    """8 um over the encoder's prior scale of 2.5 um is 3.2 prior scales, in the summary, the table and the JSON; an
+    effect without a prior scale has none."""
+    res, out, paths = written
+    obj = paths["object"]
+    assert [e["prior_scale"] for e in obj["effects"]] == [None, 2.5]
+    text = summary(obj)
+    assert "output_encoder_eccentricity = 8 um at 30.0 deg [7.8, 8.2] (probability 1.000; 3.2 prior scales)" in text
+    assert "pin_radius = 2 um [1.6, 2.4] (probability 1.000)" in text
+    assert "| `output_encoder_eccentricity` | measurement | 8 | um | 30 | [7.8, 8.2] | 1 | 3.2 |" in \
+        (out / "report.md").read_text()
+    assert res.effects[1].line().endswith("(probability 1.000; 3.2 prior scales)")
