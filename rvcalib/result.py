@@ -211,7 +211,7 @@ def named_effect(c, alpha: float, m: np.ndarray, S: np.ndarray, level: float) ->
     else:
         ci = list(mixture_interval(alpha, float(m[0]), math.sqrt(max(float(S[0, 0]), 0.0)), level))
     return NamedEffect(c.effect_name, c.key, c.family, dict(c.instance), c.unit, float(size), ang,
-                       [float(x) for x in m], S.tolist(), ci, float(alpha), c.meaning, float(c.prior_scale))
+                       [float(x) for x in m], S.tolist(), ci, float(alpha), c.meaning, getattr(c, "prior_scale", None))
 
 
 def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float, laplace: Laplace | None) -> NamedEffect:
