@@ -327,6 +327,67 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
     return best
 
 
+def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -> tuple:
+    """The sparse estimator's iteration from the always-estimated block's fit ``theta`` (model TE ``te``): at each
+    linearisation the sum of single effects over the library's columns, its chosen set refined through the reducer
+    model (:func:`propose`), until no proposal lowers the criterion or a step moves the TE by at most
+    ``step_tolerance`` of the noise with the same chosen set; the empirical block joins once the physical
+    candidates have converged.
+
+    Returns (the last accepted :class:`LoopState` with the posterior that chose it, the prior scales, the first
+    linearisation's feature columns, the last linearisation's features, what stopped it, the linearisations)."""
+    m, settings, y, proj, R = pb.model, pb.settings, pb.y, pb.proj, pb.R
+    fit = F = scales = spread = renew = X0 = J = None
+    stopped = "max_linearisations"
+    empirical = False
+    dense = pb.dense_params
+    cur = None
+    for it in range(1, settings.max_linearisations + 1):
+        if J is None:
+            J = m.jacobian(theta, spread, renew, pool)
+        scales = scales or prior_scales(pb.library, m, J, R, pb.readings, pb.dataset)
+        ts, tr = scales
+        tau = np.concatenate(scales)
+        if cur is None:
+            cur = LoopState(theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), np.ones(tau.size),
+                            criterion(pb, theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), tau))
+        F = pb.features(J, scales, empirical)
+        X0 = F.X if X0 is None else X0
+        z = proj(y - te + J @ theta)
+        fit = fit_sparse(F, z, settings.sparse(), init=fit.effects if fit is not None else None, fixed=pb.fixed)
+        sigma = math.sqrt(fit.sigma2)
+        a_s, a_r, sd = _active(fit, F, m.n_params, settings, pb.fixed)
+        linear = np.zeros(m.n_params)
+        linear[a_s] = fit.coef[:m.n_params][a_s] * ts[a_s]
+        spread, renew = _next_linearisation(fit, F, m.n_params, ts)
+        new = propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log)
+        if new is None:
+            m.te(cur.theta)                         # the model's states back at the current state
+            log(f"linearisation {it}: no proposal lowers the criterion ({time.perf_counter() - t0:.0f} s)")
+            if empirical or not pb.empirical.any():
+                stopped = "converged"
+                break
+            empirical = True
+            log("the physical candidates have converged; the empirical block joins")
+            continue                                # the same state: its columns stand
+        moved = float(np.sqrt(np.mean(proj(new.te - cur.te) ** 2)))
+        same = (tuple(new.a_s), tuple(new.a_r)) == (tuple(cur.a_s), tuple(cur.a_r))
+        log(f"linearisation {it}: {fit.n_supported} effects supported, {new.a_s.size + new.a_r.size} parameters "
+            f"chosen, sigma {sigma:.4g} arcsec, criterion {cur.phi:.4f} -> {new.phi:.4f}, the model TE moved "
+            f"{moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")
+        cur, theta, te, J = new, new.theta, new.te, None
+        renew = renew | (m.column_kinds() != "pin")
+        if same and moved <= settings.step_tolerance * sigma:
+            if empirical or not pb.empirical.any():
+                stopped = "converged"
+                break
+            empirical = True            # the physics has converged: now what it cannot give
+            log("the physical candidates have converged; the empirical block joins")
+    if cur.fit is None:                     # nothing accepted: the posterior of the last linearisation
+        cur.fit, cur.F = fit, F
+    return cur, scales, X0, F, stopped, it
+
+
 def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callable[[str], None] | None = None,
               model=None) -> CalibrationResult:
     """Calibrate the reducer model of a measured dataset.
@@ -358,9 +419,6 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
     log(f"library: {len(pb.library)} candidates ({m.n_params} solved parameters, {R.shape[1]} reading columns); "
         f"residual RMS {rms_before:.4g} arcsec")
     pool_cm = ProcessPoolExecutor(settings.workers) if settings.workers > 1 else nullcontext()
-    fit = F = scales = spread = renew = X0 = J = None
-    stopped = "max_linearisations"
-    empirical = False
     with pool_cm as pool:
         tolerance_prior = settings.estimator == "tolerance-prior"
         theta, te = global_fit(pb, theta, te, pool, log, measurement_columns(pb) if tolerance_prior else None)
@@ -369,51 +427,7 @@ def calibrate(dataset, settings: CalibrationSettings | None = None, log: Callabl
             scales = prior_scales(pb.library, m, J, R, pb.readings, dataset)
             return tolerance_prior_estimate(pb, settings, theta, J, scales, pool, log, t0, rms_before,
                                             time.perf_counter)
-        dense = pb.dense_params
-        cur = None
-        for it in range(1, settings.max_linearisations + 1):
-            if J is None:
-                J = m.jacobian(theta, spread, renew, pool)
-            scales = scales or prior_scales(pb.library, m, J, R, pb.readings, dataset)
-            ts, tr = scales
-            tau = np.concatenate(scales)
-            if cur is None:
-                cur = LoopState(theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), np.ones(tau.size),
-                                criterion(pb, theta, te, np.zeros(R.shape[1]), dense, np.zeros(0, int), tau))
-            F = pb.features(J, scales, empirical)
-            X0 = F.X if X0 is None else X0
-            z = proj(y - te + J @ theta)
-            fit = fit_sparse(F, z, settings.sparse(), init=fit.effects if fit is not None else None, fixed=pb.fixed)
-            sigma = math.sqrt(fit.sigma2)
-            a_s, a_r, sd = _active(fit, F, m.n_params, settings, pb.fixed)
-            linear = np.zeros(m.n_params)
-            linear[a_s] = fit.coef[:m.n_params][a_s] * ts[a_s]
-            spread, renew = _next_linearisation(fit, F, m.n_params, ts)
-            new = propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log)
-            if new is None:
-                m.te(cur.theta)                         # the model's states back at the current state
-                log(f"linearisation {it}: no proposal lowers the criterion ({time.perf_counter() - t0:.0f} s)")
-                if empirical or not pb.empirical.any():
-                    stopped = "converged"
-                    break
-                empirical = True
-                log("the physical candidates have converged; the empirical block joins")
-                continue                                # the same state: its columns stand
-            moved = float(np.sqrt(np.mean(proj(new.te - cur.te) ** 2)))
-            same = (tuple(new.a_s), tuple(new.a_r)) == (tuple(cur.a_s), tuple(cur.a_r))
-            log(f"linearisation {it}: {fit.n_supported} effects supported, {new.a_s.size + new.a_r.size} parameters "
-                f"chosen, sigma {sigma:.4g} arcsec, criterion {cur.phi:.4f} -> {new.phi:.4f}, the model TE moved "
-                f"{moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")
-            cur, theta, te, J = new, new.theta, new.te, None
-            renew = renew | (m.column_kinds() != "pin")
-            if same and moved <= settings.step_tolerance * sigma:
-                if empirical or not pb.empirical.any():
-                    stopped = "converged"
-                    break
-                empirical = True            # the physics has converged: now what it cannot give
-                log("the physical candidates have converged; the empirical block joins")
-        if cur.fit is None:                 # nothing accepted: the posterior of the last linearisation
-            cur.fit, cur.F = fit, F
+        cur, scales, X0, F, stopped, it = sparse_search(pb, theta, te, pool, log, t0)
         twins = swap_twins(pb, X0, cur.theta, math.sqrt(cur.fit.sigma2), cur.a_s, cur.a_r, scales[0], F.X)
     return assemble(dataset, pb, cur.F, cur.fit, scales, cur.theta, cur.te, settings,
                     {"rms_before": rms_before, "stopped_by": stopped, "ramp_lines": pb.ramp_lines, "b_r": cur.b_r,
