@@ -9,15 +9,15 @@ would hide.
 
 So at the end every named single-parameter effect ``f`` is confronted with the candidates ``g`` the data may not
 split from it, screened two ways (the screen only limits the cost): columns at the first linearisation (where
-neither was in the model) on nearly the same line (|correlation| at least :data:`SCREEN`), and candidates that,
-at the last linearisation, take ``f``'s TE with the other chosen parameters refitted and leave less than
+neither was in the model) on nearly the same line (|correlation| at least :data:`SCREEN`), and candidates that, at
+the last linearisation, take ``f``'s TE with the other chosen parameters refitted and leave less than
 :data:`DELTA_CHI2` of it (a partial alias: a look-alike on the other crank or disc that, with the others moved,
 gives the same fit). The model is solved with ``f``'s effect moved to ``g`` (the least-squares move of ``f``'s
 linearised TE onto ``g`` and the other chosen parameters, on the columns of the screen that admitted ``g``, its sign
-included: a half-turn twin acts with the opposite sign) and the reading coefficients refitted, and where the fit
-is worse by less than the 95 % quantile of chi-square with one degree of freedom (``Delta chi^2 < 3.84``, a
-likelihood ratio the data cannot tell from chance), ``g`` is a twin and ``f`` is reported as a group with it
-instead of a name.
+included: a crank-indexed error and the same error on the crank half a turn away are first-order look-alikes with
+the opposite sign) and the reading coefficients refitted, and where the fit is worse by less than the 95 % quantile
+of chi-square with one degree of freedom (``Delta chi^2 < 3.84``, a likelihood ratio the data cannot tell from
+chance), ``g`` is a twin and ``f`` is reported as a group with it instead of a name.
 
 Look-alikes can also come as a set: two crank-indexed effects (a pin and a cam of a two-crank reducer) each moved
 alone to its look-alike change how the cranks share the load and fit worse, while both moved together give the
@@ -107,7 +107,7 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
             out[f] = sorted(found, key=lambda t: t[1])
         elif tried:
             alone[f] = min(tried)[1]
-    if len(alone) > 1 and len(set(alone.values())) == len(alone):                              # the look-alikes of several chosen effects, moved together
+    if len(alone) > 1 and len(set(alone.values())) == len(alone):   # several chosen effects' look-alikes together
         fs = list(alone)
         th = _moved(X0, theta, [pb.starts[f] for f in fs], [pb.starts[alone[f]] for f in fs], active_s,
                     n + active_r, tau, m._lower, m._upper)

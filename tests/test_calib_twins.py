@@ -69,8 +69,9 @@ def test_a_swap_refits_the_reading_coefficients_and_leaves_the_model_at_the_esti
 
 
 def test_a_twin_of_the_opposite_sign_is_found_at_its_own_size():
-    """A candidate whose TE is the named one's with the opposite sign and half the scale (the half-turn twins of
-    a two-crank reducer act with opposite signs): its swap size is minus twice the named size, and it is a twin."""
+    """A candidate whose TE is the named one's with the opposite sign and half the scale (a crank-indexed error
+    and the same error on the opposite crank of a two-crank reducer are such look-alikes to first order): its swap
+    size is minus twice the named size, and it is a twin."""
     a = np.cos(3 * PHI) + 0.3 * np.sin(7 * PHI)
     shapes = np.column_stack([a, -0.5 * a, np.sin(2 * PHI)])
     model = np.column_stack([a, -0.5 * a, np.sin(2 * PHI)])

@@ -18,11 +18,13 @@ RESOLUTION = 2.0 * TOL.solver_angle_rad * ARCSEC_PER_RAD
 ERRORS = {"pin_pitch": {"value": 0.008, "pin": 7}, "cam_eccentricity": {"value": 3.5, "crank": 1, "disc": 0},
           "planet_eccentricity": {"value": 2.0, "crank": 0, "angle_deg": 106.0},
           "disc_hole_eccentricity": {"value": 3.0, "disc": 0, "hole": 1},
-          "pin_circle_offset": {"value": 5.5, "angle_deg": 11.0}, "sun_eccentricity": {"value": 2.6, "angle_deg": 129.0}}
+          "pin_circle_offset": {"value": 5.5, "angle_deg": 11.0},
+          "sun_eccentricity": {"value": 2.6, "angle_deg": 129.0}}
 IMAGE = {"pin_pitch": {"value": 0.008, "pin": 27}, "cam_eccentricity": {"value": 3.5, "crank": 0, "disc": 1},
          "planet_eccentricity": {"value": 2.0, "crank": 1, "angle_deg": 286.0},
          "disc_hole_eccentricity": {"value": 3.0, "disc": 1, "hole": 0},
-         "pin_circle_offset": {"value": 5.5, "angle_deg": 191.0}, "sun_eccentricity": {"value": 2.6, "angle_deg": 309.0}}
+         "pin_circle_offset": {"value": 5.5, "angle_deg": 191.0},
+         "sun_eccentricity": {"value": 2.6, "angle_deg": 309.0}}
 
 
 def _te(errors: dict, model: dict) -> np.ndarray:
