@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from rvcalib.datasheet import rated_torque
+from rvcalib.result import in_prior_scales
 
 #: Lines of the residual spectrum listed per kind.
 MAX_LINES = 12
@@ -117,7 +118,7 @@ def _effects(obj: dict) -> list[str]:
         return L + ["None: no credible set holds a single physical candidate.", ""]
     rows = [[f"`{e['name']}`", e["family"], num(e["value"], 5), e["unit"], num(e["angle_deg"]),
              f"[{num(e['ci95'][0], 5)}, {num(e['ci95'][1], 5)}]", num(e["probability"], 3),
-             num(abs(e["value"]) / e["prior_scale"], 2) if e.get("prior_scale") else "-"] for e in obj["effects"]]
+             num(in_prior_scales(e["value"], e.get("prior_scale")), 2)] for e in obj["effects"]]
     L += _table(["effect", "family", "value", "unit", "angle (deg)", "95 % interval", "probability",
                  "prior scales"], rows)
     for e in obj["effects"]:

@@ -55,10 +55,16 @@ class NamedEffect:
                 f"(probability {self.probability:.3f}{scales_text(self.value, self.prior_scale)})")
 
 
+def in_prior_scales(value: float, prior_scale: float | None) -> float | None:
+    """The size of a named effect in its candidate's prior scale (the tolerance class the library assumes,
+    docs/calibration.md section 2); None where the effect has none."""
+    return abs(value) / prior_scale if prior_scale else None
+
+
 def scales_text(value: float, prior_scale: float | None) -> str:
-    """``; N prior scales``: the size of a named effect in its candidate's prior scale (the tolerance class the
-    library assumes, docs/calibration.md section 2), empty where the effect has none."""
-    return "" if not prior_scale else f"; {abs(value) / prior_scale:.2g} prior scales"
+    """``; N prior scales`` (:func:`in_prior_scales`), empty where the effect has no prior scale."""
+    n = in_prior_scales(value, prior_scale)
+    return "" if n is None else f"; {n:.2g} prior scales"
 
 
 @dataclass
