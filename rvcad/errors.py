@@ -117,6 +117,11 @@ GEOMETRY_OPTIONS: dict[str, ModelOption] = {o.key: o for o in [
                 "out-of-roundness of the pin circle: pin i moves radially by value*cos(2(phi_i - angle))"),
     ModelOption("pin_circle_ovality_angle_deg", "deg", -360.0, 360.0, 0.0,
                 "direction of the major axis of the pin circle ovality"),
+    ModelOption("carrier_offset_x_um", "um", -200.0, 200.0, 0.0,
+                "the carrier's crank-hole pattern moved off the carrier's axis of rotation (the main bearings' "
+                "axis) along the carrier frame's x axis (crank angle 0): the main bearings' radial runout"),
+    ModelOption("carrier_offset_y_um", "um", -200.0, 200.0, 0.0,
+                "the same along the carrier frame's y axis (crank angle 90 deg)"),
 ]}
 """The ``model`` options that move parts (used by :class:`ResolvedErrors`). The solver's physics options
 (contact law, compliance, friction, bearing clearance) live in ``rvdyn.options``, which validates the
@@ -469,6 +474,8 @@ class ResolvedErrors:
         Radial outward shift of hole h in disc k, mm.
     pin_circle_offset : (2,)
         Offset of the pin circle centre in the fixed frame, mm.
+    carrier_offset : (2,)
+        Offset of the carrier's crank-hole pattern from the carrier's axis of rotation, carrier frame, mm.
     pin_radial : (Zp,)
         Radial outward shift of each pin centre, mm (half the diameter error).
     pin_radius : (Zp,)
@@ -489,6 +496,7 @@ class ResolvedErrors:
         self.carrier_hole = np.zeros(nc)
         self.disc_hole = np.zeros((nd, nc))
         self.pin_circle_offset = np.zeros(2)
+        self.carrier_offset = np.zeros(2)
         self.pin_radial = np.zeros(zp)
         self.pin_radius = np.zeros(zp)
         self.disc_phase = np.zeros(nd)
@@ -532,6 +540,8 @@ class ResolvedErrors:
         if ov:
             phi = 2 * np.pi * np.arange(zp) / zp
             self.pin_radial += ov * um * np.cos(2.0 * (phi - math.radians(geometry_option(m, "pin_circle_ovality_angle_deg"))))
+        self.carrier_offset += um * np.array([geometry_option(m, "carrier_offset_x_um"),
+                                              geometry_option(m, "carrier_offset_y_um")])
         self._check(case)
 
     def _check(self, case: Case) -> None:

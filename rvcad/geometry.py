@@ -125,7 +125,7 @@ class ReducerGeometry:
         beta = np.array(d.crank_angles_rad)
         self.crank_angles = beta
         a = d.center_distance_mm
-        self.carrier_holes = (a + er.carrier_hole)[:, None] * _u(beta)
+        self.carrier_holes = (a + er.carrier_hole)[:, None] * _u(beta) + er.carrier_offset
         self.disc_holes = (a + er.disc_hole)[:, :, None] * _u(beta)[None, :, :]
         self.cam_ecc = d.eccentricity_mm + er.cam_ecc
         self.cam_phase = np.arange(nd)[None, :] * math.pi + er.cam_phase

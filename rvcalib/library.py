@@ -10,8 +10,9 @@ Families (the first four are physical and may be *named*; the last is never name
   pins' radial and of their pitch deviations (cosine and sine of k times the pin's angle): order k of the ring
   gives order k of the TE. Mode 2 of the radial form is the ring's ovality.
 * ``model``: physical effects of the reducer the declared model lacks, passed to rvdyn as model options:
-  a lumped torsional compliance, a friction torque, a cam-bearing clearance, and (when the runs differ in
-  temperature) the pin circle's thermal growth.
+  a lumped torsional compliance, a friction torque, a cam-bearing clearance, the carrier's offset from its axis
+  of rotation (the main bearings' runout, two components), and (when the runs differ in temperature) the pin
+  circle's thermal growth.
 * ``measurement``: errors of the encoders: eccentricity of the output and of the input encoder scale (two
   components), the output encoder's scale error and a drift of the reading in time. The last two are ramps;
   they are candidates only where the record shows a ramp (:func:`ramp_shown`).
@@ -57,10 +58,15 @@ FAMILIES = PHYSICAL + ("empirical",)
 #: load is taken relative to the largest load (``friction_torque_Nm`` is multiplied by it); a cam bearing's radial
 #: clearance of a few micrometres (rolling bearings of class C2..CN); thermal growth of a steel ring (11.5 um/(m K)
 #: over the pin circle); an encoder ring mounted within 10 um; a scale error of 20 ppm (a ring scale's accuracy
-#: grade); a drift of 2 arcsec per revolution.
+#: grade); a drift of 2 arcsec per revolution; the carrier's offset from its axis of rotation in the class of its
+#: crank holes' position (a third of Table 4 F).
 PRIOR_SCALES = {"friction_torque_Nm": 0.03, "cam_bearing_clearance_um": 3.0, "pin_circle_diameter_um_per_K": 1.5,
                 "output_encoder_eccentricity": 10.0, "input_encoder_eccentricity": 10.0,
-                "output_encoder_scale_error": 20.0, "drift_arcsec_per_rev": 2.0}
+                "output_encoder_scale_error": 20.0, "drift_arcsec_per_rev": 2.0,
+                "carrier_offset": ERROR_TYPES["carrier_hole_eccentricity"].paper_value / 3.0}
+
+#: Model candidates of two components (x, y) and the model options that hold them.
+MODEL_VECTORS = {"carrier_offset": ("carrier_offset_x_um", "carrier_offset_y_um")}
 
 
 @dataclass(frozen=True)
@@ -165,7 +171,8 @@ class Candidate:
     def add_to(self, acc: "CaseDelta", p: np.ndarray) -> None:
         """Add this effect at parameters ``p`` to a case under construction."""
         if self.family == "model":
-            acc.model[self.key] = acc.model.get(self.key, 0.0) + float(p[0])
+            for k, v in zip(MODEL_VECTORS.get(self.key, (self.key,)), p):
+                acc.model[k] = acc.model.get(k, 0.0) + float(v)
             return
         if self.pattern is not None:
             v = acc.pinwise.setdefault(self.key, np.zeros(len(self.pattern[0])))
@@ -348,6 +355,11 @@ def _model(dataset) -> tuple[list, list]:
     o = mo["cam_bearing_clearance_um"]
     out.append(Candidate(o.key, o.key, "model", "um", o.meaning, prior_scale=PRIOR_SCALES[o.key], lower=0.0,
                          upper=o.high, type_key=o.key, kink=True))
+    o = mo["carrier_offset_x_um"]
+    out.append(Candidate("carrier_offset", "carrier_offset", "model", "um",
+                         "the carrier's crank-hole pattern off the carrier's axis of rotation (the main bearings' "
+                         "radial runout), x along crank angle 0 of the carrier frame", ("x", "y"),
+                         PRIOR_SCALES["carrier_offset"], o.low, o.high, type_key="carrier_offset", kink=True))
     if dataset.temperatures_vary:
         o = mo["pin_circle_diameter_um_per_K"]
         out.append(Candidate(o.key, o.key, "model", "um/K", o.meaning, prior_scale=PRIOR_SCALES[o.key], lower=o.low,

@@ -42,7 +42,7 @@ from rvdyn.options import MODEL_OPTIONS
 from rvcad.params import Design
 
 from rvcalib.equivalents import EQUIVALENTS
-from rvcalib.library import INPUT_ENCODER_RADIUS_MM, OUTPUT_ENCODER_RADIUS_MM, CaseDelta
+from rvcalib.library import INPUT_ENCODER_RADIUS_MM, MODEL_VECTORS, OUTPUT_ENCODER_RADIUS_MM, CaseDelta
 from rvrig.orders import check_periodic, period_deg
 
 MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg",
@@ -84,9 +84,15 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
                 d["angle_deg"] = float(item.get("angle_deg", 0.0))
             out.append(d)
     model = hidden.get("model") or {}
+    for key, (kx, ky) in MODEL_VECTORS.items():            # two options, one effect of a size and a direction
+        x, y = float(model.get(kx, 0.0)), float(model.get(ky, 0.0))
+        if x or y:
+            out.append({"name": key, "key": key, "value": math.hypot(x, y), "unit": MODEL_OPTIONS[kx].unit,
+                        "angle_deg": math.degrees(math.atan2(y, x))})
+    vectors = {k for keys in MODEL_VECTORS.values() for k in keys}
     for key, v in model.items():
         if key in ("pin_circle_ovality_angle_deg", "temperature_C", "cam_bearing_stiffness_N_per_um") or \
-                isinstance(v, str):                       # a choice (the contact law), not an effect
+                key in vectors or isinstance(v, str):     # a choice (the contact law), not an effect
             continue
         d = {"name": key, "key": key, "value": float(v), "unit": MODEL_OPTIONS[key].unit}
         if key == "pin_circle_ovality_um":

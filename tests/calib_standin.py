@@ -14,7 +14,7 @@ import numpy as np
 
 from rvcalib.datasheet import reducer_case
 from rvcalib.holdout import declared_te, model_te
-from rvcalib.library import build_library
+from rvcalib.library import CaseDelta, build_library
 from rvcalib.loop import resolved_order
 from rvcalib.readings import nuisance_columns, ramp_shown
 from rvcalib.reducer_model import ReducerModel
@@ -98,6 +98,13 @@ def rig_data(ds, te: np.ndarray, noise: float, seed: int):
 FAMILIES = ("model", "measurement", "empirical")
 
 
+def _options(cand, p: np.ndarray) -> dict:
+    """The model options of a model candidate at parameters ``p``."""
+    acc = CaseDelta()
+    cand.add_to(acc, p)
+    return acc.model
+
+
 class LinearReducer:
     """The loop's forward model (``rvcalib.loop.calibrate(model=...)``) as a fixed linear map."""
 
@@ -106,17 +113,18 @@ class LinearReducer:
                             ramp_shown(dataset)[0])
         self.candidates = ([c for c in lib if c.solved and c.dense] + [c for c in lib if c.solved and not c.dense])
         assert all(c.family == "model" for c in self.candidates), [c.name for c in self.candidates]
-        self.n_params = len(self.candidates)
+        self.n_params = sum(c.n_params for c in self.candidates)
         self.base_case = reducer_case(dataset.runs[0].case_dict())
         self.base = np.concatenate(declared_te(dataset))
         cols = []
         for c in self.candidates:
-            h = c.prior_scale
-            te = model_te(dataset, lambda r, c=c, h=h: self._case({c.key: h}, r))
-            cols.append((np.concatenate(te) - self.base) / h)
+            for j in range(c.n_params):
+                opts = _options(c, c.prior_scale * np.eye(c.n_params)[j])
+                te = model_te(dataset, lambda r, o=opts: self._case(o, r))
+                cols.append((np.concatenate(te) - self.base) / c.prior_scale)
         self.J = np.column_stack(cols)
-        self._lower = np.array([c.lower for c in self.candidates])
-        self._upper = np.array([c.upper for c in self.candidates])
+        self._lower = np.concatenate([[c.lower] * c.n_params for c in self.candidates])
+        self._upper = np.concatenate([[c.upper] * c.n_params for c in self.candidates])
         self.groups = [self.base_case]
         self.solves = 0
 
@@ -137,7 +145,11 @@ class LinearReducer:
 
     def case_dict(self, group, theta: np.ndarray) -> dict:
         t = np.clip(theta, self._lower, self._upper)
-        return self._case({c.key: float(x) for c, x in zip(self.candidates, t)})
+        acc, pos = CaseDelta(), 0
+        for c in self.candidates:
+            c.add_to(acc, t[pos:pos + c.n_params])
+            pos += c.n_params
+        return self._case(acc.model)
 
     def column_kinds(self) -> np.ndarray:
         return np.array(["derivative"] * self.n_params)

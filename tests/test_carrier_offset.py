@@ -1,0 +1,90 @@
+"""The carrier's offset from its axis of rotation (model options ``carrier_offset_x_um``/``_y_um``: the main
+bearings' radial runout relative to the crank holes): where it moves the parts, what it does to the TE, and its
+candidate in the calibration library."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rvcad.errors import Case, CaseError
+from rvcad.geometry import ReducerGeometry
+from rvcad.tolerances import TOL
+from rvcalib.library import Candidate, CaseDelta, PRIOR_SCALES
+from rvdyn.solver import ARCSEC_PER_RAD
+from rvdyn.te import run_te
+
+#: Two solves, each converged to the solver's angle tolerance, agree within this, arcsec.
+RESOLUTION = 2.0 * TOL.solver_angle_rad * ARCSEC_PER_RAD
+IMPACT = {"contact": "impact"}
+
+
+def _te(d: dict, theta_in_deg=None, steps: int = 45) -> np.ndarray:
+    # one angle, solved with a second 0.001 deg on (a solve takes two or more angles)
+    kw = {"theta_in_deg": [theta_in_deg, theta_in_deg + 1e-3]} if theta_in_deg is not None else {"steps": steps}
+    return run_te(Case.from_dict(d), **kw).table["te_arcsec"].to_numpy()
+
+
+def test_the_offset_moves_every_crank_hole_by_the_same_vector_in_the_carrier_frame():
+    nominal = ReducerGeometry(Case.from_dict({}))
+    moved = ReducerGeometry(Case.from_dict({"model": {"carrier_offset_x_um": 4.0, "carrier_offset_y_um": -3.0}}))
+    assert np.allclose(moved.carrier_holes - nominal.carrier_holes, [[4e-3, -3e-3]] * 2, rtol=0, atol=1e-13)  # mm, rounding at 30 mm
+    assert np.array_equal(moved.pin_centers, nominal.pin_centers)
+
+
+def test_along_the_crank_line_it_is_the_two_carrier_holes_moved_radially_apart():
+    """Cranks at 0 and 180 deg: an offset of c along x is crank 0's hole out by c and crank 1's in by c."""
+    offset = {"model": {**IMPACT, "carrier_offset_x_um": 6.0}, "load_Nm": 20.0}
+    holes = {"model": IMPACT, "load_Nm": 20.0,
+             "errors": {"carrier_hole_eccentricity": [{"value": 6.0, "crank": 0}, {"value": -6.0, "crank": 1}]}}
+    te, nominal = _te(offset), _te({"model": IMPACT, "load_Nm": 20.0})
+    assert np.sqrt(np.mean((te - nominal) ** 2)) > 1.0                  # the offset shows
+    assert np.abs(te - _te(holes)).max() < RESOLUTION
+
+
+@pytest.mark.parametrize("theta_in_deg", [0.0, 1234.5])
+def test_the_whole_reducer_moved_together_keeps_its_te(theta_in_deg):
+    """The pin ring (fixed frame), the carrier's holes (carrier frame) and the sun (sun frame) moved by the same
+    vector in the fixed frame at one input angle: the reducer is translated, so its TE there is the nominal's."""
+    c, ang = 8.0, 35.0                                  # um, deg in the fixed frame
+    nominal = _te({"model": IMPACT, "load_Nm": 20.0}, theta_in_deg)
+    theta_out = math.radians(theta_in_deg) / ReducerGeometry(Case.from_dict({})).ratio - nominal[0] / ARCSEC_PER_RAD
+    a_carrier = math.radians(ang) - theta_out
+    case = {"model": {**IMPACT, "carrier_offset_x_um": c * math.cos(a_carrier),
+                      "carrier_offset_y_um": c * math.sin(a_carrier)}, "load_Nm": 20.0,
+            "errors": {"pin_circle_offset": {"value": c, "angle_deg": ang},
+                       "sun_eccentricity": {"value": c, "angle_deg": (ang - theta_in_deg) % 360.0}}}
+    ring = _te({"model": IMPACT, "load_Nm": 20.0, "errors": {"pin_circle_offset": case["errors"]["pin_circle_offset"]}},
+               theta_in_deg)
+    carrier = _te({"model": case["model"], "load_Nm": 20.0}, theta_in_deg)
+    assert min(abs(ring[0] - nominal[0]), abs(carrier[0] - nominal[0])) > 1.0     # the ring or carrier alone shows
+    assert _te(case, theta_in_deg)[0] == pytest.approx(nominal[0], abs=RESOLUTION)
+
+
+def test_it_gives_a_constant_and_the_pin_orders_only():
+    """Turning with the carrier, the offset is fixed relative to the cranks: it changes how the cranks share the
+    load (a constant) and the mesh with the fixed ring (the orders of the pins), no low order."""
+    steps = 160
+    d = _te({"model": {**IMPACT, "carrier_offset_y_um": 10.0}, "load_Nm": 20.0}, steps=steps) - \
+        _te({"model": IMPACT, "load_Nm": 20.0}, steps=steps)
+    amp = np.abs(np.fft.rfft(d)) / steps * 2.0
+    zp = ReducerGeometry(Case.from_dict({})).design.z_pins
+    assert abs(d.mean()) > 1.0
+    assert max(amp[1:zp // 2]) < 0.01 * abs(d.mean())
+
+
+def test_a_bad_offset_names_the_option_and_its_range():
+    with pytest.raises((ValueError, CaseError), match=r"model.carrier_offset_y_um 250.0 um is out of range; "
+                                                       r"allowed \[-200.0, 200.0\]"):
+        ReducerGeometry(Case.from_dict({"model": {"carrier_offset_y_um": 250.0}}))
+
+
+def test_the_library_candidate_writes_both_options():
+    cand = Candidate("carrier_offset", "carrier_offset", "model", "um", "", ("x", "y"),
+                     PRIOR_SCALES["carrier_offset"], -200.0, 200.0)
+    acc = CaseDelta()
+    cand.add_to(acc, np.array([1.5, -2.5]))
+    assert acc.to_dict({"model": {"carrier_offset_x_um": 1.0}})["model"] == {"carrier_offset_x_um": 2.5,
+                                                                              "carrier_offset_y_um": -2.5}
+    assert cand.size(np.array([3.0, 4.0])) == pytest.approx((5.0, math.degrees(math.atan2(4.0, 3.0))))
