@@ -42,6 +42,7 @@ import numpy as np
 from rvcad.errors import ERROR_TYPES
 from rvcad.params import Design
 from rvdyn.options import MODEL_OPTIONS
+from rvrig.rigimport import filtered_pin_orders
 
 ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
 ARCSEC_PER_DEG = 3600.0
@@ -454,4 +455,20 @@ def build_library(dataset, max_order: int, families: tuple[str, ...] = FAMILIES,
         out += _empirical(max_order, loaded, two)
     names = [c.name for c in out]
     assert len(names) == len(set(names)), "candidate names must be unique"
-    return Library(out, notes)
+    return Library(out, notes + _folding_notes(dataset))
+
+
+def _folding_notes(dataset) -> list[str]:
+    """A note where the import's low-pass removed pin orders the model predicts (they fold back in the model's
+    predictions at the readings, where the record holds nothing): :func:`rvrig.rigimport.filtered_pin_orders`."""
+    path = getattr(dataset, "path", None)
+    if path is None or dataset.design is None:
+        return []
+    zp = int(dataset.design.z_pins)
+    orders, end = filtered_pin_orders(path, zp)
+    if not orders:
+        return []
+    return [f"the import's low-pass kept the orders below {end:g}; the model's pin order(s) "
+            f"{', '.join(map(str, orders))} fold back onto lower orders in its predictions at these readings, where "
+            f"the record holds nothing: import with --samples-per-rev of at least {5 * zp} (2 Zp in the pass band) "
+            "to compare them"]

@@ -13,9 +13,10 @@ import pandas as pd
 import pytest
 
 from rvcalib.cli import main
+from rvcalib.library import build_library
 from rvrig.dataset import read_dataset
 from rvrig.rigfilter import antialias_filter, decimate, default_samples_per_rev
-from rvrig.rigimport import import_rig, parse_conditions, read_rig_file
+from rvrig.rigimport import filtered_pin_orders, import_rig, parse_conditions, read_rig_file
 
 #: A ratio-81 design (the dataset reader converts the readings with the design's ratio).
 R81 = {"z_sun": 18, "z_planet": 36}
@@ -231,3 +232,18 @@ def test_a_time_column_gives_the_times_and_a_time_gap(tmp_path):
     assert recs[1].time_source == "column time_s"
     assert [(g["kind"], g["missing"]) for g in recs[1].gaps] == [("split", 5)]
     np.testing.assert_allclose(recs[-1].time_s, t - t[0])
+
+
+def test_pin_orders_the_low_pass_took_out_are_noted_for_the_loop(tmp_path):
+    """Averaged to 180 per revolution the pass band ends at order 72: the default design's order 2 Zp = 80 is out
+    of the record but folds back in the model's point predictions, and the library's notes say so; at 360 (pass
+    band to 144) and unfiltered, nothing is noted."""
+    f = rig_file(tmp_path / "r.csv", per_rev=720)
+    notes = {}
+    for k in (180, 360, 0):
+        import_rig([f], tmp_path / f"ds{k}", design=R81, load_Nm=0.0, samples_per_rev=k)
+        notes[k] = [n for n in build_library(read_dataset(tmp_path / f"ds{k}"), 10).notes if "fold back" in n]
+    assert filtered_pin_orders(tmp_path / "ds180", 40) == ([80], pytest.approx(72.0))
+    assert len(notes[180]) == 1 and "pin order(s) 80 fold back" in notes[180][0] and "at least 200" in notes[180][0]
+    assert notes[360] == [] and notes[0] == []
+    assert filtered_pin_orders(tmp_path, 40) == ([], None)                # no import.json
