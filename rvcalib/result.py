@@ -236,13 +236,14 @@ def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float, laplace: 
 
 def _twin_group(eff: NamedEffect, cands: list, f: int, twins: list, level: float) -> dict:
     """A named effect that a swap cannot tell from its twins, as a group: each member with its size (the named
-    effect's, and each twin's swap size) and its probability of being the one, exp(-Delta chi^2 / 2) normalised
-    (equal prior odds); the interval is the named effect's."""
-    pairs = [(cands[f], 0.0, eff.value)] + [(cands[g], d, size) for g, d, size in twins]
+    effect's, and each twin's size after the swap: a value, or a magnitude and an angle) and its probability of
+    being the one, exp(-Delta chi^2 / 2) normalised (equal prior odds); the interval is the named effect's."""
+    pairs = [(cands[f], 0.0, (eff.value, eff.angle_deg))] + [(cands[g], d, cands[g].size(np.asarray(p)))
+                                                             for g, d, p in twins]
     w = np.exp(-0.5 * np.array([d for _, d, _ in pairs]))
     members = [{"name": c.effect_name, "key": c.key, "family": c.family, "instance": dict(c.instance),
-                "unit": c.unit, "value": float(v), "angle_deg": eff.angle_deg, "probability": float(p),
-                "delta_chi2": d} for (c, d, v), p in zip(pairs, w / w.sum())]
+                "unit": c.unit, "value": float(v), "angle_deg": a, "probability": float(p),
+                "delta_chi2": d} for (c, d, (v, a)), p in zip(pairs, w / w.sum())]
     return {"kind": "physical", "coverage": level, "purity": None, "ci95": eff.ci95,
             "reason": "each fits the data as well in the others' place (delta chi2 below chi2(1) at 95 %)",
             "members": members}

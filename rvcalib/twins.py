@@ -7,15 +7,16 @@ half a turn apart give the same TE to rounding), the next linearisation takes it
 other's where it is not, and the two no longer look alike. Which one entered first is then a coin toss the result
 would hide.
 
-So at the end every named single-parameter effect ``f`` is confronted with the candidates ``g`` the data may not
-split from it, screened two ways (the screen only limits the cost): columns at the first linearisation (where
-neither was in the model) on nearly the same line (|correlation| at least :data:`SCREEN`), and candidates that, at
-the last linearisation, take ``f``'s TE with the other chosen parameters refitted and leave less than
-:data:`DELTA_CHI2` of it (a partial alias: a look-alike on the other crank or disc that, with the others moved,
-gives the same fit). The model is solved with ``f``'s effect moved to ``g`` (the least-squares move of ``f``'s
-linearised TE onto ``g`` and the other chosen parameters, on the columns of the screen that admitted ``g``, its sign
-included: a crank-indexed error and the same error on the crank half a turn away are first-order look-alikes with
-the opposite sign) and the reading coefficients refitted, and where the fit is worse by less than the 95 % quantile
+So at the end every named effect ``f`` (one parameter, or the two components of an eccentricity) is confronted
+with the candidates ``g`` of as many parameters the data may not split from it, screened two ways (the screen only
+limits the cost): candidates whose columns at the first linearisation (where neither was in the model) hold nearly
+all of ``f``'s TE (for one column, |correlation| at least :data:`SCREEN`), and candidates that, at the last
+linearisation, take ``f``'s TE with the other chosen parameters refitted and leave less than :data:`DELTA_CHI2` of
+it (a partial alias: a look-alike on the other crank or disc that, with the others moved, gives the same fit). The
+model is solved with ``f``'s effect moved to ``g`` (the least-squares move of ``f``'s linearised TE onto ``g`` and
+the other chosen parameters, on the columns of the screen that admitted ``g``, its sign or direction included: a
+crank-indexed error and the same error on the crank half a turn away are first-order look-alikes with the
+opposite sign) and the reading coefficients refitted, and where the fit is worse by less than the 95 % quantile
 of chi-square with one degree of freedom (``Delta chi^2 < 3.84``, a likelihood ratio the data cannot tell from
 chance), ``g`` is a twin and ``f`` is reported as a group with it instead of a name.
 
@@ -42,8 +43,8 @@ DELTA_CHI2 = float(stats.chi2.ppf(0.95, 1))
 
 def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np.ndarray,
                active_r: np.ndarray, tau: np.ndarray | None = None,
-               X_last: np.ndarray | None = None) -> dict[int, list[tuple[int, float, float]]]:
-    """The twins of each chosen single-parameter feature.
+               X_last: np.ndarray | None = None) -> dict[int, list[tuple[int, float, tuple]]]:
+    """The twins of each chosen feature (one parameter, or the two components of an eccentricity).
 
     Parameters
     ----------
@@ -58,8 +59,8 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
     Returns
     -------
     dict
-        Feature index -> [(twin feature index, Delta chi^2, its size), ...] for the chosen features that have
-        twins.
+        Feature index -> [(twin feature index, Delta chi^2, its parameters after the swap), ...] for the chosen
+        features that have twins.
     """
     m, n = pb.model, pb.model.n_params
     tau = np.ones(n) if tau is None else tau
@@ -74,63 +75,76 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
             r = r - Ra @ np.linalg.lstsq(Ra, r, rcond=None)[0]
         return float(r @ r) / sigma ** 2
 
-    single = [f for f in range(len(pb.feature_cands))
-              if pb.starts[f + 1] - pb.starts[f] == 1 and pb.starts[f] < n and f not in pb.fixed]
+    feats = {f: list(range(pb.starts[f], pb.starts[f + 1])) for f in range(len(pb.feature_cands))
+             if pb.starts[f] < n and f not in pb.fixed}
     on = set(active_s.tolist())
-    chosen = [f for f in single if pb.starts[f] in on]
+    chosen = [f for f, js in feats.items() if on.intersection(js)]
     if not chosen:
         return {}
-    C = X0 / np.maximum(np.linalg.norm(X0, axis=0), 1e-300)
     base = chi2(theta)
-    out: dict[int, list[tuple[int, float, float]]] = {}
+    out: dict[int, list[tuple[int, float, tuple]]] = {}
     alone: dict[int, int] = {}                      # chosen feature -> its best single swap, where none fits
     for f in chosen:
-        j = pb.starts[f]
-        others = [g for g in single if g != f and pb.starts[g] not in on]
-        cols = np.array([pb.starts[g] for g in others], dtype=int)
-        r = np.abs(C[:, cols].T @ C[:, j])
+        js = feats[f]
+        others = [g for g, ks in feats.items() if g != f and len(ks) == len(js) and not on.intersection(ks)]
+        blocks = [feats[g] for g in others]
+        c = theta[js] / tau[js]
+        r = _captured(X0, X0[:, js] @ c, blocks)
         near = {others[k]: X0 for k in np.argsort(-r)[:MOST] if r[k] >= SCREEN}
         if X_last is not None:
-            d = _moved_chi2(X_last, j, theta[j] / tau[j], active_s, n + active_r, cols) / sigma ** 2
+            d = _moved_chi2(X_last, js, c, active_s, n + active_r, blocks) / sigma ** 2
             for k in np.argsort(d)[:MOST]:
                 if d[k] < DELTA_CHI2:
                     near.setdefault(others[k], X_last)
         found, tried = [], []
         for g, X in list(near.items())[:2 * MOST]:
-            k = pb.starts[g]
-            th = _moved(X, theta, [j], [k], active_s, n + active_r, tau, m._lower, m._upper)
+            th = _moved(X, theta, js, feats[g], active_s, n + active_r, tau, m._lower, m._upper)
             dchi = chi2(th) - base
             tried.append((dchi, g))
             if dchi < DELTA_CHI2:
-                found.append((g, float(dchi), float(th[k])))
+                found.append((g, float(dchi), tuple(float(v) for v in th[feats[g]])))
         if found:
             out[f] = sorted(found, key=lambda t: t[1])
         elif tried:
             alone[f] = min(tried)[1]
     if len(alone) > 1 and len(set(alone.values())) == len(alone):   # several chosen effects' look-alikes together
         fs = list(alone)
-        th = _moved(X0, theta, [pb.starts[f] for f in fs], [pb.starts[alone[f]] for f in fs], active_s,
-                    n + active_r, tau, m._lower, m._upper)
+        th = _moved(X0, theta, [j for f in fs for j in feats[f]], [k for f in fs for k in feats[alone[f]]],
+                    active_s, n + active_r, tau, m._lower, m._upper)
         dchi = chi2(th) - base
         if dchi < DELTA_CHI2:
             for f in fs:
-                out[f] = [(alone[f], float(dchi), float(th[pb.starts[alone[f]]]))]
+                out[f] = [(alone[f], float(dchi), tuple(float(v) for v in th[feats[alone[f]]]))]
     m.te(theta)                                     # the model's states are the estimate's again
     return out
 
 
-def _moved_chi2(X: np.ndarray, j: int, c: float, active_s: np.ndarray, reading_cols: np.ndarray,
-                cols: np.ndarray) -> np.ndarray:
-    """For each candidate column: what is left of column ``j``'s TE (coefficient ``c``, scaled units) after the
-    least-squares move onto the candidate, the other chosen solved columns and the chosen reading columns."""
-    keep = np.concatenate([active_s[active_s != j], reading_cols]).astype(int)
+def _captured(X: np.ndarray, t: np.ndarray, blocks: list) -> np.ndarray:
+    """For each block of columns of ``X``: the share of ``t``'s norm its span holds (for one column, the
+    |correlation|)."""
+    tt = max(float(t @ t), 1e-300)
+    out = np.zeros(len(blocks))
+    for i, ks in enumerate(blocks):
+        G = X[:, ks]
+        out[i] = np.sqrt(max(float(t @ (G @ np.linalg.lstsq(G, t, rcond=None)[0])), 0.0) / tt)
+    return out
+
+
+def _moved_chi2(X: np.ndarray, js: list, c: np.ndarray, active_s: np.ndarray, reading_cols: np.ndarray,
+                blocks: list) -> np.ndarray:
+    """For each candidate block of columns: what is left of the TE of columns ``js`` (coefficients ``c``, scaled
+    units) after the least-squares move onto the block, the other chosen solved columns and the chosen reading
+    columns."""
+    keep = np.concatenate([np.setdiff1d(active_s, js), reading_cols]).astype(int)
     Q = np.linalg.qr(X[:, keep])[0] if keep.size else np.zeros((X.shape[0], 0))
-    t = X[:, j] * c
+    t = X[:, js] @ c
     t = t - Q @ (Q.T @ t)
-    G = X[:, cols]
-    G = G - Q @ (Q.T @ G)
-    gg = np.maximum(np.sum(G ** 2, axis=0), 1e-300)
-    return float(t @ t) - (G.T @ t) ** 2 / gg
+    out = np.zeros(len(blocks))
+    for i, ks in enumerate(blocks):
+        G = X[:, ks]
+        G = G - Q @ (Q.T @ G)
+        out[i] = float(t @ t) - float(t @ (G @ np.linalg.lstsq(G, t, rcond=None)[0]))
+    return out
 
 
 def _moved(X: np.ndarray, theta: np.ndarray, js: list, ks: list, active_s: np.ndarray, reading_cols: np.ndarray,

@@ -7,7 +7,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from rvcalib.library import Candidate
 from rvcalib.loop import Projector
+from rvcalib.result import _twin_group
 from rvcalib.twins import DELTA_CHI2, swap_twins
 
 N = 200
@@ -80,7 +82,7 @@ def test_a_twin_of_the_opposite_sign_is_found_at_its_own_size():
     theta = np.array([2.0, 0.0, 0.0])
     got = swap_twins(pb, pb.proj(shapes), theta, 0.05, np.array([0]), np.zeros(0, int))
     assert [g for g, *_ in got[0]] == [1]
-    assert got[0][0][2] == pytest.approx(-4.0)
+    assert got[0][0][2] == pytest.approx((-4.0,))
     assert got[0][0][1] == pytest.approx(0.0, abs=1e-9)
 
 
@@ -113,10 +115,10 @@ def test_a_partial_alias_with_another_chosen_parameter_refitted_is_a_twin():
     assert swap_twins(pb, X, theta, 0.05, np.array([0, 2]), np.zeros(0, int)) == {}
     got = swap_twins(pb, X, theta, 0.05, np.array([0, 2]), np.zeros(0, int), X_last=X)
     assert [g for g, *_ in got[0]] == [1]
-    assert got[0][0][2] == pytest.approx(2.0)
+    assert got[0][0][2] == pytest.approx((2.0,))
     assert got[0][0][1] == pytest.approx(0.0, abs=1e-6)
     assert [g for g, *_ in got[2]] == [1]                   # three dependent columns: h = 2 a - 2 (a - h / 2)
-    assert got[2][0][2] == pytest.approx(-2.0)
+    assert got[2][0][2] == pytest.approx((-2.0,))
     assert np.allclose(pb.model.te(theta), shapes @ theta)
 
 
@@ -145,6 +147,36 @@ def test_look_alikes_that_fit_only_moved_together_are_twins():
     assert float(np.sum(pb.proj(pb.model.te(alone) - pb.model.te(theta)) ** 2)) / 0.05 ** 2 > 100 * DELTA_CHI2
     got = swap_twins(pb, pb.proj(shapes), theta, 0.05, np.array([0, 2]), np.zeros(0, int))
     assert {f: [g for g, *_ in t] for f, t in got.items()} == {0: [1], 2: [3]}
-    assert got[0][0][2] == pytest.approx(2.0) and got[2][0][2] == pytest.approx(1.5)
+    assert got[0][0][2] == pytest.approx((2.0,)) and got[2][0][2] == pytest.approx((1.5,))
     assert got[0][0][1] == pytest.approx(0.0, abs=1e-6)
     assert np.allclose(pb.model.te(theta), shapes @ theta + q * 3.0)    # the model left at the estimate
+
+
+def _two_component_problem(shapes: np.ndarray, widths: list, theta: np.ndarray):
+    """A problem whose features have ``widths`` parameters each (an eccentricity has two)."""
+    pb = _problem(shapes, theta, sigma=0.05)
+    pb.model = LinearModel(shapes)
+    pb.feature_cands = [[f"f{i}"] for i in range(len(widths))]
+    pb.starts = np.concatenate([[0], np.cumsum(widths)])
+    return pb
+
+
+def test_an_eccentricity_and_its_image_on_the_other_crank_are_twins_with_their_own_direction():
+    """Two components each: the second feature's columns are the first's with the opposite sign (a planet
+    eccentricity and the same on the crank half a turn away, to first order); a third two-component feature holds
+    the x column but not the y one. The twin's size is the named one's turned by 180 deg; the third is no twin."""
+    ax, ay, b = np.cos(3 * PHI), np.sin(3 * PHI) + 0.2 * np.cos(7 * PHI), np.sin(2 * PHI)
+    shapes = np.column_stack([ax, ay, -ax, -ay, ax, np.cos(9 * PHI), b])
+    theta = np.array([2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    pb = _two_component_problem(shapes, [2, 2, 2, 1], theta)
+    got = swap_twins(pb, pb.proj(shapes), theta, 0.05, np.array([0, 1]), np.zeros(0, int))
+    assert [g for g, *_ in got[0]] == [1]
+    assert got[0][0][2] == pytest.approx((-2.0, -1.0))
+    assert got[0][0][1] == pytest.approx(0.0, abs=1e-9)
+    cands = [Candidate(f"e{i}", "planet_eccentricity", "table4", "um", "", ("x", "y")) for i in range(3)]
+    eff = SimpleNamespace(value=float(np.hypot(2.0, 1.0)), angle_deg=float(np.degrees(np.arctan2(1.0, 2.0))),
+                          ci95=(2.0, 2.5))
+    members = _twin_group(eff, cands, 0, got[0], 0.95)["members"]
+    assert [m["value"] for m in members] == pytest.approx([np.hypot(2.0, 1.0)] * 2)
+    assert members[1]["angle_deg"] == pytest.approx(members[0]["angle_deg"] - 180.0)
+    assert [m["probability"] for m in members] == pytest.approx([0.5, 0.5])
