@@ -17,9 +17,9 @@ stops. The records are development data: never copied into the project, never re
    ``--design`` (default ``examples/designs/rv160n.json``, three cranks; ``--no-loop`` skips it), its summary
    printed as the command prints it and its report written to ``OUT/calibration``: the rig's zero of each test,
    what it names, what stays unexplained, the datasheet as declared and as calibrated, and with ``--holdout`` each
-   load left out of the fit and predicted. ``--loop-samples-per-rev K`` imports the records again at K readings per
-   revolution for the loop alone (a model evaluation costs in proportion to the readings; the anti-alias low-pass
-   then keeps the orders below K / 2).
+   load left out of the fit and predicted. The loop fits the readings averaged to the density ``rv-calibrate``
+   chooses (flat to the model's orders, :mod:`rvrig.average`); ``--loop-samples-per-rev K`` is its
+   ``--samples-per-rev``.
 
 The design. ``examples/designs/rv160n.json`` holds the published RV-160N sizes (sun 22, planets 44, 40 pins, 39
 lobes, pin circle 223 mm, eccentricity 2.0 mm, module 1.5 mm) with three cranks at 0, 120 and 240 deg; its
@@ -49,6 +49,7 @@ sys.path.insert(0, str(ROOT))
 
 from results_log import record  # noqa: E402
 from rvcalib.cli import main as rv_calibrate  # noqa: E402
+from rvrig.average import model_samples_per_rev  # noqa: E402
 from rvrig.dataset import read_dataset  # noqa: E402
 from rvrig.rigtable import load_changes, measured_datasheet, plot_test_means, test_table  # noqa: E402
 from rvrig.spectrum import separate  # noqa: E402
@@ -158,7 +159,7 @@ def spectrum_section(ds) -> list:
 
 
 def loop_section(ds, workers: int, rated_Nm: float, out: Path, estimator: str = "sparse",
-                 holdout: bool = False) -> list:
+                 holdout: bool = False, samples_per_rev: int | None = None) -> list:
     """The loop on the imported dataset as ``rv-calibrate`` runs it (:func:`rvcalib.cli.run`: the loop, the
     datasheet as declared and as calibrated, and with ``holdout`` each load left out of the fit and predicted), its
     summary printed as the command prints it, the report in ``out`` (figures named ``loop_...``,
@@ -167,7 +168,8 @@ def loop_section(ds, workers: int, rated_Nm: float, out: Path, estimator: str = 
     from rvcalib.cli import run, summary
 
     t0 = time.perf_counter()
-    settings = CalibrationSettings(workers=workers, rated_Nm=rated_Nm, estimator=estimator)
+    settings = CalibrationSettings(workers=workers, rated_Nm=rated_Nm, estimator=estimator,
+                                   samples_per_rev=samples_per_rev)
 
     def log(s: str) -> None:
         print(f"    [{time.perf_counter() - t0:6.0f} s] {s}", flush=True)
@@ -205,7 +207,7 @@ def main() -> int:
     p.add_argument("--no-loop", action="store_true", help="skip the loop")
     p.add_argument("--holdout", action="store_true", help="after the loop, predict each load left out of the fit")
     p.add_argument("--loop-samples-per-rev", dest="loop_per_rev", type=int, default=None,
-                   help="readings per revolution of the loop's import (default: the import's default)")
+                   help="readings per revolution the loop fits (rv-calibrate --samples-per-rev; default its default)")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--estimator", default="sparse", choices=("sparse", "tolerance-prior"),
                    help="the loop's estimator (rv-calibrate --estimator)")
@@ -231,13 +233,11 @@ def main() -> int:
         figs += spectrum_section(read_dataset(full))
         if not args.no_loop:
             print("4. the loop (rv-calibrate, rvcalib.cli.run) on the imported dataset")
-            if args.loop_per_rev is not None:
-                coarse = Path(tmp) / "loop"
-                import_dataset(folder, coarse, args.design, args.loop_per_rev)
-                ds = read_dataset(coarse)
             figs += loop_section(ds, args.workers, args.rated_Nm, out / "calibration", args.estimator,
-                                 args.holdout)
-            figs.append(("loop_samples_per_rev", float(ds.runs[0].n / ds.runs[0].revolutions), "readings/rev"))
+                                 args.holdout, args.loop_per_rev)
+            k = model_samples_per_rev(ds.design) if args.loop_per_rev is None else args.loop_per_rev
+            dense_k = ds.runs[0].n / ds.runs[0].revolutions
+            figs.append(("loop_samples_per_rev", float(min(k, dense_k) if k else dense_k), "readings/rev"))
     record("real_rv160n", [(n, float(v), u) for n, v, u in figs])
     return 0
 

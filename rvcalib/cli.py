@@ -39,7 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = v.ArgumentParser(
         prog="rv-calibrate",
         usage="%(prog)s DATASET --out DIR [--reducer DESIGN.json] [--json] [--workers N] [--max-effects L] "
-              "[--max-order K] [--empirical-weight W] [--contact physical|impact] [--rated-Nm T] [--holdout-loads] "
+              "[--max-order K] [--empirical-weight W] [--contact physical|impact] [--rated-Nm T] [--samples-per-rev K] "
+              "[--holdout-loads] "
               "[--estimator sparse|tolerance-prior] [--max-linearisations N] [--no-half-turn] [--verbose]\n       %(prog)s import FILES... --out DATASET_DIR [--ratio N | --reducer DESIGN.json] "
               "[options of rv-calibrate import --help]",
         description="Calibrate the reducer model on measured TE: what the rig shows, the effects the declared model "
@@ -74,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the reducer's rated output torque, N m, for lost motion (+-3 %% of it) and the datasheet; "
                         "default: 167 N m for the default design only (the paper's RV-20E class); any other design "
                         "needs it")
+    p.add_argument("--samples-per-rev", dest="samples_per_rev", type=int, default=None, metavar="K",
+                   help="readings per output revolution the loop fits: denser runs are averaged down by the import's "
+                        "anti-alias low-pass (default: the density flat to the model's orders 2 Zp and N + 1, e.g. "
+                        "205 for ratio 81 with 40 pins; 0: every reading); the measured figures use every reading")
     p.add_argument("--holdout-loads", dest="holdout_loads", action="store_true",
                    help="also fit without each load in turn and predict it (one more loop per load)")
     p.add_argument("--estimator", default="sparse", metavar="E",
@@ -104,6 +109,8 @@ def settings_from(args: argparse.Namespace) -> CalibrationSettings:
         v.reject("--contact", args.contact, " or ".join(allowed), cls=v.OptionError)
     if args.rated_Nm is not None:
         v.option_real(args.rated_Nm, "--rated-Nm", 0.0, MAX_LOAD_NM, lo_open=True, unit="N m")
+    if args.samples_per_rev is not None and args.samples_per_rev != 0:
+        v.option_int(args.samples_per_rev, "--samples-per-rev", 16, 100000, why="0 for every reading")
     if args.estimator not in ESTIMATORS:
         v.reject("--estimator", args.estimator, " or ".join(ESTIMATORS), cls=v.OptionError)
     v.output_dir(args.out)
@@ -111,7 +118,7 @@ def settings_from(args: argparse.Namespace) -> CalibrationSettings:
                                empirical_weight=float(args.empirical_weight), workers=args.workers,
                                contact=args.contact, rated_Nm=args.rated_Nm, estimator=args.estimator,
                                max_linearisations=args.max_linearisations,
-                               half_turn=args.half_turn).validate()
+                               half_turn=args.half_turn, samples_per_rev=args.samples_per_rev).validate()
 
 
 def _friction(result, dataset, law) -> Any:
@@ -144,10 +151,14 @@ def run(dataset, settings: CalibrationSettings, out: str, holdout: bool = False,
     from rvcalib.loop import calibrate
     from rvcalib.report import measured_figures, write_report
     from rvdyn.solver import law_from_model
+    from rvrig.average import averaged, model_samples_per_rev
 
     law = None if settings.contact is None else law_from_model({"contact": settings.contact})
     measured = measured_figures(dataset, settings.rated_Nm)
+    k = settings.samples_per_rev
+    dataset, fit_notes = averaged(dataset, model_samples_per_rev(dataset.design) if k is None else k)
     result = calibrate(dataset, settings, log=log, model=model_for(dataset))
+    result.notes[:0] = fit_notes
     try:
         declared = declared_te(dataset, law)
     except ValueError as exc:        # the declared model rvdyn cannot solve: the residual before is left out

@@ -47,6 +47,10 @@ class CalibrationSettings:
     rated_Nm : float or None
         Rated torque of the reducer for its datasheet (N m); None: no datasheet is computed for a design other
         than the default.
+    samples_per_rev : int or None
+        Readings per output revolution ``rv-calibrate`` fits (:func:`rvcalib.cli.run` averages denser runs down,
+        :func:`rvrig.average.averaged`): None, the density whose averaging filter is flat to the reducer model's
+        orders (:func:`rvrig.average.model_samples_per_rev`); 0, every reading.
     families : tuple of str
         Candidate families in the library.
     estimator : str
@@ -71,6 +75,7 @@ class CalibrationSettings:
     workers: int = 1
     contact: str | None = None
     rated_Nm: float | None = None
+    samples_per_rev: int | None = None
     families: tuple = FAMILIES
     estimator: str = "sparse"
     half_turn: bool = True
@@ -98,6 +103,9 @@ class CalibrationSettings:
             bad("contact", f"one of {list(CONTACTS)}")
         if self.rated_Nm is not None and not (math.isfinite(self.rated_Nm) and 0 < self.rated_Nm <= 20000):
             bad("rated_Nm", "None or a number in (0, 20000] N m")
+        k = self.samples_per_rev
+        if k is not None and not (isinstance(k, int) and not isinstance(k, bool) and (k == 0 or 16 <= k <= 100000)):
+            bad("samples_per_rev", "None, 0 (every reading) or an integer in 16..100000")
         if not self.families or any(f not in FAMILIES for f in self.families):
             bad("families", f"a non-empty tuple from {list(FAMILIES)}")
         if self.estimator not in ESTIMATORS:

@@ -38,6 +38,8 @@ SETTINGS = CalibrationSettings(max_order=6, families=FAMILIES, workers=1)
     (["--estimator", "ridge"], r"--estimator 'ridge' is not allowed; allowed: sparse or tolerance-prior"),
     (["--rated-Nm", "-5"], r"--rated-Nm -5.0 is out of range; allowed: a number in \(0, 20000\] N m"),
     (["--workers", "two"], r"argument --workers: invalid int value: 'two'"),
+    (["--samples-per-rev", "8"], r"--samples-per-rev 8 is out of range; allowed: an integer in \[16, 100000\] "
+                                 r"\(0 for every reading\)"),
 ])
 def test_a_bad_option_is_refused_by_name(args, match, capsys, tmp_path):
     try:
@@ -82,13 +84,16 @@ def test_the_options_make_one_settings_object(tmp_path):
     args = build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o"), "--max-effects", "12",
                                       "--max-order", "40", "--empirical-weight", "0.5", "--contact", "impact",
                                       "--rated-Nm", "1568", "--workers", "1", "--estimator", "tolerance-prior",
-                                      "--max-linearisations", "30", "--no-half-turn"])
+                                      "--max-linearisations", "30", "--no-half-turn", "--samples-per-rev", "0"])
     assert settings_from(args) == CalibrationSettings(max_effects=12, max_order=40, empirical_weight=0.5,
                                                       contact="impact", rated_Nm=1568.0, workers=1,
                                                       estimator="tolerance-prior", max_linearisations=30,
-                                                      half_turn=False)
+                                                      half_turn=False, samples_per_rev=0)
     default = settings_from(build_parser().parse_args([str(tmp_path), "--out", str(tmp_path / "o")]))
-    assert default.workers == 2 and default.half_turn is True
+    assert default.workers == 2 and default.half_turn is True and default.samples_per_rev is None
+    with pytest.raises(ValueError, match=r"settings.samples_per_rev = 8 is not allowed: None, 0 \(every reading\) "
+                                         r"or an integer in 16..100000"):
+        CalibrationSettings(samples_per_rev=8).validate()
 
 
 @pytest.fixture(scope="module")
