@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linprog
 
-from rvcad.errors import Case, as_case
+from rvcad.errors import GEOMETRY_OPTIONS, Case, as_case
 from rvcad.geometry import ReducerGeometry
 from rvcad.params import closest_cranks
 from rvcad.plan import PLATE_RIM_CLEARANCE_MM
@@ -231,18 +231,27 @@ def _free_disc_interference(g: ReducerGeometry, states: int, rounds: int) -> np.
 
 
 def _blame(case: Case, limit: float) -> list[str]:
-    """Error types (``errors.<name>``) whose removal alone brings the pin interference below ``limit``."""
-    names = list(case.raw_errors)
+    """Error types (``errors.<name>``) and model options that move parts (``model.<name>``,
+    :data:`rvcad.errors.GEOMETRY_OPTIONS`) whose removal alone brings the pin interference below ``limit``."""
+    base = case.to_dict()
+    fields = [f"errors.{k}" for k in case.raw_errors] + \
+             [f"model.{k}" for k, v in case.model.items() if k in GEOMETRY_OPTIONS and v != GEOMETRY_OPTIONS[k].default]
     hit = []
-    for name in names:
-        rest = {k: v for k, v in case.raw_errors.items() if k != name}
+    for field in fields:
+        part, name = field.split(".", 1)
         try:
-            g = ReducerGeometry(case.with_errors(rest))
+            g = ReducerGeometry(Case.from_dict({**base, part: {k: v for k, v in base[part].items() if k != name}}))
         except ValueError:
             continue
         if float(pin_interference(g, states=8, rounds=4).max()) <= limit:
-            hit.append(f"errors.{name}")
-    return hit or [f"errors.{n}" for n in names] or ["design.pin_radius_mm"]
+            hit.append(field)
+    return hit or fields or ["design.pin_radius_mm"]
+
+
+def _given(case: Case, field: str) -> Any:
+    """The value a case gives to ``errors.<name>`` or ``model.<name>`` (None for a design field)."""
+    part, name = field.split(".", 1)
+    return case.raw_errors.get(name) if part == "errors" else case.model.get(name) if part == "model" else None
 
 
 # ----------------------------------------------------------------------------- entry point
@@ -296,7 +305,7 @@ def _check(case: Case, geometry: ReducerGeometry | None) -> dict[str, Any]:
     pen = float(pin_interference(g).max())
     if pen > MAX_PENETRATION_MM:
         fields = _blame(case, MAX_PENETRATION_MM)
-        values = [case.raw_errors.get(f.split(".", 1)[1]) for f in fields]
+        values = [_given(case, f) for f in fields]
         given = quote(values[0]) if len(fields) == 1 else "(" + ", ".join(map(quote, values)) + ")"
         raise DesignError(
             f"{' + '.join(fields)} {given} makes the parts overlap (pins in the discs, loaded stage I flanks) by at "

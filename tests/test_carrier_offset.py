@@ -8,7 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from rvcad.check import check_case
 from rvcad.errors import Case, CaseError
+from rvcad.validation import DesignError
 from rvcad.geometry import ReducerGeometry
 from rvcad.tolerances import TOL
 from rvcalib.library import Candidate, CaseDelta, PRIOR_SCALES
@@ -111,3 +113,11 @@ def test_the_library_candidate_writes_both_options():
     assert acc.to_dict({"model": {"carrier_offset_x_um": 1.0}})["model"] == {"carrier_offset_x_um": 2.5,
                                                                               "carrier_offset_y_um": -2.5}
     assert cand.size(np.array([3.0, 4.0])) == pytest.approx((5.0, math.degrees(math.atan2(4.0, 3.0))))
+
+
+@pytest.mark.parametrize("model", [{"carrier_offset_y_um": 150.0}, {"pin_circle_ovality_um": 150.0}])
+def test_a_part_moving_option_that_makes_the_parts_overlap_is_named(model):
+    """The design check blames the model option (not a design field) when removing it removes the overlap."""
+    (key, value), = model.items()
+    with pytest.raises(DesignError, match=rf"^model.{key} {value} makes the parts overlap"):
+        check_case({"model": model, "errors": {"pin_pitch": {"value": 0.001, "pin": 3}}}, cache=False)
