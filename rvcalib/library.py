@@ -42,7 +42,7 @@ import numpy as np
 from rvcad.errors import ERROR_TYPES
 from rvcad.params import Design
 from rvdyn.options import MODEL_OPTIONS
-from rvrig.rigimport import filtered_pin_orders
+from rvrig.average import filtered_model_orders, model_samples_per_rev
 
 ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
 ARCSEC_PER_DEG = 3600.0
@@ -459,16 +459,15 @@ def build_library(dataset, max_order: int, families: tuple[str, ...] = FAMILIES,
 
 
 def _folding_notes(dataset) -> list[str]:
-    """A note where the import's low-pass removed pin orders the model predicts (they fold back in the model's
-    predictions at the readings, where the record holds nothing): :func:`rvrig.rigimport.filtered_pin_orders`."""
+    """A note where the import's low-pass removed orders the model predicts (they fold back in the model's
+    predictions at the readings, where the record holds nothing): :func:`rvrig.average.filtered_model_orders`."""
     path = getattr(dataset, "path", None)
     if path is None or dataset.design is None:
         return []
-    zp = int(dataset.design.z_pins)
-    orders, end = filtered_pin_orders(path, zp)
+    orders, end = filtered_model_orders(path, dataset.design)
     if not orders:
         return []
-    return [f"the import's low-pass kept the orders below {end:g}; the model's pin order(s) "
-            f"{', '.join(map(str, orders))} fold back onto lower orders in its predictions at these readings, where "
-            f"the record holds nothing: import with --samples-per-rev of at least {5 * zp} (2 Zp in the pass band) "
-            "to compare them"]
+    return [f"the import's low-pass kept the orders below {end:g}; the model's order(s) "
+            f"{', '.join(f'{k:g}' for k in orders)} fold back onto lower orders in its predictions at these "
+            f"readings, where the record holds nothing: import with --samples-per-rev of at least "
+            f"{model_samples_per_rev(dataset.design)} to compare them"]

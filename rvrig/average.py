@@ -7,12 +7,15 @@ below a rig's noise) and the input order ``N + 1`` (the sun, the planets, the in
 costs in proportion to the readings, so the loop fits the records averaged down by the import's own anti-alias
 low-pass to the density whose flat band holds those orders (:func:`model_samples_per_rev`): the model's point
 predictions then fold no order the record holds back onto another. The measured figures (means, peak-to-peak,
-spectrum) are read from every reading.
+spectrum) are read from every reading. A folder imported at a lower density has lost some of those orders for
+good: :func:`filtered_model_orders` says which.
 """
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -22,11 +25,30 @@ from rvrig.rigfilter import PASS_FRACTION, decimate
 from rvrig.rigimport import RigRecord
 
 
+def model_orders(design: Design) -> list[float]:
+    """The orders of the output angle the reducer model's TE holds: ``Zp``, ``2 Zp`` and ``N + 1``."""
+    return [float(design.z_pins), 2.0 * design.z_pins, float(design.ratio) + 1.0]
+
+
 def model_samples_per_rev(design: Design) -> int:
     """Readings per output revolution whose averaging filter is flat up to the model's orders: the smallest
     ``K`` with ``PASS_FRACTION K / 2 >= max(2 Zp, N + 1)`` (205 for ratio 81 with 40 pins, 305 for ratio 121)."""
-    need = max(2.0 * design.z_pins, float(design.ratio) + 1.0)
-    return int(math.ceil(2.0 * need / PASS_FRACTION - 1e-9))
+    return int(math.ceil(2.0 * max(model_orders(design)) / PASS_FRACTION - 1e-9))
+
+
+def filtered_model_orders(folder: str | Path, design: Design) -> tuple[list[float], float | None]:
+    """The model's orders (:func:`model_orders`) that the import's low-pass took out of a dataset folder's
+    records (above the pass band's end of some run, ``import.json``), and that end (order); ``([], None)`` for a
+    folder not written by :func:`rvrig.rigimport.import_rig` or not averaged down."""
+    path = Path(folder) / "import.json"
+    if not path.is_file():
+        return [], None
+    runs = [r for f in json.loads(path.read_text(encoding="utf-8")).get("files", []) for r in f.get("runs", [])]
+    ends = [float(r["filter"]["pass_band_to_order"]) for r in runs if r.get("filter")]
+    if not ends:
+        return [], None
+    end = min(ends)
+    return [k for k in model_orders(design) if k > end], end
 
 
 def _record(run: RunRecord) -> RigRecord:

@@ -359,28 +359,6 @@ def import_rig(files: "list[str | Path]", out: str | Path, *, ratio: float | Non
     return result
 
 
-#: Pin orders the reducer model's TE holds (Zp and 2 Zp: docs/physics.md section 3; 3 Zp is below the rig noise).
-PIN_HARMONICS = (1, 2)
-
-
-def filtered_pin_orders(folder: str | Path, z_pins: int) -> tuple[list[int], float | None]:
-    """The pin orders ``k Zp`` (:data:`PIN_HARMONICS`) that the import's low-pass took out of a dataset folder's
-    records (above the pass band's end of some run), and that pass band's end (order); ``([], None)`` for a
-    folder not written by :func:`import_rig` or not averaged down.
-
-    The reducer model predicts the TE at the readings as point samples: an order above half the readings per
-    revolution folds back onto a lower one in the prediction, where the low-passed record holds nothing."""
-    path = Path(folder) / "import.json"
-    if not path.is_file():
-        return [], None
-    runs = [r for f in json.loads(path.read_text(encoding="utf-8")).get("files", []) for r in f.get("runs", [])]
-    ends = [float(r["filter"]["pass_band_to_order"]) for r in runs if r.get("filter")]
-    if not ends:
-        return [], None
-    end = min(ends)
-    return [k * z_pins for k in PIN_HARMONICS if k * z_pins > end], end
-
-
 def _runs_table(runs: list[dict]) -> pd.DataFrame:
     """runs.csv: a condition column only when every file has it (a partly known condition is refused)."""
     df = pd.DataFrame(runs)

@@ -1,5 +1,6 @@
 """Synthetic measured datasets for the rig tests: runs of one output revolution of a ratio-81 reducer whose TE is
-a function of the output angle and time, written in the dataset format (conventions, "Measured data")."""
+a function of the output angle and time, written in the dataset format (conventions, "Measured data"), and rig
+files in the shared rig layout (output angle and TE per direction, sampled at a fixed rate)."""
 from __future__ import annotations
 
 import json
@@ -44,3 +45,31 @@ def cos_orders(terms: dict[float, tuple[float, float]]) -> Callable:
         r = np.radians(th)
         return sum(a * np.cos(k * r + np.radians(p)) for k, (a, p) in terms.items())
     return te
+
+
+#: The shared rig layout's header: output angle and TE per direction (the source's spelling).
+HEADER = ["Poisition_Output_Reducer_Fw", "Transmission_Error_Fw", "Position_Output_Reducer_Bw", "Transmission_Error_Bw"]
+ARCSEC = 1.0 / 3600.0
+
+
+def te_arcsec(theta_deg: np.ndarray, terms: dict[float, float], const: float = 0.0) -> np.ndarray:
+    """``const + sum a cos(k theta)`` (theta the output angle, deg)."""
+    th = np.radians(theta_deg)
+    return const + sum(a * np.cos(k * th) for k, a in terms.items())
+
+
+def rig_file(path: Path, per_rev: int = 2000, revs: float = 1.0, terms=None, consts=(-20.0, 15.0),
+             drop: tuple[int, ...] = (), wrap: bool = False) -> Path:
+    """A rig file: ``per_rev`` readings per output revolution, forward 0 -> 360 and backward 360 -> 0;
+    ``drop``: reading indices left out of both directions (gaps); ``wrap``: positions modulo 360."""
+    terms = {1: 30.0, 39: 4.0} if terms is None else terms
+    n = int(round(per_rev * revs))
+    keep = np.setdiff1d(np.arange(n), drop)
+    fw = (np.arange(n) + 0.5) * 360.0 / per_rev
+    bw = 360.0 * np.ceil(revs) - fw
+    cols = []
+    for pos, c in ((fw, consts[0]), (bw, consts[1])):
+        pos = pos[keep]
+        cols += [np.mod(pos, 360.0) if wrap else pos, te_arcsec(pos, terms, c) * ARCSEC]
+    pd.DataFrame(dict(zip(HEADER, cols))).to_csv(path, index=False, float_format="%.10f")
+    return path

@@ -9,8 +9,11 @@ import pytest
 
 from rvcad.params import Design
 from rvcalib.simulate import simulate_dataset, standard_runs
-from rvrig.average import averaged, model_samples_per_rev
+from rig_records import R81, rig_file
+from rvcalib.library import build_library
+from rvrig.average import averaged, filtered_model_orders, model_samples_per_rev
 from rvrig.dataset import read_dataset
+from rvrig.rigimport import import_rig
 
 
 def _te(output_deg: np.ndarray, high: float = 2.0) -> np.ndarray:
@@ -53,3 +56,19 @@ def test_sparser_runs_and_zero_keep_every_reading(dense):
         assert notes == [] and all(a is b for a, b in zip(got.runs, dense.runs))
     with pytest.raises(ValueError, match=r"samples_per_rev -1 must be 0 \(every reading\) or positive"):
         averaged(dense, -1)
+
+
+def test_model_orders_an_import_took_out_are_noted_for_the_loop(tmp_path):
+    """Imported at 180 per revolution the pass band ends at order 72: of a ratio-81 reducer's orders 40, 80 and 82
+    the last two are out of the record but fold back in the model's point predictions, and the library's notes say
+    so; at 360 (pass band to 144) and unfiltered, nothing is noted."""
+    f = rig_file(tmp_path / "r.csv", per_rev=720)
+    notes = {}
+    for k in (180, 360, 0):
+        import_rig([f], tmp_path / f"ds{k}", design=R81, load_Nm=0.0, samples_per_rev=k)
+        notes[k] = [n for n in build_library(read_dataset(tmp_path / f"ds{k}"), 10).notes if "fold back" in n]
+    design = read_dataset(tmp_path / "ds180").design
+    assert filtered_model_orders(tmp_path / "ds180", design) == ([80.0, 82.0], pytest.approx(72.0))
+    assert len(notes[180]) == 1 and "order(s) 80, 82 fold back" in notes[180][0] and "at least 205" in notes[180][0]
+    assert notes[360] == [] and notes[0] == []
+    assert filtered_model_orders(tmp_path, design) == ([], None)            # no import.json

@@ -6,45 +6,16 @@ output angle plus a constant per direction, sampled at a fixed rate at constant 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
+from rig_records import ARCSEC, HEADER, R81, rig_file, te_arcsec
 from rvcalib.cli import main
-from rvcalib.library import build_library
 from rvrig.dataset import read_dataset
 from rvrig.rigfilter import antialias_filter, decimate, default_samples_per_rev
-from rvrig.rigimport import filtered_pin_orders, import_rig, parse_conditions, read_rig_file
-
-#: A ratio-81 design (the dataset reader converts the readings with the design's ratio).
-R81 = {"z_sun": 18, "z_planet": 36}
-HEADER = ["Poisition_Output_Reducer_Fw", "Transmission_Error_Fw", "Position_Output_Reducer_Bw", "Transmission_Error_Bw"]
-ARCSEC = 1.0 / 3600.0
-
-
-def te_arcsec(theta_deg: np.ndarray, terms: dict[float, float], const: float = 0.0) -> np.ndarray:
-    """``const + sum a cos(k theta)`` (theta the output angle, deg)."""
-    th = np.radians(theta_deg)
-    return const + sum(a * np.cos(k * th) for k, a in terms.items())
-
-
-def rig_file(path: Path, per_rev: int = 2000, revs: float = 1.0, terms=None, consts=(-20.0, 15.0),
-             drop: tuple[int, ...] = (), wrap: bool = False) -> Path:
-    """A rig file: ``per_rev`` readings per output revolution, forward 0 -> 360 and backward 360 -> 0;
-    ``drop``: reading indices left out of both directions (gaps); ``wrap``: positions modulo 360."""
-    terms = {1: 30.0, 39: 4.0} if terms is None else terms
-    n = int(round(per_rev * revs))
-    keep = np.setdiff1d(np.arange(n), drop)
-    fw = (np.arange(n) + 0.5) * 360.0 / per_rev
-    bw = 360.0 * np.ceil(revs) - fw
-    cols = []
-    for pos, c in ((fw, consts[0]), (bw, consts[1])):
-        pos = pos[keep]
-        cols += [np.mod(pos, 360.0) if wrap else pos, te_arcsec(pos, terms, c) * ARCSEC]
-    pd.DataFrame(dict(zip(HEADER, cols))).to_csv(path, index=False, float_format="%.10f")
-    return path
+from rvrig.rigimport import import_rig, parse_conditions, read_rig_file
 
 
 def test_the_shared_layout_becomes_a_dataset_with_conditions_from_the_file_name(tmp_path, capsys):
@@ -232,18 +203,3 @@ def test_a_time_column_gives_the_times_and_a_time_gap(tmp_path):
     assert recs[1].time_source == "column time_s"
     assert [(g["kind"], g["missing"]) for g in recs[1].gaps] == [("split", 5)]
     np.testing.assert_allclose(recs[-1].time_s, t - t[0])
-
-
-def test_pin_orders_the_low_pass_took_out_are_noted_for_the_loop(tmp_path):
-    """Averaged to 180 per revolution the pass band ends at order 72: the default design's order 2 Zp = 80 is out
-    of the record but folds back in the model's point predictions, and the library's notes say so; at 360 (pass
-    band to 144) and unfiltered, nothing is noted."""
-    f = rig_file(tmp_path / "r.csv", per_rev=720)
-    notes = {}
-    for k in (180, 360, 0):
-        import_rig([f], tmp_path / f"ds{k}", design=R81, load_Nm=0.0, samples_per_rev=k)
-        notes[k] = [n for n in build_library(read_dataset(tmp_path / f"ds{k}"), 10).notes if "fold back" in n]
-    assert filtered_pin_orders(tmp_path / "ds180", 40) == ([80], pytest.approx(72.0))
-    assert len(notes[180]) == 1 and "pin order(s) 80 fold back" in notes[180][0] and "at least 200" in notes[180][0]
-    assert notes[360] == [] and notes[0] == []
-    assert filtered_pin_orders(tmp_path, 40) == ([], None)                # no import.json
