@@ -234,7 +234,7 @@ def _named(c, effects: list, f: int, F, tau: np.ndarray, level: float, laplace: 
     return named_effect(c, a_tot, m * tau, S * np.outer(tau, tau), level)
 
 
-def _twin_group(eff: NamedEffect, cands: list, f: int, twins: list, level: float) -> dict:
+def twin_group(eff: NamedEffect, cands: list, f: int, twins: list, level: float) -> dict:
     """A named effect that a swap cannot tell from its twins, as a group: each member with its size (the named
     effect's, and each twin's size after the swap: a value, or a magnitude and an angle) and its probability of
     being the one, exp(-Delta chi^2 / 2) normalised (equal prior odds); the interval is the named effect's."""
@@ -337,7 +337,7 @@ def read_posterior(F, fit, feature_cands: list, tau: np.ndarray, settings, fixed
                 if not (eff.ci95[0] > 0 or eff.ci95[1] < 0):   # the data cannot tell its size from zero
                     diffuse.append(dict(info, reason="its 95 % interval includes zero"))
                 elif (twins or {}).get(f):      # another candidate fits as well in its place (rvcalib.twins)
-                    groups.append(_twin_group(eff, cands, f, twins[f], level))
+                    groups.append(twin_group(eff, cands, f, twins[f], level))
                 else:
                     named.append(eff)
         elif fams == {"empirical"}:

@@ -9,7 +9,7 @@ import pytest
 
 from rvcalib.library import Candidate
 from rvcalib.loop import Projector
-from rvcalib.result import _twin_group
+from rvcalib.result import twin_group
 from rvcalib.twins import DELTA_CHI2, swap_twins
 
 N = 200
@@ -176,7 +176,7 @@ def test_an_eccentricity_and_its_image_on_the_other_crank_are_twins_with_their_o
     cands = [Candidate(f"e{i}", "planet_eccentricity", "table4", "um", "", ("x", "y")) for i in range(3)]
     eff = SimpleNamespace(value=float(np.hypot(2.0, 1.0)), angle_deg=float(np.degrees(np.arctan2(1.0, 2.0))),
                           ci95=(2.0, 2.5))
-    members = _twin_group(eff, cands, 0, got[0], 0.95)["members"]
+    members = twin_group(eff, cands, 0, got[0], 0.95)["members"]
     assert [m["value"] for m in members] == pytest.approx([np.hypot(2.0, 1.0)] * 2)
     assert members[1]["angle_deg"] == pytest.approx(members[0]["angle_deg"] - 180.0)
     assert [m["probability"] for m in members] == pytest.approx([0.5, 0.5])
