@@ -119,15 +119,16 @@ def swap_twins(pb, X0: np.ndarray, theta: np.ndarray, sigma: float, active_s: np
     return out
 
 
+def _held(G: np.ndarray, t: np.ndarray) -> float:
+    """The squared norm of ``t``'s projection onto the span of the columns ``G``."""
+    return max(float(t @ (G @ np.linalg.lstsq(G, t, rcond=None)[0])), 0.0)
+
+
 def _captured(X: np.ndarray, t: np.ndarray, blocks: list) -> np.ndarray:
     """For each block of columns of ``X``: the share of ``t``'s norm its span holds (for one column, the
     |correlation|)."""
     tt = max(float(t @ t), 1e-300)
-    out = np.zeros(len(blocks))
-    for i, ks in enumerate(blocks):
-        G = X[:, ks]
-        out[i] = np.sqrt(max(float(t @ (G @ np.linalg.lstsq(G, t, rcond=None)[0])), 0.0) / tt)
-    return out
+    return np.array([np.sqrt(_held(X[:, ks], t) / tt) for ks in blocks])
 
 
 def _moved_chi2(X: np.ndarray, js: list, c: np.ndarray, active_s: np.ndarray, reading_cols: np.ndarray,
@@ -139,12 +140,7 @@ def _moved_chi2(X: np.ndarray, js: list, c: np.ndarray, active_s: np.ndarray, re
     Q = np.linalg.qr(X[:, keep])[0] if keep.size else np.zeros((X.shape[0], 0))
     t = X[:, js] @ c
     t = t - Q @ (Q.T @ t)
-    out = np.zeros(len(blocks))
-    for i, ks in enumerate(blocks):
-        G = X[:, ks]
-        G = G - Q @ (Q.T @ G)
-        out[i] = float(t @ t) - float(t @ (G @ np.linalg.lstsq(G, t, rcond=None)[0]))
-    return out
+    return np.array([float(t @ t) - _held(X[:, ks] - Q @ (Q.T @ X[:, ks]), t) for ks in blocks])
 
 
 def _moved(X: np.ndarray, theta: np.ndarray, js: list, ks: list, active_s: np.ndarray, reading_cols: np.ndarray,
