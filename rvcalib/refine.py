@@ -54,66 +54,78 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
     (theta, b_r, te, cost)
         The refined parameters, the model TE there and the objective (the sum of squares above).
     """
-    p = theta.size
-    lo, hi = model._lower[active_s], model._upper[active_s]
-    sd = prior_sd[active_s]
-    Ra = proj(R[:, active_r])
-    ra_prior = 1.0 / prior_sd[p + active_r] ** 2
-    A = Ra.T @ Ra / sigma ** 2 + np.diag(ra_prior)
-    cache: dict = {}
+    obj = _Objective(model, y, proj, R, theta, b_r, active_s, active_r, prior_sd, sigma, spread, pool)
     b = b_r.copy()
-
-    def linear(r: np.ndarray) -> np.ndarray:
-        return np.linalg.solve(A, Ra.T @ r / sigma ** 2) if active_r.size else np.zeros(0)
-
-    def state(x):
-        th = theta.copy()
-        th[active_s] = x
-        return th
-
-    def fun(x):
-        if np.array_equal(cache.get("x"), x):      # the model's last solve: its states are this x's
-            return cache["f"].copy()
-        th = state(x)
-        try:
-            te = model.te(th)
-        except ModelEvaluationError:
-            return np.full(y.size + x.size + active_r.size, 1e6)
-        r = proj(y - te - R @ _zero(b_r, active_r))
-        br = linear(r)
-        f = np.concatenate([(r - Ra @ br) / sigma, x / sd, br * np.sqrt(ra_prior)])
-        cache["x"], cache["te"], cache["br"], cache["f"] = x.copy(), te, br, f
-        return f.copy()
-
-    def jac(x):
-        if not np.array_equal(cache.get("x"), x):
-            fun(x)
-        renew = np.zeros(p, dtype=bool)
-        renew[active_s] = True
-        J = proj(model.jacobian(state(x), spread, renew, pool)[:, active_s])
-        if active_r.size:
-            J = J - Ra @ np.linalg.solve(A, Ra.T @ J / sigma ** 2)
-        return np.vstack([-J / sigma, np.diag(1.0 / sd), np.zeros((active_r.size, active_s.size))])
-
     if active_s.size == 0:
         te = model.te(theta)
-        b[active_r] = linear(proj(y - te - R @ _zero(b_r, active_r)))
-        return theta, _zero(b, np.zeros(0, int)) + _only(b, active_r, b_r), te, float("nan")
-    x0 = _solvable(fun, theta, active_s, lo, hi, feasible)
+        b[active_r] = obj.linear(proj(y - te - R @ _zero(b_r, active_r)))
+        return theta, b, te, float("nan")
+    lo, hi, sd = model._lower[active_s], model._upper[active_s], obj.sd
+    x0 = _solvable(obj, theta, active_s, lo, hi, feasible)
     if alternative is not None:
-        x1 = _solvable(fun, alternative, active_s, lo, hi, feasible)
-        if not np.array_equal(x1, x0) and np.sum(fun(x1) ** 2) < np.sum(fun(x0) ** 2):
+        x1 = _solvable(obj, alternative, active_s, lo, hi, feasible)
+        if not np.array_equal(x1, x0) and np.sum(obj(x1) ** 2) < np.sum(obj(x0) ** 2):
             x0 = x1
     if np.any((x0 <= lo) | (x0 >= hi)):
-        x0 = _gauss_newton_start(fun, jac, x0, lo, hi, sd)
+        x0 = _gauss_newton_start(obj, obj.jac, x0, lo, hi, sd)
     nfev = max_nfev or 10 + 2 * active_s.size
-    res = optimize.least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale=sd, max_nfev=nfev)
-    fun(res.x)                                  # the model's states are those of the estimate (the next Jacobian's)
-    b[active_r] = cache["br"]
+    res = optimize.least_squares(obj, x0, jac=obj.jac, bounds=(lo, hi), method="trf", x_scale=sd, max_nfev=nfev)
+    obj(res.x)                                  # the model's states are those of the estimate (the next Jacobian's)
+    b[active_r] = obj.last["br"]
     if log:
         log(f"  nonlinear estimate of {active_s.size} solved and {active_r.size} reading parameters: "
             f"{res.nfev} evaluations, objective {2 * res.cost:.1f} ({res.message})")
-    return state(res.x), b, cache["te"], float(2 * res.cost)
+    return obj.state(res.x), b, obj.last["te"], float(2 * res.cost)
+
+
+class _Objective:
+    """The residuals of the module docstring's sum of squares at the active solved parameters ``x``, the active
+    reading coefficients eliminated (their ridge solution for each ``x``: variable projection), and their
+    Jacobian. The last evaluation is kept: the model's states are then that ``x``'s, which its Jacobian needs."""
+
+    def __init__(self, model, y, proj, R, theta, b_r, active_s, active_r, prior_sd, sigma, spread, pool) -> None:
+        self.model, self.y, self.proj, self.R, self.theta = model, y, proj, R, theta
+        self.active_s, self.active_r, self.sigma, self.spread, self.pool = active_s, active_r, sigma, spread, pool
+        self.sd = prior_sd[active_s]
+        self.Ra = proj(R[:, active_r])
+        self.ra_prior = 1.0 / prior_sd[theta.size + active_r] ** 2
+        self.A = self.Ra.T @ self.Ra / sigma ** 2 + np.diag(self.ra_prior)
+        self.fixed_r = R @ _zero(b_r, active_r)         # the inactive reading coefficients' TE
+        self.last: dict = {}
+
+    def linear(self, r: np.ndarray) -> np.ndarray:
+        """The active reading coefficients' ridge solution on the residual ``r``."""
+        if not self.active_r.size:
+            return np.zeros(0)
+        return np.linalg.solve(self.A, self.Ra.T @ r / self.sigma ** 2)
+
+    def state(self, x: np.ndarray) -> np.ndarray:
+        th = self.theta.copy()
+        th[self.active_s] = x
+        return th
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        if np.array_equal(self.last.get("x"), x):      # the model's last solve: its states are this x's
+            return self.last["f"].copy()
+        try:
+            te = self.model.te(self.state(x))
+        except ModelEvaluationError:
+            return np.full(self.y.size + x.size + self.active_r.size, 1e6)
+        r = self.proj(self.y - te - self.fixed_r)
+        br = self.linear(r)
+        f = np.concatenate([(r - self.Ra @ br) / self.sigma, x / self.sd, br * np.sqrt(self.ra_prior)])
+        self.last = {"x": x.copy(), "te": te, "br": br, "f": f}
+        return f.copy()
+
+    def jac(self, x: np.ndarray) -> np.ndarray:
+        if not np.array_equal(self.last.get("x"), x):
+            self(x)
+        renew = np.zeros(self.theta.size, dtype=bool)
+        renew[self.active_s] = True
+        J = self.proj(self.model.jacobian(self.state(x), self.spread, renew, self.pool)[:, self.active_s])
+        if self.active_r.size:
+            J = J - self.Ra @ np.linalg.solve(self.A, self.Ra.T @ J / self.sigma ** 2)
+        return np.vstack([-J / self.sigma, np.diag(1.0 / self.sd), np.zeros((self.active_r.size, self.active_s.size))])
 
 
 def _solvable(fun, theta: np.ndarray, active_s: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -153,11 +165,4 @@ def _zero(b: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """b with the entries ``idx`` set to zero."""
     out = b.copy()
     out[idx] = 0.0
-    return out
-
-
-def _only(b: np.ndarray, idx: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """Zeros but for the entries ``idx`` of b."""
-    out = np.zeros_like(ref)
-    out[idx] = b[idx]
     return out

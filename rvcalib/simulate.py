@@ -129,50 +129,44 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     out_dir : str or Path
         Dataset folder to create (``runs.csv``, ``samples.csv``).
     runs : list of dict
-        Each ``{"run", "load_Nm", "direction"}`` plus optional ``"declared": {error key: value}``
-        (default instance, written to runs.csv and used in the truth), ``"temperature_C"`` and
-        ``"test"`` (the id of the test, one homing of the rig, the run belongs to; default the run's
-        own id).
+        Each ``{"run", "load_Nm", "direction"}`` plus optional ``"declared": {error key: value}`` (default instance,
+        written to runs.csv and used in the truth), ``"temperature_C"`` and ``"test"`` (the id of the test, one homing
+        of the rig, the run belongs to; default the run's own id).
     hidden : dict or None
-        The truth the dataset does not declare: ``"errors"`` (case JSON errors, any instance),
-        ``"model"`` (rvdyn model options), ``"measurement"`` (``output_encoder_eccentricity_um``,
-        ``output_encoder_phase_deg``, ``input_encoder_eccentricity_um``, ``input_encoder_phase_deg``,
-        ``output_encoder_scale_ppm``: the output reading is ``theta_out (1 + s)``),
-        ``"design"`` (design fields of the reducer as built that the dataset's design does not hold, e.g. an
-        undeclared profile modification ``{"profile_equidistant_mm": 0.004}``; expected as the library effect that
-        gives the same TE, :mod:`rvcalib.equivalents`)
-        and ``"harmonics"`` (list of ``{"order", "amplitude_arcsec", "phase_deg", "per_Nm"}``, outside
-        the library; with ``"per_Nm": true`` the amplitude is per N m of the run's load).
-    noise_arcsec : float
-        Output encoder noise (standard deviation), arcsec.
-    input_noise_arcsec : float
-        Input encoder noise, arcsec (enters the TE divided by the ratio).
+        The truth the dataset does not declare: ``"errors"`` (case JSON errors, any instance), ``"model"`` (rvdyn
+        model options), ``"measurement"`` (``output_encoder_eccentricity_um``, ``output_encoder_phase_deg``,
+        ``input_encoder_eccentricity_um``, ``input_encoder_phase_deg``, ``output_encoder_scale_ppm``: the output
+        reading is ``theta_out (1 + s)``), ``"design"`` (design fields of the reducer as built that the dataset's
+        design does not hold, e.g. an undeclared profile modification ``{"profile_equidistant_mm": 0.004}``; expected
+        as the library effect that gives the same TE, :mod:`rvcalib.equivalents`) and ``"harmonics"`` (list of
+        ``{"order", "amplitude_arcsec", "phase_deg", "per_Nm"}``, outside the library; with ``"per_Nm": true`` the
+        amplitude is per N m of the run's load).
+    noise_arcsec, input_noise_arcsec : float
+        Output and input encoder noise (standard deviations), arcsec; the input's enters the TE divided by the ratio.
     samples_per_rev : int
         Samples per output revolution (any count >= 8; the rig's sampling, not a model grid).
     start_deg : float
-        Input angle of the first sample, deg. Any start other than 0 puts the samples off every
-        model grid, as on a real rig.
+        Input angle of the first sample, deg. Any start other than 0 puts the samples off every model grid, as on a
+        real rig.
     revolutions : float
         Output revolutions recorded per run (>= 1).
     transient : dict or None
         ``{"runs": [ids] or "all", "amplitude_arcsec", "tau_samples", "extra_revolutions"}``.
-    duplicates : int
-        Rows written twice, spread at random over the file.
-    seed : int
-        Random seed.
+    duplicates, seed : int
+        Rows written twice (spread at random over the file); the random seed.
     answer_path : str, Path or None
         Where the answer goes (default ``<out_dir>.answer.json`` beside the folder).
     speed_rpm : float or None
         Written to runs.csv if given (informative).
     design : dict or None
-        The reducer (the ``design`` object of a case JSON; default the paper's). Every run is solved
-        with it, and its ratio converts the encoder angles.
+        The reducer (the ``design`` object of a case JSON; default the paper's). Every run is solved with it, and its
+        ratio converts the encoder angles.
     write_design : bool
-        Write the design into the dataset folder as ``design.json`` (only for a non-default design),
-        as a bench that knows its reducer would.
+        Write the design into the dataset folder as ``design.json`` (only for a non-default design), as a bench that
+        knows its reducer would.
     test_offsets : dict or None
-        The rig's zero of each test: test id -> constant (arcsec) added to the TE reading of every
-        run of that test (tests not listed: 0). Not written to the dataset; the answer file holds it.
+        The rig's zero of each test: test id -> constant (arcsec) added to the TE reading of every run of that test
+        (tests not listed: 0). Not written to the dataset; the answer file holds it.
 
     Returns
     -------
@@ -181,51 +175,59 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     """
     hidden = dict(hidden or {})
     meas = _check_hidden(hidden)
-    if revolutions < 1.0:
-        raise ValueError(f"revolutions {revolutions} must be >= 1 (the format needs one output revolution)")
-    if not runs:
-        raise ValueError("runs must list at least one run")
+    declared_keys = _check_runs(runs, revolutions, samples_per_rev)
     run_tests, offsets = _test_offsets(runs, test_offsets)
     rng = np.random.default_rng(seed)
     out = Path(out_dir)
     des, built = _designs(design, hidden)
-    N = int(samples_per_rev)
-    if N < 8:
+    rig = _Rig(float(des.ratio), period_deg(des) / int(samples_per_rev), int(samples_per_rev), float(revolutions),
+               float(start_deg), dict(transient or {}), meas, list(hidden.get("harmonics") or []),
+               float(noise_arcsec), float(input_noise_arcsec))
+    built_dict = built.to_dict() if design or hidden.get("design") else None
+    truths = [_truth_case(r, hidden, built_dict) for r in runs]
+    samples = [rig.readings(r, t, offsets.get(run_tests[str(r["run"])], 0.0), rng) for r, t in zip(runs, truths)]
+    _write_dataset(out, [_run_row(r, declared_keys, speed_rpm) for r in runs], samples, int(duplicates), rng,
+                   any("temperature_C" in r for r in runs),
+                   des.to_dict() if design and write_design and des != Design() else None)
+    answer = {"dataset": str(out), "hidden": hidden, "expected_effects": expected_effects(hidden), **rig.answer(),
+              "start_deg": float(start_deg), "revolutions": revolutions, "duplicates": int(duplicates), "seed": seed,
+              "design": des.to_dict(), "test_offsets": offsets, "run_tests": run_tests}
+    ap = Path(answer_path) if answer_path is not None else out.parent / f"{out.name}.answer.json"
+    _write_json_atomic(answer, ap)
+    return ap
+
+
+def _check_runs(runs: list[dict[str, Any]], revolutions: float, samples_per_rev: int) -> list[str]:
+    """Validate the runs and the sampling; returns the declared error keys of the runs, sorted."""
+    if revolutions < 1.0:
+        raise ValueError(f"revolutions {revolutions} must be >= 1 (the format needs one output revolution)")
+    if not runs:
+        raise ValueError("runs must list at least one run")
+    if int(samples_per_rev) < 8:
         raise ValueError(f"samples_per_rev {samples_per_rev} must be >= 8")
     declared_keys = sorted({k for r in runs for k in (r.get("declared") or {})})
     for k in declared_keys:
         if k not in ERROR_TYPES:
             raise ValueError(f"runs[].declared key {k!r} is unknown; allowed: {sorted(ERROR_TYPES)}")
+    return declared_keys
+
+
+def _write_dataset(out: Path, rows: list[dict[str, Any]], samples: list[pd.DataFrame], duplicates: int,
+                   rng: np.random.Generator, temperatures: bool, design: dict[str, Any] | None) -> None:
+    """Write ``runs.csv``, ``samples.csv`` (``duplicates`` rows written twice, at random places) and, where given,
+    ``design.json``."""
     out.mkdir(parents=True, exist_ok=True)
-    rig = _Rig(float(des.ratio), period_deg(des) / N, N, float(revolutions), float(start_deg), dict(transient or {}),
-               meas, list(hidden.get("harmonics") or []), float(noise_arcsec), float(input_noise_arcsec))
-    rows, samples = [], []
-    for r in runs:
-        truth = _truth_case(r, hidden, built.to_dict() if design or hidden.get("design") else None)
-        samples.append(rig.readings(r, truth, offsets.get(run_tests[str(r["run"])], 0.0), rng))
-        rows.append(_run_row(r, declared_keys, speed_rpm))
     sdf = pd.concat(samples, ignore_index=True)
     if duplicates:
-        idx = np.sort(rng.choice(len(sdf), size=int(duplicates), replace=False))
+        idx = np.sort(rng.choice(len(sdf), size=duplicates, replace=False))
         sdf = pd.concat([sdf, sdf.iloc[idx]]).sort_index(kind="stable").reset_index(drop=True)
     rdf = pd.DataFrame(rows)
-    if any("temperature_C" in r for r in runs):
+    if temperatures:
         rdf["temperature_C"] = rdf["temperature_C"].fillna(20.0)
     _write_csv_atomic(rdf, out / "runs.csv")
     _write_csv_atomic(sdf, out / "samples.csv")
-    if design and write_design and des != Design():
-        _write_json_atomic(des.to_dict(), out / "design.json")
-    te_noise = math.sqrt(noise_arcsec ** 2 + (input_noise_arcsec / rig.ratio) ** 2)
-    answer = {"dataset": str(out), "hidden": hidden, "expected_effects": expected_effects(hidden),
-              "noise_te_arcsec": te_noise, "noise_output_arcsec": noise_arcsec,
-              "noise_input_arcsec": input_noise_arcsec, "samples_per_rev": N,
-              "start_deg": float(start_deg), "revolutions": revolutions,
-              "transient": rig.transient or None, "duplicates": int(duplicates), "seed": seed,
-              "encoder_radii_mm": {"output": OUTPUT_ENCODER_RADIUS_MM, "input": INPUT_ENCODER_RADIUS_MM},
-              "design": des.to_dict(), "ratio": rig.ratio, "test_offsets": offsets, "run_tests": run_tests}
-    ap = Path(answer_path) if answer_path is not None else out.parent / f"{out.name}.answer.json"
-    _write_json_atomic(answer, ap)
-    return ap
+    if design is not None:
+        _write_json_atomic(design, out / "design.json")
 
 
 def _write_json_atomic(obj: Any, path: Path) -> None:
@@ -321,6 +323,15 @@ class _Rig:
     harmonics: list[dict[str, Any]]
     noise_arcsec: float
     input_noise_arcsec: float
+
+    def answer(self) -> dict[str, Any]:
+        """What the answer file says of the rig: its noise (the TE's, the output's and the input's, arcsec), its
+        sampling, its transient, the encoder radii and the ratio."""
+        te_noise = math.sqrt(self.noise_arcsec ** 2 + (self.input_noise_arcsec / self.ratio) ** 2)
+        return {"noise_te_arcsec": te_noise, "noise_output_arcsec": self.noise_arcsec,
+                "noise_input_arcsec": self.input_noise_arcsec, "samples_per_rev": self.N,
+                "transient": self.transient or None, "ratio": self.ratio,
+                "encoder_radii_mm": {"output": OUTPUT_ENCODER_RADIUS_MM, "input": INPUT_ENCODER_RADIUS_MM}}
 
     def readings(self, r: dict[str, Any], truth: dict[str, Any], offset_arcsec: float,
                  rng: np.random.Generator) -> pd.DataFrame:
