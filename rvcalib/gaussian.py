@@ -101,23 +101,41 @@ def evidence_sigma(X: np.ndarray, r: np.ndarray, sd: np.ndarray, dof: int, sigma
                    iterations: int = 50) -> tuple[float, np.ndarray]:
     """MacKay's fixed point for the noise (see the module docstring) and the posterior covariance there.
 
+    The parameters with a flat prior (``sd`` infinite), ``F``, are determined by the data alone: each counts one
+    in ``g``, and the others see the columns and the residual with ``X_F`` projected out (``Q``). With
+    ``D = diag(sd_B)`` and the eigendecomposition ``D X_B' Q X_B D = V diag(lam) V'`` (once), the covariance of
+    ``B`` at a noise variance ``s2`` is ``D V diag(1 / (lam / s2 + 1)) V' D`` and ``g = |F| + sum(lam / (lam +
+    s2))``, so each step ``s2 = |r|^2 / (dof - g)`` costs ``q`` operations, not a factorisation. The flat block's
+    covariance follows from its least-squares solution given ``B``: ``C_FF = s2 (X_F' X_F)^+ + A C_BB A'``,
+    ``C_FB = -A C_BB``, ``A = (X_F' X_F)^+ X_F' X_B``.
+
     Parameters
     ----------
-    X : (n, q) the columns at the MAP, projected; r : (n,) the residual there; sd : (q,) prior standard deviations;
-    dof : readings less the constants; sigma0 : the start, arcsec.
+    X : (n, q) the columns at the MAP, projected; r : (n,) the residual there; sd : (q,) prior standard deviations
+    (``inf``: flat); dof : readings less the constants; sigma0 : the start, arcsec.
     """
-    prec = 1.0 / np.square(sd)
-    G = X.T @ X
-    s2 = sigma0 ** 2
-    C = np.linalg.pinv(G / s2 + np.diag(prec))
+    sd = np.asarray(sd, dtype=float)
+    F, B = np.flatnonzero(~np.isfinite(sd)), np.flatnonzero(np.isfinite(sd))
+    XF, XB = X[:, F], X[:, B]
+    GFi = np.linalg.pinv(XF.T @ XF)
+    A = GFi @ (XF.T @ XB)
+    Xw = (XB - XF @ A) * sd[B][None, :]                       # Q X_B D
+    lam, V = np.linalg.eigh(Xw.T @ Xw)
+    lam = np.maximum(lam, 0.0)
+    rr, s2 = float(r @ r), sigma0 ** 2
     for _ in range(iterations):
-        g = float(np.sum(1.0 - prec * np.diag(C)))
-        new = float(r @ r) / max(dof - g, 1.0)
-        C = np.linalg.pinv(G / new + np.diag(prec))
-        if abs(new - s2) <= 1e-10 * s2:
-            s2 = new
-            break
+        new = rr / max(dof - F.size - float(np.sum(lam / (lam + s2))), 1.0)
+        done = abs(new - s2) <= 1e-10 * s2
         s2 = new
+        if done:
+            break
+    W = V * (sd[B][:, None] / np.sqrt(lam / s2 + 1.0))
+    C = np.empty((sd.size, sd.size))
+    CBB = W @ W.T
+    C[np.ix_(B, B)] = CBB
+    C[np.ix_(F, B)] = -A @ CBB
+    C[np.ix_(B, F)] = C[np.ix_(F, B)].T
+    C[np.ix_(F, F)] = s2 * GFi + A @ CBB @ A.T
     return math.sqrt(s2), C
 
 

@@ -273,6 +273,25 @@ def test_tolerance_prior_names_no_twin_the_data_cannot_split(base):
     assert res.rms_after <= 1.2 * 0.2
 
 
+def test_evidence_noise_is_the_fixed_point_of_its_definition_with_flat_and_finite_priors():
+    """At the returned noise s2, C is the inverse of X'X / s2 + diag(1 / sd^2) (a flat prior: 0) and s2 is
+    |r|^2 / (dof - g), g = sum(1 - C_jj / sd_j^2): the definition, on correlated columns."""
+    from rvcalib.gaussian import evidence_sigma
+
+    rng = np.random.default_rng(5)
+    X = rng.normal(size=(120, 12)) * rng.uniform(0.1, 10.0, 12)
+    X[:, 4] = X[:, 5] + 1e-3 * X[:, 4]
+    r = rng.normal(0.0, 0.7, 120)
+    sd = rng.uniform(0.1, 3.0, 12)
+    sd[[0, 7]] = np.inf
+    sigma, C = evidence_sigma(X, r, sd, 117, 2.0, iterations=500)
+    prec = 1.0 / np.square(sd)
+    want = np.linalg.inv(X.T @ X / sigma ** 2 + np.diag(prec))
+    assert np.allclose(C, want, rtol=1e-8, atol=1e-12 * np.abs(want).max())
+    g = float(np.sum(1.0 - prec * np.diag(want)))
+    assert sigma ** 2 == pytest.approx(float(r @ r) / (117 - g), rel=1e-9)
+
+
 def test_evidence_noise_and_block_variance_against_closed_forms():
     """MacKay's fixed point with flat priors is the unbiased RSS / (n - p); the REML variance of a one-direction
     block is ``max(0, (z^2 - s2_hat) / |b|^2)`` with ``s2_hat`` the rest over its m - 1 directions."""
