@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from rvcad.params import Design
-from rvrig.dataset import MeasuredDataset, RunRecord, noise_estimate
+from rvrig.dataset import MeasuredDataset, RunRecord, median_step, noise_estimate
 from rvrig.rigfilter import PASS_FRACTION, decimate
 from rvrig.rigimport import RigRecord
 
@@ -55,7 +55,7 @@ def _record(run: RunRecord) -> RigRecord:
     """One run as a rig record of its TE (deg) on its output angle, its slots counted in median steps."""
     out = np.asarray(run.output_deg, dtype=float)
     direction = 1 if out[-1] >= out[0] else -1
-    step = float(np.median(np.abs(np.diff(out))))
+    step = median_step(out)
     slot = np.rint(np.abs(out - out[0]) / step).astype(int)
     time = run.time_s if run.time_s is not None else slot * 1.0
     return RigRecord(direction, out, run.te_arcsec / 3600.0, np.asarray(time, dtype=float), slot, "the readings")

@@ -228,13 +228,18 @@ class MeasuredDataset:
         return float(np.sqrt(np.sum(w * s ** 2) / np.sum(w)))
 
 
+def median_step(x: np.ndarray) -> float:
+    """The median absolute step between consecutive values of ``x`` (a record's sample step, in x's unit)."""
+    return float(np.median(np.abs(np.diff(np.asarray(x, dtype=float)))))
+
+
 def record_revolutions(input_deg: np.ndarray, period: float) -> float:
     """Output revolutions covered by a record: (span + one median sample step) / ``period`` (the input
     angle of one output revolution, deg)."""
     x = np.asarray(input_deg, dtype=float)
     if x.size < 2:
         return 0.0
-    step = float(np.median(np.abs(np.diff(x))))
+    step = median_step(x)
     return (abs(float(x[-1] - x[0])) + step) / period
 
 
@@ -422,7 +427,7 @@ def _drop_transient(run: str, inp: np.ndarray, te: np.ndarray, direction: int, s
                     notes: list[str], period: float) -> int:
     """Number of leading samples to drop as start-up transient (0 if none or not checkable)."""
     span = abs(float(inp[-1] - inp[0]))
-    step = float(np.median(np.abs(np.diff(inp))))
+    step = median_step(inp)
     if span < period + 4 * step:
         notes.append(f"run {run}: the record is not longer than one output revolution, so a start-up "
                      "transient could not be checked against the repeat")
@@ -565,7 +570,7 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
                              f"goes from {inp[i]:.6g} to {inp[i + 1]:.6g} deg against direction {direction:+d}")
         _check_angle_units(rid, inp, out, ratio, des_src == "default")
         revs = record_revolutions(inp, period)
-        step = float(np.median(np.abs(np.diff(inp))))
+        step = median_step(inp)
         if revs < 1.0 - 0.5 * step / period:  # half a sample step of slack for reading errors
             raise DatasetError(f"samples.csv: run {rid} covers {revs:.4g} output revolutions (input span "
                              f"{abs(inp[-1] - inp[0]):.6g} deg); at least one output revolution ({period:g} deg "

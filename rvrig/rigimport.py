@@ -37,7 +37,7 @@ from rsm.csvio import read_csv_strict
 from rvcad.atomic import atomic_path, remove_stale_temps
 from rvcad.params import Design
 from rvcad.validation import DatasetError, OptionError
-from rvrig.dataset import load_design, noise_estimate
+from rvrig.dataset import load_design, median_step, noise_estimate
 from rvrig.rigfilter import FILL_SPACINGS, decimate, default_samples_per_rev
 
 #: Accepted names of the four columns, per direction: (output angle names, TE name).
@@ -92,7 +92,7 @@ class RigRecord:
     @property
     def step_deg(self) -> float:
         """Median output angle between readings, deg."""
-        return float(np.median(np.abs(np.diff(self.output_deg))))
+        return median_step(self.output_deg)
 
     @property
     def revolutions(self) -> float:
