@@ -101,13 +101,13 @@ def evidence_sigma(X: np.ndarray, r: np.ndarray, sd: np.ndarray, dof: int, sigma
                    iterations: int = 50) -> tuple[float, np.ndarray]:
     """MacKay's fixed point for the noise (see the module docstring) and the posterior covariance there.
 
-    The parameters with a flat prior (``sd`` infinite), ``F``, are determined by the data alone: each counts one
-    in ``g``, and the others see the columns and the residual with ``X_F`` projected out (``Q``). With
-    ``D = diag(sd_B)`` and the eigendecomposition ``D X_B' Q X_B D = V diag(lam) V'`` (once), the covariance of
-    ``B`` at a noise variance ``s2`` is ``D V diag(1 / (lam / s2 + 1)) V' D`` and ``g = |F| + sum(lam / (lam +
-    s2))``, so each step ``s2 = |r|^2 / (dof - g)`` costs ``q`` operations, not a factorisation. The flat block's
-    covariance follows from its least-squares solution given ``B``: ``C_FF = s2 (X_F' X_F)^+ + A C_BB A'``,
-    ``C_FB = -A C_BB``, ``A = (X_F' X_F)^+ X_F' X_B``.
+    The parameters with a flat prior (``sd`` infinite), ``F``, are determined by the data alone: each counts one in
+    ``g``, and the others see the columns with ``X_F`` projected out (``Q``; the residual at the MAP is already
+    orthogonal to ``X_F``). With ``D = diag(sd_B)`` and the eigendecomposition ``D X_B' Q X_B D = V diag(lam) V'``
+    (once), the covariance of ``B`` at a noise variance ``s2`` is ``D V diag(1 / (lam / s2 + 1)) V' D`` and ``g =
+    |F| + sum(lam / (lam + s2))``, so each step ``s2 = |r|^2 / (dof - g)`` costs ``q`` operations, not a
+    factorisation. The flat block's covariance follows from its least-squares solution given ``B``: ``C_FF = s2
+    (X_F' X_F)^+ + A C_BB A'``, ``C_FB = -A C_BB``, ``A = (X_F' X_F)^+ X_F' X_B``.
 
     Parameters
     ----------

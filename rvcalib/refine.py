@@ -58,7 +58,7 @@ def refine(model, y: np.ndarray, proj, R: np.ndarray, theta: np.ndarray, b_r: np
     b = b_r.copy()
     if active_s.size == 0:
         te = model.te(theta)
-        b[active_r] = obj.linear(proj(y - te - R @ _zero(b_r, active_r)))
+        b[active_r] = obj.linear(proj(y - te - obj.fixed_r))
         return theta, b, te, float("nan")
     lo, hi, sd = model._lower[active_s], model._upper[active_s], obj.sd
     x0 = _solvable(obj, theta, active_s, lo, hi, feasible)
