@@ -503,10 +503,26 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
     if not root.is_dir():
         raise DatasetError(f"dataset folder '{root}' does not exist or is not a folder")
     des, des_src = load_design(design, root)
-    ratio = float(des.ratio)
     period = period_deg(des)
     runs_df, keys = _read_runs(root / "runs.csv")
-    sdf = _read_csv(root / "samples.csv", "samples")
+    srun, inp_all, out_all, t_all = _read_samples(root / "samples.csv", set(runs_df["run"]))
+    groups = {k: np.flatnonzero((srun == k).to_numpy()) for k in runs_df["run"]}
+    records: list[RunRecord] = []
+    for _, row in runs_df.iterrows():
+        idx = groups[row["run"]]
+        if idx.size == 0:
+            raise DatasetError(f"samples.csv: run {row['run']} of runs.csv has no samples")
+        records.append(_run_record(row, keys, runs_df.columns, inp_all[idx], out_all[idx],
+                                   t_all[idx] if t_all is not None else None, des, des_src, period))
+    notes = [n for r in records for n in r.notes]
+    return MeasuredDataset(path=root, runs=records, notes=notes, declared_keys=keys, design=des, design_source=des_src,
+                           tests=group_tests(runs_df))
+
+
+def _read_samples(path: Path, known: set) -> tuple:
+    """samples.csv checked (its columns, empty run ids, runs not in runs.csv): the run column and the input,
+    output and (or None) time columns as numbers."""
+    sdf = _read_csv(path, "samples")
     for c in SAMPLE_REQUIRED:
         if c not in sdf.columns:
             raise DatasetError(f"samples.csv: required column '{c}' is missing; columns are {list(sdf.columns)}")
@@ -520,85 +536,77 @@ def read_dataset(path: str | Path, design: "str | Path | dict | Design | None" =
     inp_all = _numeric(sdf, "input_deg", "samples.csv", srun)
     out_all = _numeric(sdf, "output_deg", "samples.csv", srun)
     t_all = _numeric(sdf, "time_s", "samples.csv", srun) if "time_s" in sdf.columns else None
-    known = set(runs_df["run"])
     extra = sorted(set(srun) - known)
     if extra:
         raise DatasetError(f"samples.csv: run '{extra[0]}' in column 'run' is not in runs.csv")
-    notes: list[str] = []
-    records: list[RunRecord] = []
-    groups = {k: np.flatnonzero((srun == k).to_numpy()) for k in runs_df["run"]}
-    for _, row in runs_df.iterrows():
-        rid = row["run"]
-        idx = groups[rid]
-        if idx.size == 0:
-            raise DatasetError(f"samples.csv: run {rid} of runs.csv has no samples")
-        inp, out = inp_all[idx], out_all[idx]
-        tt = t_all[idx] if t_all is not None else None
-        rnotes: list[str] = []
-        dropped = {"duplicates": 0, "transient": 0}
-        direction = int(row["direction"])
-        # duplicated samples: the same input angle again (keep the first)
-        keep = np.ones(idx.size, dtype=bool)
-        if idx.size > 1:
-            same = np.diff(inp) == 0.0
-            keep[1:] = ~same
-        _, first = np.unique(inp, return_index=True)
-        rep = np.ones(idx.size, dtype=bool)
-        rep[:] = False
-        rep[first] = True
-        keep &= rep
-        ndup = int((~keep).sum())
-        if ndup:
-            rnotes.append(f"run {rid}: dropped {ndup} duplicated samples (repeated input_deg; the first kept)")
-            dropped["duplicates"] = ndup
-            inp, out = inp[keep], out[keep]
-            tt = tt[keep] if tt is not None else None
-        if inp.size < 8:
-            raise DatasetError(f"samples.csv: run {rid} has only {inp.size} distinct samples; at least one output "
-                             "revolution of samples is needed")
-        if tt is not None and np.any(np.diff(tt) <= 0):
-            i = int(np.flatnonzero(np.diff(tt) <= 0)[0])
-            raise DatasetError(f"samples.csv: run {rid}: column 'time_s' is not increasing at sample {i + 2} of the run "
-                             f"({tt[i]:g} then {tt[i + 1]:g} s)")
-        dx = np.diff(inp) * direction
-        if np.all(dx < 0):
-            raise DatasetError(f"samples.csv: run {rid}: column 'input_deg' runs {'down' if direction == 1 else 'up'} "
-                             f"but runs.csv gives direction {direction:+d}")
-        if np.any(dx <= 0):
-            i = int(np.flatnonzero(dx <= 0)[0])
-            raise DatasetError(f"samples.csv: run {rid}: column 'input_deg' is not monotonic: sample {i + 2} of the run "
-                             f"goes from {inp[i]:.6g} to {inp[i + 1]:.6g} deg against direction {direction:+d}")
-        _check_angle_units(rid, inp, out, ratio, des_src == "default")
-        revs = record_revolutions(inp, period)
-        step = median_step(inp)
-        if revs < 1.0 - 0.5 * step / period:  # half a sample step of slack for reading errors
-            raise DatasetError(f"samples.csv: run {rid} covers {revs:.4g} output revolutions (input span "
-                             f"{abs(inp[-1] - inp[0]):.6g} deg); at least one output revolution ({period:g} deg "
-                             "of input) is needed")
-        te = (out - inp / ratio) * ARCSEC_PER_DEG
-        if abs(float(np.median(te))) > 3600.0:
-            raise DatasetError(f"samples.csv: run {rid}: the TE output_deg - input_deg/{ratio:g} is "
-                             f"{np.median(te) / 3600:.4g} deg; the encoders do not share their zero or the columns "
-                             "are not the input and output angles")
-        sigma = noise_estimate(te)
-        cut = _drop_transient(rid, inp, te, direction, sigma, rnotes, period)
-        if cut:
-            dropped["transient"] = cut
-            inp, out = inp[cut:], out[cut:]
-            tt = tt[cut:] if tt is not None else None
-            te = te[cut:]
-        declared = {k: float(row[k]) for k in keys if float(row[k]) != 0.0}
-        temp = float(row["temperature_C"]) if "temperature_C" in runs_df.columns else None
-        speed = float(row["speed_rpm"]) if "speed_rpm" in runs_df.columns else None
-        rec = RunRecord(run=rid, load_Nm=float(row["load_Nm"]), direction=direction, declared=declared,
-                        temperature_C=temp, speed_rpm=speed, input_deg=inp, output_deg=out, time_s=tt,
-                        dropped=dropped, noise_arcsec=noise_estimate(te), notes=rnotes, design=des)
-        try:
-            Case.from_dict(rec.case_dict())
-        except ValueError as exc:
-            raise DatasetError(f"runs.csv: run {rid}: {exc}") from None
-        records.append(rec)
-        notes.extend(rnotes)
-    tests = group_tests(runs_df)
-    return MeasuredDataset(path=root, runs=records, notes=notes, declared_keys=keys, design=des, design_source=des_src,
-                           tests=tests)
+    return srun, inp_all, out_all, t_all
+
+
+def _drop_duplicates(rid: str, inp: np.ndarray, out: np.ndarray, tt: np.ndarray | None,
+                     rnotes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
+    """The run's samples without duplicates (the same input angle again: the first kept), and their count."""
+    keep = np.ones(inp.size, dtype=bool)
+    if inp.size > 1:
+        keep[1:] = ~(np.diff(inp) == 0.0)
+    _, first = np.unique(inp, return_index=True)
+    rep = np.zeros(inp.size, dtype=bool)
+    rep[first] = True
+    keep &= rep
+    ndup = int((~keep).sum())
+    if not ndup:
+        return inp, out, tt, 0
+    rnotes.append(f"run {rid}: dropped {ndup} duplicated samples (repeated input_deg; the first kept)")
+    return inp[keep], out[keep], (tt[keep] if tt is not None else None), ndup
+
+
+def _check_order(rid: str, inp: np.ndarray, tt: np.ndarray | None, direction: int) -> None:
+    """At least 8 samples, times increasing, input angles monotonic in the run's direction."""
+    if inp.size < 8:
+        raise DatasetError(f"samples.csv: run {rid} has only {inp.size} distinct samples; at least one output "
+                         "revolution of samples is needed")
+    if tt is not None and np.any(np.diff(tt) <= 0):
+        i = int(np.flatnonzero(np.diff(tt) <= 0)[0])
+        raise DatasetError(f"samples.csv: run {rid}: column 'time_s' is not increasing at sample {i + 2} of the run "
+                         f"({tt[i]:g} then {tt[i + 1]:g} s)")
+    dx = np.diff(inp) * direction
+    if np.all(dx < 0):
+        raise DatasetError(f"samples.csv: run {rid}: column 'input_deg' runs {'down' if direction == 1 else 'up'} "
+                         f"but runs.csv gives direction {direction:+d}")
+    if np.any(dx <= 0):
+        i = int(np.flatnonzero(dx <= 0)[0])
+        raise DatasetError(f"samples.csv: run {rid}: column 'input_deg' is not monotonic: sample {i + 2} of the run "
+                         f"goes from {inp[i]:.6g} to {inp[i + 1]:.6g} deg against direction {direction:+d}")
+
+
+def _run_record(row, keys: list[str], columns, inp: np.ndarray, out: np.ndarray, tt: np.ndarray | None,
+                des: Design, des_src: str, period: float) -> RunRecord:
+    """One run of runs.csv with its samples, checked and repaired (duplicates, start-up transient)."""
+    rid, direction, ratio = row["run"], int(row["direction"]), float(des.ratio)
+    rnotes: list[str] = []
+    inp, out, tt, ndup = _drop_duplicates(rid, inp, out, tt, rnotes)
+    _check_order(rid, inp, tt, direction)
+    _check_angle_units(rid, inp, out, ratio, des_src == "default")
+    revs = record_revolutions(inp, period)
+    if revs < 1.0 - 0.5 * median_step(inp) / period:  # half a sample step of slack for reading errors
+        raise DatasetError(f"samples.csv: run {rid} covers {revs:.4g} output revolutions (input span "
+                         f"{abs(inp[-1] - inp[0]):.6g} deg); at least one output revolution ({period:g} deg "
+                         "of input) is needed")
+    te = (out - inp / ratio) * ARCSEC_PER_DEG
+    if abs(float(np.median(te))) > 3600.0:
+        raise DatasetError(f"samples.csv: run {rid}: the TE output_deg - input_deg/{ratio:g} is "
+                         f"{np.median(te) / 3600:.4g} deg; the encoders do not share their zero or the columns "
+                         "are not the input and output angles")
+    cut = _drop_transient(rid, inp, te, direction, noise_estimate(te), rnotes, period)
+    inp, out, te = inp[cut:], out[cut:], te[cut:]
+    tt = tt[cut:] if tt is not None else None
+    rec = RunRecord(run=rid, load_Nm=float(row["load_Nm"]), direction=direction,
+                    declared={k: float(row[k]) for k in keys if float(row[k]) != 0.0},
+                    temperature_C=float(row["temperature_C"]) if "temperature_C" in columns else None,
+                    speed_rpm=float(row["speed_rpm"]) if "speed_rpm" in columns else None,
+                    input_deg=inp, output_deg=out, time_s=tt, dropped={"duplicates": ndup, "transient": cut},
+                    noise_arcsec=noise_estimate(te), notes=rnotes, design=des)
+    try:
+        Case.from_dict(rec.case_dict())
+    except ValueError as exc:
+        raise DatasetError(f"runs.csv: run {rid}: {exc}") from None
+    return rec
