@@ -49,7 +49,7 @@ sys.path.insert(0, str(ROOT))
 
 from results_log import record  # noqa: E402
 from rvcalib.cli import main as rv_calibrate  # noqa: E402
-from rvrig.average import model_samples_per_rev  # noqa: E402
+from rvrig.average import fitted_density  # noqa: E402
 from rvrig.dataset import read_dataset  # noqa: E402
 from rvrig.rigtable import load_changes, measured_datasheet, plot_test_means, test_table  # noqa: E402
 from rvrig.spectrum import separate  # noqa: E402
@@ -235,9 +235,7 @@ def main() -> int:
             print("4. the loop (rv-calibrate, rvcalib.cli.run) on the imported dataset")
             figs += loop_section(ds, args.workers, args.rated_Nm, out / "calibration", args.estimator,
                                  args.holdout, args.loop_per_rev)
-            k = model_samples_per_rev(ds.design) if args.loop_per_rev is None else args.loop_per_rev
-            dense_k = ds.runs[0].n / ds.runs[0].revolutions
-            figs.append(("loop_samples_per_rev", float(min(k, dense_k) if k else dense_k), "readings/rev"))
+            figs.append(("loop_samples_per_rev", fitted_density(ds.runs[0], args.loop_per_rev), "readings/rev"))
     record("real_rv160n", [(n, float(v), u) for n, v, u in figs])
     return 0
 

@@ -151,12 +151,11 @@ def run(dataset, settings: CalibrationSettings, out: str, holdout: bool = False,
     from rvcalib.loop import calibrate
     from rvcalib.report import measured_figures, write_report
     from rvdyn.solver import law_from_model
-    from rvrig.average import averaged, model_samples_per_rev
+    from rvrig.average import averaged
 
     law = None if settings.contact is None else law_from_model({"contact": settings.contact})
     measured = measured_figures(dataset, settings.rated_Nm)
-    k = settings.samples_per_rev
-    dataset, fit_notes = averaged(dataset, model_samples_per_rev(dataset.design) if k is None else k)
+    dataset, fit_notes = averaged(dataset, settings.samples_per_rev)
     result = calibrate(dataset, settings, log=log, model=model_for(dataset))
     result.notes[:0] = fit_notes
     try:

@@ -61,25 +61,34 @@ def _record(run: RunRecord) -> RigRecord:
     return RigRecord(direction, out, run.te_arcsec / 3600.0, np.asarray(time, dtype=float), slot, "the readings")
 
 
-def averaged(dataset: MeasuredDataset, samples_per_rev: int) -> tuple[MeasuredDataset, list[str]]:
-    """The dataset with every run denser than ``samples_per_rev`` readings per output revolution averaged down
-    (:func:`rvrig.rigfilter.decimate`: zero-phase low-pass, then an even grid of output angle; the input readings
-    follow from the TE, ``input = N (output - TE)``); sparser runs and ``samples_per_rev`` 0 keep every reading.
+def fitted_density(run: RunRecord, samples_per_rev: int | None) -> float:
+    """Readings per output revolution of ``run`` that the loop fits: ``samples_per_rev`` (None: the model's,
+    :func:`model_samples_per_rev`) where the run is denser, else every reading (also for 0)."""
+    k = model_samples_per_rev(run.design) if samples_per_rev is None else samples_per_rev
+    if k < 0:
+        raise ValueError(f"samples_per_rev {samples_per_rev} must be 0 (every reading) or positive")
+    density = run.n / max(run.revolutions, 1e-9)
+    return density if k == 0 or density <= k else float(k)
+
+
+def averaged(dataset: MeasuredDataset, samples_per_rev: int | None) -> tuple[MeasuredDataset, list[str]]:
+    """The dataset with every run denser than ``samples_per_rev`` readings per output revolution (None: the
+    model's, :func:`model_samples_per_rev`) averaged down (:func:`rvrig.rigfilter.decimate`: zero-phase low-pass,
+    then an even grid of output angle; the input readings follow from the TE, ``input = N (output - TE)``); sparser
+    runs and ``samples_per_rev`` 0 keep every reading (:func:`fitted_density`).
 
     Returns
     -------
     (MeasuredDataset, list of str)
         The dataset and one note per density averaged (what the loop fits and why).
     """
-    if samples_per_rev < 0:
-        raise ValueError(f"samples_per_rev {samples_per_rev} must be 0 (every reading) or positive")
     runs, notes = [], {}
     for r in dataset.runs:
-        density = r.n / max(r.revolutions, 1e-9)
-        if samples_per_rev == 0 or density <= samples_per_rev:
+        density, k = r.n / max(r.revolutions, 1e-9), fitted_density(r, samples_per_rev)
+        if k == density:
             runs.append(r)
             continue
-        arr, info = decimate(_record(r), samples_per_rev)
+        arr, info = decimate(_record(r), int(k))
         te = arr["te_deg"]
         runs.append(dataclasses.replace(
             r, output_deg=arr["output_deg"], input_deg=r.ratio * (arr["output_deg"] - te),

@@ -11,7 +11,7 @@ from rvcad.params import Design
 from rvcalib.simulate import simulate_dataset, standard_runs
 from rig_records import R81, rig_file
 from rvcalib.library import build_library
-from rvrig.average import averaged, filtered_model_orders, model_samples_per_rev
+from rvrig.average import averaged, filtered_model_orders, fitted_density, model_samples_per_rev
 from rvrig.dataset import read_dataset
 from rvrig.rigimport import import_rig
 
@@ -48,6 +48,9 @@ def test_averaging_keeps_the_band_and_removes_what_is_above_it(dense):
         # the TE the readings give (output - input / N) is the band's part; order 150 is gone
         np.testing.assert_allclose(run.te_arcsec, _te(run.output_deg, high=0.0), atol=0.02)
     assert len(notes) == 1 and "from 1440 to 205 per output revolution (flat to order 82)" in notes[0]
+    # None: the model's density (the default design, ratio 121: 305), what rv-calibrate fits by default
+    assert fitted_density(dense.runs[0], None) == 305.0 and fitted_density(dense.runs[0], 205) == 205.0
+    assert averaged(dense, None)[1] == averaged(dense, 305)[1] != notes
 
 
 def test_sparser_runs_and_zero_keep_every_reading(dense):
