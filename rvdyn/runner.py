@@ -481,40 +481,10 @@ class Runner:
         unique: dict[str, Job] = {}
         for k, j in zip(keys, jobs):
             unique.setdefault(k, j)
-        results: dict[str, dict[str, Any]] = {}
-        todo: list[str] = []
-        prefetched: set[str] = set()
-        for k in unique:
-            if self.memory.pinned(k):  # solved (or taken from the cache) by this runner's prefetch: counted there
-                results[k] = self.memory.get(k)  # type: ignore[assignment]
-                prefetched.add(k)
-                continue
-            hit = self.memory.get(k)
-            if hit is None:
-                hit = self.cache.get(k)
-                if hit is not None:
-                    hit = self._keep(k, hit)
-            if hit is None:
-                todo.append(k)
-            else:
-                results[k] = {**hit, "cached": True}
+        results, todo, prefetched = self._lookup(unique)
         self.reused += len(results) - len(prefetched)
         if self.states.max_bytes > 0:
-            # a converged case asked for again (taken from a cache) is its neighbourhood's newest state once more: the
-            # solves after it start from the case last asked for (e.g. a Jacobian's columns from the state at which
-            # they are taken, even when other solves of that run condition came in between). When its state is no
-            # longer kept (beyond the budget, or solved by another process) the neighbourhood's newest state is
-            # another case's, and sensitivity solves from there would give their differences against that case,
-            # not against this one: the neighbourhood is left without a state, so the solves after it converge
-            # (a Jacobian differenced from another case's state can come out nearly of rank one)
-            for k in unique:
-                if k in results and unique[k].max_outer is None:
-                    st = self.job_states.get(k)
-                    if st is not None:
-                        self.states.put(unique[k].neighbour_key(), st)
-                    else:
-                        self.states.discard(unique[k].neighbour_key())
-                        self.states_lost += 1
+            self._renew_states(unique, results)
         tasks = self._tasks(todo, keys, group, len(jobs))
         payloads = [_payload(unique[t[0]], t[0]) if len(t) == 1 else self._group_payload([unique[k] for k in t], t)
                     for t in tasks]
@@ -532,42 +502,16 @@ class Runner:
                    disable=not self.progress, dynamic_ncols=True)
         try:
             for wave in waves:
-                if near:
-                    for i in wave:
-                        for k, q in zip(tasks[i], payloads[i]["jobs"] if "jobs" in payloads[i] else [payloads[i]]):
-                            x0 = self.states.get(near[k])
-                            if x0 is not None:
-                                q["x_init"] = x0
-                # the wave's converged states go to the warm-start store in task order once the wave is done, not
-                # as the results arrive: with several workers the next solves' starts (hence their rounding) do not
-                # depend on which worker finished first
-                arrived: list[tuple[int, str, np.ndarray]] = []
-                for j, res in self.executor.run(fn, [payloads[i] for i in wave]):
-                    i = wave[j]
-                    got = res["results"] if "results" in res else [res]
-                    self.worker_seconds += float(res.get("task_seconds", res.get("stats", {}).get("seconds", 0.0)))
-                    if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
-                        raise RuntimeError(f"worker returned the result of {res.get('key')!r} for "
-                                           f"{payloads[i]['key']!r}")
-                    for k, r in zip(tasks[i], got):
-                        if r.get("key") != k:
-                            raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
-                        state = r.pop("state", None)
-                        if state is not None and k in near:
-                            arrived.append((i, k, state))
-                        self.cache.put(k, r)
-                        results[k] = {**self._keep(k, r), "cached": False}
-                        self.computed += 1
-                        self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
-                    bar.update(len(got))
-                for _, k, state in sorted(arrived, key=lambda a: a[0]):  # stable: a task's jobs in their order
-                    self.states.put(near[k], state)
-                    kept = self.states.peek(near[k])
-                    if kept is not None:
-                        self.job_states.put(k, kept)
+                self._run_wave(fn, wave, tasks, payloads, near, results, bar)
         finally:
             bar.close()
             self.wall_seconds += time.perf_counter() - t0
+        return self._deliver(unique, keys, results, prefetched, keep)
+
+    def _deliver(self, unique: dict[str, Job], keys: list[str], results: dict[str, dict[str, Any]],
+                 prefetched: set[str], keep: bool) -> list[dict[str, Any]]:
+        """The results of a call in the order of its cases, each the caller's own copy (its TE a new array); counts
+        the failed ones not prefetched and, with ``keep``, pins the results in memory."""
         self.failed += sum(1 for k in unique if results[k].get("status") == "failed" and k not in prefetched)
         if keep:  # pinned with the cached flag of this call, for later calls (counted now)
             for k in unique:
@@ -580,6 +524,86 @@ class Runner:
             r["te_arcsec"] = None if te is None else np.array(te, dtype=float)  # the caller's own copy
             out.append(r)
         return out
+
+    def _lookup(self, unique: dict[str, Job]) -> tuple[dict[str, dict[str, Any]], list[str], set[str]]:
+        """The results of a batch's jobs found in this runner's memory or its disk cache (with ``cached`` True;
+        the pinned ones of :meth:`prefetch` as they were kept), the keys to solve, and the prefetched keys."""
+        results: dict[str, dict[str, Any]] = {}
+        todo: list[str] = []
+        prefetched: set[str] = set()
+        for k in unique:
+            if self.memory.pinned(k):  # solved (or taken from the cache) by this runner's prefetch: counted there
+                results[k] = self.memory.get(k)  # type: ignore[assignment]
+                prefetched.add(k)
+                continue
+            hit = self.memory.get(k)
+            if hit is None:
+                hit = self.cache.get(k)
+                if hit is not None:
+                    hit = self._keep(k, hit)
+            if hit is None:
+                todo.append(k)
+            else:
+                results[k] = {**hit, "cached": True}
+        return results, todo, prefetched
+
+    def _renew_states(self, unique: dict[str, Job], results: dict[str, dict[str, Any]]) -> None:
+        """Make each converged case taken from a cache its neighbourhood's newest warm-start state again, or
+        leave the neighbourhood without a state when the case's own is no longer kept (``states_lost``)."""
+        # the solves after such a case start from the case last asked for (e.g. a Jacobian's columns from the state
+        # at which they are taken, even when other solves of that run condition came in between). When its state is
+        # no longer kept (beyond the budget, or solved by another process) the neighbourhood's newest state is
+        # another case's, and sensitivity solves from there would give their differences against that case,
+        # not against this one: the neighbourhood is left without a state, so the solves after it converge
+        # (a Jacobian differenced from another case's state can come out nearly of rank one)
+        for k in unique:
+            if k in results and unique[k].max_outer is None:
+                st = self.job_states.get(k)
+                if st is not None:
+                    self.states.put(unique[k].neighbour_key(), st)
+                else:
+                    self.states.discard(unique[k].neighbour_key())
+                    self.states_lost += 1
+
+    def _run_wave(self, fn: SolveFn, wave: list[int], tasks: list[list[str]], payloads: list[dict[str, Any]],
+                  near: dict[str, str], results: dict[str, dict[str, Any]], bar: Any) -> None:
+        """Solve the tasks ``wave`` (indices of ``tasks`` and ``payloads``) through the executor, from the warm
+        starts of their neighbourhoods ``near`` (job key -> neighbourhood key; empty: none): each result is
+        checked against its key, cached and put in ``results``; the converged states then become the
+        neighbourhoods' newest."""
+        if near:
+            for i in wave:
+                for k, q in zip(tasks[i], payloads[i]["jobs"] if "jobs" in payloads[i] else [payloads[i]]):
+                    x0 = self.states.get(near[k])
+                    if x0 is not None:
+                        q["x_init"] = x0
+        # the wave's converged states go to the warm-start store in task order once the wave is done, not
+        # as the results arrive: with several workers the next solves' starts (hence their rounding) do not
+        # depend on which worker finished first
+        arrived: list[tuple[int, str, np.ndarray]] = []
+        for j, res in self.executor.run(fn, [payloads[i] for i in wave]):
+            i = wave[j]
+            got = res["results"] if "results" in res else [res]
+            self.worker_seconds += float(res.get("task_seconds", res.get("stats", {}).get("seconds", 0.0)))
+            if res.get("key") != payloads[i]["key"] or len(got) != len(tasks[i]):
+                raise RuntimeError(f"worker returned the result of {res.get('key')!r} for "
+                                   f"{payloads[i]['key']!r}")
+            for k, r in zip(tasks[i], got):
+                if r.get("key") != k:
+                    raise RuntimeError(f"worker returned the result of {r.get('key')!r} for {k!r}")
+                state = r.pop("state", None)
+                if state is not None and k in near:
+                    arrived.append((i, k, state))
+                self.cache.put(k, r)
+                results[k] = {**self._keep(k, r), "cached": False}
+                self.computed += 1
+                self.solve_seconds.append(float(r["stats"].get("seconds", math.nan)))
+            bar.update(len(got))
+        for _, k, state in sorted(arrived, key=lambda a: a[0]):  # stable: a task's jobs in their order
+            self.states.put(near[k], state)
+            kept = self.states.peek(near[k])
+            if kept is not None:
+                self.job_states.put(k, kept)
 
     def _keep(self, key: str, res: dict[str, Any]) -> dict[str, Any]:
         """A result with its TE as an array (None when failed), kept in memory (within its budget)."""

@@ -179,6 +179,7 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             E0, F_all, K_all = energy_sub(self, x0, G, J, B, law, step, arms, fk=True)
         else:
             E0 = energy_sub(self, x0, G, J, B, law, step, arms)
+            F_all = K_all = None
         E_start = E0.copy()                           # the linearised potential at x0 itself (returned)
         Jnorm = _row_norm(J)
         bnorm = np.linalg.norm(B, axis=1)
@@ -200,54 +201,9 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             else:
                 delta = -(Gi + _jdot(Ji, s[:, :nj]))
                 f, k = law.force_stiffness(delta, idx)
-            if nj == D:
-                grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[sel]
-                H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
-                if arms is not None:
-                    _, gb, Hb = self._bearing(x0[idx] + s, arms[idx])
-                    grad = grad + gb
-                    H = H + Hb
-                diag = np.einsum("ndd->nd", H) + floor[idx]
-                A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
-                dstep = -np.linalg.solve(A, grad[:, :, None])[:, :, 0]
-            else:                                     # supports inside the equilibrium (rvdyn.support_eq)
-                grad, dstep, sup_scale = self._chain_newton(x0[idx] + s, arms[idx], -np.matmul(f[:, None, :], Ji)[:, 0],
-                                                 np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji), B[sel],
-                                                 mu[idx], floor[idx])
-            # backtracking on the (convex) potential: take the first step length that lowers it
-            best_E = E0[idx].copy()
-            best_s = s.copy()
-            accepted_full = np.zeros(idx.size, dtype=bool)
-            pending = np.ones(idx.size, dtype=bool)
-            # supports inside (loose): a Newton step shorter than the inner tolerance that does not lower the
-            # potential at full length (rounding at the minimum) is not shortened further: a shorter one would
-            # move the state by less than the tolerance too (the same convergence test, no evaluations)
-            tiny = (np.linalg.norm(dstep, axis=1) < tol_mm) if loose else None
-            for alpha in (1.0, 0.5, 0.25, 0.1, 0.02):
-                w = np.nonzero(pending)[0]
-                if w.size == 0:
-                    break
-                if w.size == idx.size:
-                    cand = s + alpha * dstep
-                    Ec = energy_sub(self, x0[sel], Gi, Ji, B[sel], law, cand, None if arms is None else arms[sel],
-                                    rows=idx, fk=keep_fk)
-                else:
-                    cand = s[w] + alpha * dstep[w]
-                    Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], B[idx[w]], law, cand,
-                                    None if arms is None else arms[idx[w]], rows=idx[w], fk=keep_fk)
-                if keep_fk:
-                    Ec, fc, kc = Ec
-                upd = Ec < best_E[w]
-                best_E[w[upd]] = Ec[upd]
-                best_s[w[upd]] = cand[upd]
-                if keep_fk:
-                    F_all[idx[w[upd]]] = fc[upd]
-                    K_all[idx[w[upd]]] = kc[upd]
-                if alpha == 1.0:
-                    accepted_full[w[upd]] = True
-                    if tiny is not None:
-                        pending[w[tiny[w]]] = False
-                pending[w[upd]] = False
+            grad, dstep, sup_scale = self._newton_step(x0, s, idx, sel, Ji, f, k, B, arms, mu, floor, eye)
+            best_E, best_s, accepted_full = self._line_search(x0, G, J, Gi, Ji, B, law, arms, s, dstep, idx, sel,
+                                                              E0[idx].copy(), F_all, K_all, tol_mm if loose else None)
             moved = np.linalg.norm(best_s - s, axis=1)
             step[idx] = best_s
             E0[idx] = best_E
@@ -266,6 +222,69 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             stuck = (moved == 0) & (mu[idx] >= 1e12)
             active[idx[done | stuck]] = False
         return step, E_start
+
+    def _newton_step(self, x0: np.ndarray, s: np.ndarray, idx: np.ndarray, sel: slice | np.ndarray, Ji: np.ndarray,
+                     f: np.ndarray, k: np.ndarray, B: np.ndarray, arms: np.ndarray | None, mu: np.ndarray,
+                     floor: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Gradient (n, ndof) N of the linearised potential at the steps ``s`` (mm) of the states ``idx`` (``sel``:
+        the same rows or all), their damped Newton step (n, ndof) mm and, supports inside, the supports' force scale
+        (n,) N (else None). ``f``, ``k``: contact forces (N) and stiffnesses (N/mm) at ``s``."""
+        if Ji.shape[2] == self.ndof:
+            grad = -np.matmul(f[:, None, :], Ji)[:, 0] + B[sel]
+            H = np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji)
+            if arms is not None:
+                _, gb, Hb = self._bearing(x0[idx] + s, arms[idx])
+                grad = grad + gb
+                H = H + Hb
+            diag = np.einsum("ndd->nd", H) + floor[idx]
+            A = H + mu[idx, None, None] * diag[:, :, None] * eye[None]
+            return grad, -np.linalg.solve(A, grad[:, :, None])[:, :, 0], None
+        # supports inside the equilibrium (rvdyn.support_eq)
+        return self._chain_newton(x0[idx] + s, arms[idx], -np.matmul(f[:, None, :], Ji)[:, 0],
+                                  np.matmul(Ji.transpose(0, 2, 1) * k[:, None, :], Ji), B[sel], mu[idx], floor[idx])
+
+    def _line_search(self, x0: np.ndarray, G: np.ndarray, J: np.ndarray, Gi: np.ndarray, Ji: np.ndarray,
+                     B: np.ndarray, law: ContactLaw, arms: np.ndarray | None, s: np.ndarray, dstep: np.ndarray,
+                     idx: np.ndarray, sel: slice | np.ndarray, best_E: np.ndarray, F_all: np.ndarray | None,
+                     K_all: np.ndarray | None, tiny_mm: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Backtracking on the (convex) linearised potential along the Newton steps ``dstep`` (mm) from the steps ``s``
+        of the states ``idx``: the first step length that lowers it below ``best_E`` (N mm, updated). Returns the
+        potential (N mm), the step (mm) and whether the full length was taken; the accepted forces (N) and stiffnesses
+        (N/mm) go to ``F_all``, ``K_all`` if given. ``tiny_mm``: the inner tolerance (mm) with the supports inside."""
+        keep_fk = F_all is not None
+        best_s = s.copy()
+        accepted_full = np.zeros(idx.size, dtype=bool)
+        pending = np.ones(idx.size, dtype=bool)
+        # supports inside (loose): a Newton step shorter than the inner tolerance that does not lower the
+        # potential at full length (rounding at the minimum) is not shortened further: a shorter one would
+        # move the state by less than the tolerance too (the same convergence test, no evaluations)
+        tiny = (np.linalg.norm(dstep, axis=1) < tiny_mm) if tiny_mm is not None else None
+        for alpha in (1.0, 0.5, 0.25, 0.1, 0.02):
+            w = np.nonzero(pending)[0]
+            if w.size == 0:
+                break
+            if w.size == idx.size:
+                cand = s + alpha * dstep
+                Ec = energy_sub(self, x0[sel], Gi, Ji, B[sel], law, cand, None if arms is None else arms[sel],
+                                rows=idx, fk=keep_fk)
+            else:
+                cand = s[w] + alpha * dstep[w]
+                Ec = energy_sub(self, x0[idx[w]], G[idx[w]], J[idx[w]], B[idx[w]], law, cand,
+                                None if arms is None else arms[idx[w]], rows=idx[w], fk=keep_fk)
+            if keep_fk:
+                Ec, fc, kc = Ec
+            upd = Ec < best_E[w]
+            best_E[w[upd]] = Ec[upd]
+            best_s[w[upd]] = cand[upd]
+            if keep_fk:
+                F_all[idx[w[upd]]] = fc[upd]
+                K_all[idx[w[upd]]] = kc[upd]
+            if alpha == 1.0:
+                accepted_full[w[upd]] = True
+                if tiny is not None:
+                    pending[w[tiny[w]]] = False
+            pending[w[upd]] = False
+        return best_E, best_s, accepted_full
 
     def _check_solve_args(self, theta_in, direction, load_Nm) -> np.ndarray:
         if direction not in (1, -1):
@@ -466,17 +485,12 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
         the outer loop's contraction (``CONTRACTION_MAX``; the warm ones)."""
         N = th.size
         tol_mm = self.tol.solver_angle_rad * self.Rp
-        trust = np.full(N, OUTER_TRUST_MM)
-        last_dx = np.zeros((N, self.ndof))
+        trs = (np.full(N, OUTER_TRUST_MM), np.zeros((N, self.ndof)), np.zeros(N, dtype=bool), np.zeros(N),
+               np.zeros(N), np.full(N, np.inf))      # the trust region's state per row (:meth:`_trust_step`)
         mu_all = np.full(N, mu0)
-        cut = np.zeros(N, dtype=bool)                # the last step was cut to the trust radius
-        e_old = np.zeros(N)                          # linearised potential at the last state (N mm) ...
-        e_pred = np.zeros(N)                         # ... and at the last state plus its (cut) step
         used = [0] * len(bounds)
         active = list(range(len(bounds)))
         prev_rows = None
-        dx = np.zeros((0, self.ndof))
-        prev_ch = np.full(N, np.inf)                 # the last uncut step's size per state (inf: none)
         may_settle = np.broadcast_to(np.asarray(contraction, dtype=bool), (N,))   # warm states: the contraction stop
         # one solve with the supports inside: each state leaves the outer loop at its own convergence (the
         # damping floor of the inner loop fixed at the first linearisation's), so a few slow states do not keep
@@ -492,29 +506,11 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             row_on[a:b] = True
         fk0 = None
         fk_rows = np.full(N, np.nan)                 # a batch's floor stiffness of each state, fixed at its first
+        solves = (th, x, dirs, law, loads, bounds, collect)     # what the errors of unconverged solves need
         for it in range(self.tol.solver_max_iter):
             if not active:
                 break
-            if per_row and len(bounds) > 1 and not row_on.all():
-                rows = np.nonzero(row_on)[0]
-                n_rows = rows.size
-            elif per_row and len(bounds) == 1 and not row_on[bounds[0][0]:bounds[0][1]].all():
-                rows = np.nonzero(row_on)[0]
-                n_rows = rows.size
-            elif len(active) == len(bounds) and len(bounds) == 1:
-                rows = slice(bounds[0][0], bounds[0][1])
-                n_rows = bounds[0][1] - bounds[0][0]
-            else:
-                rows = np.concatenate([np.arange(*bounds[g]) for g in active])
-                n_rows = rows.size
-            if prev_rows is not None and n_rows != prev_rows.size and hasattr(self.contacts, "keep_rows"):
-                self.contacts.keep_rows(np.isin(prev_rows, rows), self.zp)      # warm starts of the rows left
-            prev_rows = np.arange(N)[rows]
-            locs, pos = [], 0
-            for g in active:
-                n = bounds[g][1] - bounds[g][0]
-                locs.append(slice(pos, pos + n))
-                pos += n
+            rows, n_rows, locs, prev_rows = self._outer_rows(per_row, bounds, active, row_on, prev_rows)
             xs = x[rows]
             G, J = self._linearise(th[rows], xs, dirs[rows] if len(bounds) > 1 else dirs[0])
             C = self._line_last()[0] if law.physical else None
@@ -539,95 +535,141 @@ class QuasiStaticSolver(LinearisationMixin, SupportMixin, PhysicsMixin, ResultsM
             arms = self._hole_arms(th[rows], xs, step_law)
             dx, e_start = self._inner(th[rows], xs, G, J, B[rows], step_law, mu, floor_k=floor_k, arms=arms)
             mu_all[rows] = np.minimum(mu, 1e-2)
-            # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
-            # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
-            # OUTER_TRUST_MM); a step that reverses the previous one (a contact flipping between
-            # two linearisations) halves that state's trust radius for good
-            if it > 0:
-                flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
-                trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
-                if expand:
-                    # the potential at xs (from the inner solve) plus the load's work over the last step
-                    e_now = e_start + np.einsum("nd,nd->n", last_dx[rows], B[rows])
-                    pred = e_old[rows] - e_pred[rows]
-                    good = cut[rows] & ~flip & (pred > 0) & (e_old[rows] - e_now > 0.75 * pred)
-                    trust[rows] = np.where(good, np.minimum(4.0 * trust[rows], MAX_TRUST_MM), trust[rows])
-            big = np.abs(dx).max(axis=1)
-            dx = dx * np.minimum(1.0, trust[rows] / np.maximum(big, 1e-300))[:, None]
-            # the contraction test (CONTRACTION_MAX): an uncut, exact step whose predecessor was uncut too
-            q = np.maximum(big / np.maximum(prev_ch[rows], 1e-300), CONTRACTION_MAX)
-            settled = (may_settle[rows] & (big <= trust[rows]) & (big < LOOSE_MIN_STEP * tol_mm)
-                       & (q <= CONTRACTION_MAX) & (CONTRACTION_MAX / (1.0 - CONTRACTION_MAX) * big < tol_mm))
-            if self.max_outer is not None and it + 1 >= self.max_outer:
-                settled = settled | may_settle[rows]  # a sensitivity solve's warm states stop here
-            prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
-            if expand:
-                cut[rows] = big > trust[rows]
-                e_old[rows] = e_start                 # the linearised potential at xs, from the inner solve
-                e_pred[rows] = energy_sub(self, xs, G, J, B[rows], step_law, dx, arms)
-            last_dx[rows] = dx
+            dx, settled = self._trust_step(it, rows, xs, dx, e_start, G, J, B, step_law, arms, trs, may_settle[rows],
+                                           expand, tol_mm)
             xs += dx
             x[rows] = xs
-            still = []
-            if per_row:
-                ch = np.abs(dx).max(axis=1)
-                conv = (ch < tol_mm) | settled | ((it >= self.tol.solver_max_iter // 3) & (ch < 10 * tol_mm))
-                if len(bounds) == 1:
-                    used[0] = it + 1
-                if conv.any():
-                    rr = np.arange(N)[rows][conv]
-                    o = offset + rr
-                    out["G"][o] = G[conv] + _jdot(J[conv], dx[conv][:, :self.nj])
-                    out["nrm"][o] = self._nrm_last[conv]
-                    out["J"][o] = J[conv]
-                    out["C"][o], out["R"][o] = self._line_last(np.nonzero(conv)[0])
-                    row_on[rr] = False
-                if len(bounds) > 1:
-                    for g in active:
-                        used[g] = it + 1
-                    still = [(g, None) for g in active if row_on[bounds[g][0]:bounds[g][1]].any()]
-                    if still and it + 1 == self.tol.solver_max_iter:
-                        big_g = np.zeros(N)
-                        big_g[np.arange(N)[rows]] = ch
-                        for g, _ in still:
-                            a, b = bounds[g]
-                            used[g] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[g],
-                                                        float(big_g[a:b].max()))
-                            if not collect:
-                                raise used[g]
-                    active = [g for g, _ in still]
-                    continue
-                if row_on.any():
-                    still.append((0, locs[0]))
-                    if it + 1 == self.tol.solver_max_iter:
-                        a, b = bounds[0]
-                        used[0] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[0], float(ch.max()))
-                        if not collect:
-                            raise used[0]
-                active = [g for g, _ in still]
-                continue
-            for g, lc in zip(active, locs):
-                used[g] = it + 1
-                change = np.abs(dx[lc]).max()
-                ok = bool(np.all((np.abs(dx[lc]).max(axis=1) < tol_mm) | settled[lc]))
-                if ok or (it >= self.tol.solver_max_iter // 3 and change < 10 * tol_mm):
-                    # the step is below the tolerance: the linearised gaps at the new state are exact
-                    # to O(dx^2 / rho), far below 1e-12 mm
-                    o = slice(offset + bounds[g][0], offset + bounds[g][1])
-                    out["G"][o] = G[lc] + _jdot(J[lc], dx[lc][:, :self.nj])
-                    out["nrm"][o] = self._nrm_last[lc]
-                    out["J"][o] = J[lc]
-                    out["C"][o], out["R"][o] = self._line_last(lc)
-                else:
-                    still.append((g, lc))
-            if still and it + 1 == self.tol.solver_max_iter:
-                for g, lc in still:
-                    a, b = bounds[g]
-                    used[g] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[g], float(np.abs(dx[lc]).max()))
-                    if not collect:
-                        raise used[g]
-            active = [g for g, _ in still]
+            active = self._settle(it, per_row, rows, dx, settled, G, J, locs, active, row_on, used, out, offset,
+                                  solves, tol_mm)
         return used
+
+    def _outer_rows(self, per_row: bool, bounds: list[tuple[int, int]], active: list[int], row_on: np.ndarray,
+                    prev_rows: np.ndarray | None) -> tuple[slice | np.ndarray, int, list[slice], np.ndarray]:
+        """The rows an outer iteration linearises (a slice or indices), their number, each active solve's place
+        among them and their indices; a provider with ``keep_rows`` keeps the warm starts of the rows left."""
+        N = row_on.size
+        if per_row and len(bounds) > 1 and not row_on.all():
+            rows = np.nonzero(row_on)[0]
+            n_rows = rows.size
+        elif per_row and len(bounds) == 1 and not row_on[bounds[0][0]:bounds[0][1]].all():
+            rows = np.nonzero(row_on)[0]
+            n_rows = rows.size
+        elif len(active) == len(bounds) and len(bounds) == 1:
+            rows = slice(bounds[0][0], bounds[0][1])
+            n_rows = bounds[0][1] - bounds[0][0]
+        else:
+            rows = np.concatenate([np.arange(*bounds[g]) for g in active])
+            n_rows = rows.size
+        if prev_rows is not None and n_rows != prev_rows.size and hasattr(self.contacts, "keep_rows"):
+            self.contacts.keep_rows(np.isin(prev_rows, rows), self.zp)      # warm starts of the rows left
+        locs, pos = [], 0
+        for g in active:
+            n = bounds[g][1] - bounds[g][0]
+            locs.append(slice(pos, pos + n))
+            pos += n
+        return rows, n_rows, locs, np.arange(N)[rows]
+
+    def _trust_step(self, it: int, rows: slice | np.ndarray, xs: np.ndarray, dx: np.ndarray, e_start: np.ndarray,
+                    G: np.ndarray, J: np.ndarray, B: np.ndarray, step_law: ContactLaw, arms: np.ndarray | None,
+                    trs: tuple, may_settle: np.ndarray, expand: bool, tol_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """The outer step (n, ndof) mm of the rows at ``xs``: the inner step ``dx`` cut to each state's trust radius,
+        and which states stop on the contraction test. ``e_start``: the linearised potential at ``xs``, N mm.
+        ``trs``, updated: per row the trust radius (mm), last step (mm), whether it was cut, the linearised
+        potential (N mm) at the last state and at the last state plus its step, the last uncut step's size (mm)."""
+        trust, last_dx, cut, e_old, e_pred, prev_ch = trs
+        # trust region of the linearisation: the gap normals turn by step/rho, rho down to the
+        # roots' 0.07 mm, so an outer step moves each state at most `trust` (start
+        # OUTER_TRUST_MM); a step that reverses the previous one (a contact flipping between
+        # two linearisations) halves that state's trust radius for good
+        if it > 0:
+            flip = np.einsum("nd,nd->n", dx, last_dx[rows]) < 0
+            trust[rows] = np.where(flip, 0.5 * trust[rows], trust[rows])
+            if expand:
+                # the potential at xs (from the inner solve) plus the load's work over the last step
+                e_now = e_start + np.einsum("nd,nd->n", last_dx[rows], B[rows])
+                pred = e_old[rows] - e_pred[rows]
+                good = cut[rows] & ~flip & (pred > 0) & (e_old[rows] - e_now > 0.75 * pred)
+                trust[rows] = np.where(good, np.minimum(4.0 * trust[rows], MAX_TRUST_MM), trust[rows])
+        big = np.abs(dx).max(axis=1)
+        dx = dx * np.minimum(1.0, trust[rows] / np.maximum(big, 1e-300))[:, None]
+        # the contraction test (CONTRACTION_MAX): an uncut, exact step whose predecessor was uncut too
+        q = np.maximum(big / np.maximum(prev_ch[rows], 1e-300), CONTRACTION_MAX)
+        settled = (may_settle & (big <= trust[rows]) & (big < LOOSE_MIN_STEP * tol_mm)
+                   & (q <= CONTRACTION_MAX) & (CONTRACTION_MAX / (1.0 - CONTRACTION_MAX) * big < tol_mm))
+        if self.max_outer is not None and it + 1 >= self.max_outer:
+            settled = settled | may_settle            # a sensitivity solve's warm states stop here
+        prev_ch[rows] = np.where(big <= trust[rows], big, np.inf)
+        if expand:
+            cut[rows] = big > trust[rows]
+            e_old[rows] = e_start                     # the linearised potential at xs, from the inner solve
+            e_pred[rows] = energy_sub(self, xs, G, J, B[rows], step_law, dx, arms)
+        last_dx[rows] = dx
+        return dx, settled
+
+    def _settle(self, it: int, per_row: bool, rows: slice | np.ndarray, dx: np.ndarray, settled: np.ndarray,
+                G: np.ndarray, J: np.ndarray, locs: list[slice], active: list[int], row_on: np.ndarray, used: list,
+                out: dict, offset: int, solves: tuple, tol_mm: float) -> list[int]:
+        """The convergence test after an outer step ``dx`` (mm), state by state (``per_row``, leaving ``row_on``) or
+        solve by solve: writes the converged linearisation to ``out``, updates ``used`` and returns the solves still
+        iterating; a solve that cannot converge raises its error, or with ``collect`` (in ``solves``) keeps it."""
+        th, x, dirs, law, loads, bounds, collect = solves
+        N = row_on.size
+        still = []
+        if per_row:
+            ch = np.abs(dx).max(axis=1)
+            conv = (ch < tol_mm) | settled | ((it >= self.tol.solver_max_iter // 3) & (ch < 10 * tol_mm))
+            if len(bounds) == 1:
+                used[0] = it + 1
+            if conv.any():
+                rr = np.arange(N)[rows][conv]
+                o = offset + rr
+                out["G"][o] = G[conv] + _jdot(J[conv], dx[conv][:, :self.nj])
+                out["nrm"][o] = self._nrm_last[conv]
+                out["J"][o] = J[conv]
+                out["C"][o], out["R"][o] = self._line_last(np.nonzero(conv)[0])
+                row_on[rr] = False
+            if len(bounds) > 1:
+                for g in active:
+                    used[g] = it + 1
+                still = [(g, None) for g in active if row_on[bounds[g][0]:bounds[g][1]].any()]
+                if still and it + 1 == self.tol.solver_max_iter:
+                    big_g = np.zeros(N)
+                    big_g[np.arange(N)[rows]] = ch
+                    for g, _ in still:
+                        a, b = bounds[g]
+                        used[g] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[g], float(big_g[a:b].max()))
+                        if not collect:
+                            raise used[g]
+                return [g for g, _ in still]
+            if row_on.any():
+                still.append((0, locs[0]))
+                if it + 1 == self.tol.solver_max_iter:
+                    a, b = bounds[0]
+                    used[0] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[0], float(ch.max()))
+                    if not collect:
+                        raise used[0]
+            return [g for g, _ in still]
+        for g, lc in zip(active, locs):
+            used[g] = it + 1
+            change = np.abs(dx[lc]).max()
+            ok = bool(np.all((np.abs(dx[lc]).max(axis=1) < tol_mm) | settled[lc]))
+            if ok or (it >= self.tol.solver_max_iter // 3 and change < 10 * tol_mm):
+                # the step is below the tolerance: the linearised gaps at the new state are exact
+                # to O(dx^2 / rho), far below 1e-12 mm
+                o = slice(offset + bounds[g][0], offset + bounds[g][1])
+                out["G"][o] = G[lc] + _jdot(J[lc], dx[lc][:, :self.nj])
+                out["nrm"][o] = self._nrm_last[lc]
+                out["J"][o] = J[lc]
+                out["C"][o], out["R"][o] = self._line_last(lc)
+            else:
+                still.append((g, lc))
+        if still and it + 1 == self.tol.solver_max_iter:
+            for g, lc in still:
+                a, b = bounds[g]
+                used[g] = self._unconverged(th[a:b], x[a:b], dirs[a], law, loads[g], float(np.abs(dx[lc]).max()))
+                if not collect:
+                    raise used[g]
+        return [g for g, _ in still]
 
 
 def _row_norm(J: np.ndarray) -> np.ndarray:

@@ -168,6 +168,49 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     mu_p = model_value(s.model, "pin_friction_coefficient")
     mu_b = model_value(s.model, "bearing_friction_coefficient")
     th = np.array([math.radians(theta_in_deg)])
+    sides, budget_acc, crank_acc, warnings, preloaded = _sweep_levels(s, th, rated)
+    # the housing ring in series (rvdyn.housing; elastic supports only, as the other supports): its wind-up
+    # along each side's levels, added to the equilibrium's torsion in the sense of the torque
+    house = {sign: _housing_windup(s, g, sides[sign]) for sign in (1, -1)}
+    if s.supports is not None:
+        budget_acc["housing"] = [float(house[sign][-1]) * ARCSEC_PER_RAD for sign in (1, -1)]
+    el_theta, el_tau, el_fric, el_pins, el_house = _elastic_points(s, g, sides, house, mu_p, mu_b)
+    curve = _sweep_curve(el_theta, el_tau, el_fric, rated, points)
+    elastic = pd.DataFrame({"torque_Nm": el_tau / 1e3, "torsion_arcmin": el_theta * ARCSEC_PER_RAD / 60.0,
+                            "friction_torque_Nm": el_fric / 1e3, "pins_in_contact": el_pins,
+                            "housing_arcmin": el_house * ARCSEC_PER_RAD / 60.0})
+    rig, lost_motion, width0 = _curve_figures(curve, rated)
+    backlash = _backlash_arcmin(s, sides, preloaded)
+    budget = {k: float(np.mean(v)) for k, v in budget_acc.items()}
+    figures: dict[str, Any] = {
+        "torsional_rigidity_Nm_per_arcmin": float(rig),
+        "lost_motion_arcmin": float(lost_motion),
+        "backlash_arcmin": float(backlash),
+        "hysteresis_loss_arcmin": float(width0),
+        "rated_torque_Nm": rated,
+        "budget": budget,
+        "budget_total_arcsec": float(sum(budget.values())),
+        "budget_per_crank": {k: [float(x) for x in np.mean(v, axis=0)] for k, v in crank_acc.items()},
+        "pins_in_contact": {f"{f:g}": int(sol.n_pin_contacts[0]) for f, (_, sol) in zip((0.0,) + LEVELS, sides[1])},
+        "contact": s.law.kind,
+        "supports": "elastic" if s.supports is not None else "rigid",
+        "pin_friction_coefficient": mu_p,
+        "bearing_friction_coefficient": mu_b,
+        "input_angle_deg": float(theta_in_deg),
+        "preloaded": preloaded,
+        "solver": solver,
+        "datasheet_class": DATASHEET,
+        "warnings": warnings,
+    }
+    return StiffnessResult(curve=curve, elastic=elastic, figures=figures)
+
+
+def _sweep_levels(s: QuasiStaticSolver, th: np.ndarray, rated: float
+                  ) -> tuple[dict[int, list], dict[str, list[float]], dict[str, list[np.ndarray]], list[str], bool]:
+    """The equilibria of the elastic curve at the locked input angle ``th`` (rad, (1,)): per side (+1, -1) the
+    rows ``(torque N m, Solution)`` at zero torque and at each of ``LEVELS`` times ``rated`` (N m); the wind-up
+    parts at rated torque (part -> arcsec per side, and per crank), the solves' warnings and whether the case
+    is preloaded (:func:`_zero_torque`)."""
     sides = {}
     budget_acc: dict[str, list[float]] = {}
     crank_acc: dict[str, list[np.ndarray]] = {}
@@ -192,18 +235,19 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
                 for k, v in sol.crank_parts_rad.items():
                     crank_acc.setdefault(k, []).append(np.asarray(v[0], dtype=float) * ARCSEC_PER_RAD)
         sides[sign] = rows
-    # the housing ring in series (rvdyn.housing; elastic supports only, as the other supports): its wind-up
-    # along each side's levels, added to the equilibrium's torsion in the sense of the torque
-    house = {sign: _housing_windup(s, g, sides[sign]) for sign in (1, -1)}
-    if s.supports is not None:
-        budget_acc["housing"] = [float(house[sign][-1]) * ARCSEC_PER_RAD for sign in (1, -1)]
+    return sides, budget_acc, crank_acc, warnings, preloaded
+
+
+def _elastic_points(s: QuasiStaticSolver, g: ReducerGeometry, sides: dict, house: dict, mu_p: float,
+                    mu_b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The elastic curve's points of both sides in the order of torsion (then torque): torsion (rad, the housing's
+    wind-up ``house`` included), torque and Coulomb friction torque (N mm), pin contacts, housing wind-up (rad)."""
     el_theta, el_tau, el_fric, el_pins, el_house = [], [], [], [], []
     for sign in (-1, 1):
         rows = sides[sign]
         theta = np.array([sol.te_rad[0] for _, sol in rows]) + sign * house[sign]
         tf = _friction_torque(s, g, rows, theta, mu_p, mu_b)
-        order = np.argsort(theta) if sign > 0 else np.argsort(theta)
-        for i in order:
+        for i in np.argsort(theta):
             el_theta.append(theta[i])
             el_tau.append(rows[i][0] * 1e3)
             el_fric.append(tf[i])
@@ -215,7 +259,14 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     el_pins = np.array(el_pins)
     el_house = np.array(el_house)
     o = np.lexsort((el_tau, el_theta))
-    el_theta, el_tau, el_fric, el_pins, el_house = el_theta[o], el_tau[o], el_fric[o], el_pins[o], el_house[o]
+    return el_theta[o], el_tau[o], el_fric[o], el_pins[o], el_house[o]
+
+
+def _sweep_curve(el_theta: np.ndarray, el_tau: np.ndarray, el_fric: np.ndarray, rated: float,
+                 points: int) -> pd.DataFrame:
+    """The hysteresis curve of the torque sweep -rated -> +rated -> -rated (``rated`` N m) from the elastic
+    points (torsion rad, torque and friction torque N mm): the output moves only when the torque leaves the
+    friction band (module docstring), ``points`` evenly spaced torques per branch plus the elastic levels."""
     U = np.maximum.accumulate(el_tau + el_fric)                                  # loading branch tau(theta)
     D = np.maximum.accumulate(el_tau - el_fric)                                  # unloading branch
     R = rated * 1e3
@@ -232,13 +283,15 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
         dn_t = _branch_inverse(el_theta, D, tau, up=False)
         theta = min(max(theta, up_t), dn_t) if up_t <= dn_t else up_t
         out.append(theta)
-    curve = pd.DataFrame({"torque_Nm": path / 1e3, "torsion_arcmin": np.array(out) * ARCSEC_PER_RAD / 60.0,
-                          "branch": branch})
-    # the unloading branch from +rated is the first branch's return; sample the load branch of the
-    # complete cycle (-rated -> +rated after an unloading from +rated) for the width
-    elastic = pd.DataFrame({"torque_Nm": el_tau / 1e3, "torsion_arcmin": el_theta * ARCSEC_PER_RAD / 60.0,
-                            "friction_torque_Nm": el_fric / 1e3, "pins_in_contact": el_pins,
-                            "housing_arcmin": el_house * ARCSEC_PER_RAD / 60.0})
+    # the unloading branch from +rated is the first branch's return; the widths are read on the load branch
+    # of the complete cycle (-rated -> +rated after an unloading from +rated)
+    return pd.DataFrame({"torque_Nm": path / 1e3, "torsion_arcmin": np.array(out) * ARCSEC_PER_RAD / 60.0,
+                         "branch": branch})
+
+
+def _curve_figures(curve: pd.DataFrame, rated: float) -> tuple[float, float, float]:
+    """Torsional rigidity (N m/arcmin: the mid-curve's secant between 3 % and 100 % of ``rated`` N m, mean of
+    both sides), lost motion (arcmin, between the mid-curve at +-3 %) and the curve's width at zero torque (arcmin)."""
     lm_plus, _ = _mid_width(curve, LOST_MOTION_FRACTION * rated)
     lm_minus, _ = _mid_width(curve, -LOST_MOTION_FRACTION * rated)
     _, width0 = _mid_width(curve, 0.0)
@@ -246,34 +299,17 @@ def hysteresis(case: Case, rated_Nm: float | None = None, theta_in_deg: float = 
     m_r_minus, _ = _mid_width(curve, -rated)
     b = (1.0 - LOST_MOTION_FRACTION) * rated
     rig = 0.5 * (b / (m_r_plus - lm_plus) + b / (lm_minus - m_r_minus))
+    return rig, lm_plus - lm_minus, width0
+
+
+def _backlash_arcmin(s: QuasiStaticSolver, sides: dict, preloaded: bool) -> float:
+    """The geometric play at zero torque (arcmin): TE(-1) - TE(+1) of the rigid limit's zero-torque rows."""
     zero = sides[1][0][1], sides[-1][0][1]                                     # the f = 0 rows
     # a preloaded case has no play (the rigid limit found an interference): backlash 0; a play within the two
     # solves' convergence (each to solver_angle_rad of output angle) is not resolved: backlash 0, not rounding
     play_rad = zero[0].te_rad[0] - zero[1].te_rad[0]
     resolved = abs(play_rad) > 2.0 * s.tol.solver_angle_rad
-    backlash = play_rad * ARCSEC_PER_RAD / 60.0 if resolved and not preloaded else 0.0
-    budget = {k: float(np.mean(v)) for k, v in budget_acc.items()}
-    figures: dict[str, Any] = {
-        "torsional_rigidity_Nm_per_arcmin": float(rig),
-        "lost_motion_arcmin": float(lm_plus - lm_minus),
-        "backlash_arcmin": float(backlash),
-        "hysteresis_loss_arcmin": float(width0),
-        "rated_torque_Nm": rated,
-        "budget": budget,
-        "budget_total_arcsec": float(sum(budget.values())),
-        "budget_per_crank": {k: [float(x) for x in np.mean(v, axis=0)] for k, v in crank_acc.items()},
-        "pins_in_contact": {f"{f:g}": int(sol.n_pin_contacts[0]) for f, (_, sol) in zip((0.0,) + LEVELS, sides[1])},
-        "contact": s.law.kind,
-        "supports": "elastic" if s.supports is not None else "rigid",
-        "pin_friction_coefficient": mu_p,
-        "bearing_friction_coefficient": mu_b,
-        "input_angle_deg": float(theta_in_deg),
-        "preloaded": preloaded,
-        "solver": solver,
-        "datasheet_class": DATASHEET,
-        "warnings": warnings,
-    }
-    return StiffnessResult(curve=curve, elastic=elastic, figures=figures)
+    return play_rad * ARCSEC_PER_RAD / 60.0 if resolved and not preloaded else 0.0
 
 
 def _zero_torque(s: QuasiStaticSolver, th: np.ndarray, direction: int):

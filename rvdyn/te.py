@@ -264,21 +264,7 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     check_max_outer(max_outer)
     if solver not in SOLVERS:
         raise ValueError(f"solver {solver!r} is unknown; allowed: {list(SOLVERS)}")
-    if loads is None or isinstance(loads, (str, bytes)) or len(loads) == 0:
-        raise ValueError(f"loads {loads!r} must be a non-empty list of (load_Nm, direction) pairs")
-    pairs: list[tuple[float, int]] = []
-    for i, pair in enumerate(loads):
-        try:
-            L, d = pair
-        except (TypeError, ValueError):
-            raise ValueError(f"loads[{i}] = {pair!r} must be a (load_Nm, direction) pair") from None
-        if isinstance(L, bool) or not isinstance(L, (int, float, np.integer, np.floating)) or not (
-                math.isfinite(L) and L > 0):
-            raise ValueError(f"loads[{i}] load_Nm {L!r} must be a finite number > 0 (N m; the rigid limit, load 0, "
-                             "is run_te's)")
-        if isinstance(d, bool) or d not in (1, -1):
-            raise ValueError(f"loads[{i}] direction {d!r} must be +1 or -1")
-        pairs.append((float(L), int(d)))
+    pairs = _check_pairs(loads)
     counts = list(steps) if isinstance(steps, (list, tuple, np.ndarray)) else [steps] * len(pairs)
     if len(counts) != len(pairs):
         raise ValueError(f"steps has {len(counts)} entries for {len(pairs)} loads; give one count or one per load")
@@ -295,16 +281,37 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     if len(starts) != len(pairs):
         raise ValueError(f"x_init has {len(starts)} entries for {len(pairs)} loads")
     if solver != "analytic":
-        out: list = []
-        for n, (L, d), a, xi in zip(counts, pairs, given, starts):
-            try:
-                out.append(run_te(case, solver, n, revolutions, L, d, law, geom=g, theta_in_deg=a, x_init=xi,
-                                  max_outer=max_outer))
-            except (InterferenceError, RuntimeError) as err:
-                if errors == "raise":
-                    raise
-                out.append(err)
-        return out
+        return _run_te_each(case, solver, counts, pairs, revolutions, law, g, errors, given, starts, max_outer)
+    return _run_te_batch(case, counts, pairs, ths, revs, law, g, errors, starts, max_outer)
+
+
+def _check_pairs(loads: list[tuple[float, int]] | None) -> list[tuple[float, int]]:
+    """The ``(load_Nm, direction)`` pairs of :func:`run_te_many` as (float N m, int); ValueError naming the first
+    bad entry (not a pair, a load not finite and > 0, a direction other than +1 and -1) or an empty list."""
+    if loads is None or isinstance(loads, (str, bytes)) or len(loads) == 0:
+        raise ValueError(f"loads {loads!r} must be a non-empty list of (load_Nm, direction) pairs")
+    pairs: list[tuple[float, int]] = []
+    for i, pair in enumerate(loads):
+        try:
+            L, d = pair
+        except (TypeError, ValueError):
+            raise ValueError(f"loads[{i}] = {pair!r} must be a (load_Nm, direction) pair") from None
+        if isinstance(L, bool) or not isinstance(L, (int, float, np.integer, np.floating)) or not (
+                math.isfinite(L) and L > 0):
+            raise ValueError(f"loads[{i}] load_Nm {L!r} must be a finite number > 0 (N m; the rigid limit, load 0, "
+                             "is run_te's)")
+        if isinstance(d, bool) or d not in (1, -1):
+            raise ValueError(f"loads[{i}] direction {d!r} must be +1 or -1")
+        pairs.append((float(L), int(d)))
+    return pairs
+
+
+def _run_te_batch(case: Case, counts: list[int], pairs: list[tuple[float, int]], ths: list[np.ndarray],
+                  revs: list[float], law: ContactLaw | None, g: ReducerGeometry, errors: str, starts: list,
+                  max_outer: int | None) -> list:
+    """:func:`run_te_many` with the analytic provider, all pairs in one batch (input angles ``ths``, rad, and output
+    revolutions ``revs`` per pair): one TEResult per pair (``stats["seconds"]``: the batch's time over the pairs,
+    s), or with ``errors="return"`` the error of a pair that cannot be solved in its place."""
     t0 = time.perf_counter()
     s = QuasiStaticSolver(g, AnalyticContacts(g, per_point=True), law)
     s.want_parts = False
@@ -313,8 +320,25 @@ def run_te_many(case: Case, solver: str = "analytic", steps: int | list[int] = 7
     sols = s.solve_many(ths, [d for _, d in pairs], [L for L, _ in pairs], errors=errors,
                         x_init=None if all(xi is None for xi in xs) else xs)
     secs = (time.perf_counter() - t0) / len(pairs)
-    return [sol if isinstance(sol, Exception) else _te_result(case, solver, s, sol, n, rv, d, L, secs)
+    return [sol if isinstance(sol, Exception) else _te_result(case, "analytic", s, sol, n, rv, d, L, secs)
             for sol, n, rv, (L, d) in zip(sols, counts, revs, pairs)]
+
+
+def _run_te_each(case: Case, solver: str, counts: list[int], pairs: list[tuple[float, int]], revolutions: float,
+                 law: ContactLaw | None, g: ReducerGeometry, errors: str, given: list, starts: list,
+                 max_outer: int | None) -> list:
+    """:func:`run_te_many` pair by pair with :func:`run_te` (the fcl provider): one TEResult per pair, or with
+    ``errors="return"`` the InterferenceError or RuntimeError of a pair that cannot be solved in its place."""
+    out: list = []
+    for n, (L, d), a, xi in zip(counts, pairs, given, starts):
+        try:
+            out.append(run_te(case, solver, n, revolutions, L, d, law, geom=g, theta_in_deg=a, x_init=xi,
+                              max_outer=max_outer))
+        except (InterferenceError, RuntimeError) as err:
+            if errors == "raise":
+                raise
+            out.append(err)
+    return out
 
 
 def backlash(case: Case, solver: str = "analytic", steps: int = 720, load_Nm: float = LIGHT_LOAD_NM,
