@@ -56,12 +56,15 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
 from .csvio import read_csv_strict
+
+if TYPE_CHECKING:
+    from .results import RSMResults
 
 __all__ = ["main", "jsonable", "build_parser"]
 
@@ -182,10 +185,8 @@ def _results_block(res) -> dict:
                               "adeq_precision", "std_dev", "rmse", "coefficients", "notes")}
 
 
-def _cmd_fit(args: argparse.Namespace) -> int:
-    from .model import ResponseSurfaceModel
-    from .reduce import compare_reductions
-
+def _fit_inputs(args: argparse.Namespace) -> tuple[pd.DataFrame, pd.DataFrame | None]:
+    """Check the ``rsm fit`` options; read the data file and the ``--new-data`` file (``None`` without it)."""
     path = Path(args.data)
     if not path.is_file():
         raise ValueError(f"data file '{path}' does not exist")
@@ -204,7 +205,82 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         new_data = read_csv_strict(npath, "--new-data file")
         if len(new_data) == 0:
             raise ValueError(f"--new-data file '{npath}' has no rows")
-    data = read_csv_strict(path, "data file")
+    return read_csv_strict(path, "data file"), new_data
+
+
+def _fit_reduction(res: RSMResults, args: argparse.Namespace, out: dict, text: list[str]) -> RSMResults:
+    """Reduce the full fit as ``--reduce`` asks (backward or paper) and compare the reductions.
+
+    Adds the ``reduction`` and ``comparison`` blocks to ``out`` (JSON) and their summary to ``text``;
+    returns the fit the validation and the plots use (the refitted model of backward elimination).
+    """
+    from .reduce import compare_reductions
+
+    final = res
+    comp = compare_reductions(res, alpha=args.alpha, alpha_out=args.alpha_out,
+                              hierarchy=not args.no_hierarchy)
+    if args.reduce == "backward":
+        b = comp.backward
+        final = b.results
+        out["reduction"] = {"method": "backward", "alpha_out": b.alpha_out,
+                            "hierarchy": b.hierarchy, "removed": b.removed,
+                            "steps": b.steps.to_dict(orient="records"),
+                            **_results_block(b.results)}
+        text += ["", f"Backward elimination (alpha-out {b.alpha_out}, hierarchy "
+                     f"{'kept' if b.hierarchy else 'ignored'}, refitted): removed "
+                     f"{', '.join(b.removed) or 'nothing'}", "", b.results.summary()]
+    else:
+        pr = comp.paper
+        out["reduction"] = {
+            "method": "paper", "alpha": pr.alpha, "units": pr.units, "terms": pr.terms,
+            "dropped": pr.dropped, "refitted": False,
+            "coefficients": {"coded": pr.coefficients_coded.to_dict(),
+                             "actual": (None if pr.coefficients_actual is None
+                                        else pr.coefficients_actual.to_dict())},
+            "sse": pr.sse, "rmse": pr.rmse, "r2": pr.r2,
+        }
+        text += ["", f"Paper-mode simplification (terms with p < {pr.alpha}, coefficients "
+                     f"kept from the full fit in {pr.units} units, not refitted):",
+                 "  " + " + ".join(f"{v:.6g}*{k}" if k != "Intercept" else f"{v:.6g}"
+                                   for k, v in pr.coefficients.items()),
+                 f"  dropped: {', '.join(pr.dropped)}"]
+    tab = comp.table
+    out["comparison"] = {m: {c: tab.loc[m, c] for c in tab.columns} for m in tab.index}
+    out["comparison"]["shortcut_cost_sse"] = comp.shortcut_cost
+    text += ["", "Reduction comparison on the fitted runs (sse = residual SS, rmse = sqrt(sse/n))",
+             tab[["n_terms", "sse", "rmse", "r2", "max_abs_resid", "refitted"]].to_string(
+                 float_format=lambda v: f"{v:.6g}"),
+             f"cost of not refitting the paper's terms: +{_clean(comp.shortcut_cost, res.ss_total):.6g}"
+             " residual SS"]
+    return final
+
+
+def _fit_augment(res: RSMResults, args: argparse.Namespace, new_data: pd.DataFrame | None, out: dict,
+                 text: list[str]) -> None:
+    """Run ``--augment`` on the full fit; adds the ``augment`` block to ``out`` and its summary to ``text``.
+
+    An error about the new runs names the ``--new-data`` file.
+    """
+    from .augment import SelectionRule, augment, format_augment
+    from .candidates import default_candidates
+
+    try:
+        aug = augment(res, new_data=new_data,
+                      candidates=default_candidates(res.factors, res.levels, physical=not args.no_physical),
+                      rule=SelectionRule(alpha=args.alpha, max_add=args.max_add))
+    except ValueError as exc:
+        msg = str(exc)
+        if msg.startswith("new data: "):
+            msg = f"--new-data '{args.new_data}': {msg[len('new data: '):]}"
+        raise ValueError(msg) from None
+    out["augment"] = aug.to_dict()
+    text += ["", format_augment(aug)]
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    from .model import ResponseSurfaceModel
+
+    data, new_data = _fit_inputs(args)
     terms = args.terms if args.terms else args.model
     model = ResponseSurfaceModel(data, args.factors, args.response, terms=terms,
                                  levels=args.levels, units=args.units)
@@ -213,41 +289,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     final = res
     text = [res.summary()]
     if args.reduce != "none":
-        comp = compare_reductions(res, alpha=args.alpha, alpha_out=args.alpha_out,
-                                  hierarchy=not args.no_hierarchy)
-        if args.reduce == "backward":
-            b = comp.backward
-            final = b.results
-            out["reduction"] = {"method": "backward", "alpha_out": b.alpha_out,
-                                "hierarchy": b.hierarchy, "removed": b.removed,
-                                "steps": b.steps.to_dict(orient="records"),
-                                **_results_block(b.results)}
-            text += ["", f"Backward elimination (alpha-out {b.alpha_out}, hierarchy "
-                         f"{'kept' if b.hierarchy else 'ignored'}, refitted): removed "
-                         f"{', '.join(b.removed) or 'nothing'}", "", b.results.summary()]
-        else:
-            pr = comp.paper
-            out["reduction"] = {
-                "method": "paper", "alpha": pr.alpha, "units": pr.units, "terms": pr.terms,
-                "dropped": pr.dropped, "refitted": False,
-                "coefficients": {"coded": pr.coefficients_coded.to_dict(),
-                                 "actual": (None if pr.coefficients_actual is None
-                                            else pr.coefficients_actual.to_dict())},
-                "sse": pr.sse, "rmse": pr.rmse, "r2": pr.r2,
-            }
-            text += ["", f"Paper-mode simplification (terms with p < {pr.alpha}, coefficients "
-                         f"kept from the full fit in {pr.units} units, not refitted):",
-                     "  " + " + ".join(f"{v:.6g}*{k}" if k != "Intercept" else f"{v:.6g}"
-                                       for k, v in pr.coefficients.items()),
-                     f"  dropped: {', '.join(pr.dropped)}"]
-        tab = comp.table
-        out["comparison"] = {m: {c: tab.loc[m, c] for c in tab.columns} for m in tab.index}
-        out["comparison"]["shortcut_cost_sse"] = comp.shortcut_cost
-        text += ["", "Reduction comparison on the fitted runs (sse = residual SS, rmse = sqrt(sse/n))",
-                 tab[["n_terms", "sse", "rmse", "r2", "max_abs_resid", "refitted"]].to_string(
-                     float_format=lambda v: f"{v:.6g}"),
-                 f"cost of not refitting the paper's terms: +{_clean(comp.shortcut_cost, res.ss_total):.6g}"
-                 " residual SS"]
+        final = _fit_reduction(res, args, out, text)
     vdata = None
     if args.validate:
         vdata = read_csv_strict(args.validate, "validation file")
@@ -263,26 +305,12 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         out["plots"] = [str(p) for p in paths]
         text += ["", f"wrote {len(paths)} figures to {args.plots}"]
     if args.augment:
-        from .augment import SelectionRule, augment, format_augment
-        from .candidates import default_candidates
-
-        try:
-            aug = augment(res, new_data=new_data,
-                          candidates=default_candidates(res.factors, res.levels, physical=not args.no_physical),
-                          rule=SelectionRule(alpha=args.alpha, max_add=args.max_add))
-        except ValueError as exc:
-            msg = str(exc)
-            if msg.startswith("new data: "):
-                msg = f"--new-data '{args.new_data}': {msg[len('new data: '):]}"
-            raise ValueError(msg) from None
-        out["augment"] = aug.to_dict()
-        text += ["", format_augment(aug)]
+        _fit_augment(res, args, new_data, out, text)
     if args.json:
         print(json.dumps(jsonable(out), allow_nan=False))
     else:
         print("\n".join(text))
     return 0
-
 
 def _cmd_design(args: argparse.Namespace) -> int:
     from .coding import Levels

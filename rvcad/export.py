@@ -262,6 +262,126 @@ def check_tolerance(tolerance_um: float) -> float:
     return float(tolerance_um)
 
 
+def _check_formats(formats: Sequence[str]) -> list[str]:
+    """The requested formats in the order of :data:`FORMATS` (``ValueError`` for an unknown or no format)."""
+    fmts = [f.strip().lower() for f in formats]
+    for f in fmts:
+        if f not in FORMATS:
+            raise ValueError(f"format {f!r} is unknown; allowed: {', '.join(FORMATS)}")
+    if not fmts:
+        raise ValueError("no format given; allowed: step, stl")
+    return [f for f in FORMATS if f in fmts]
+
+
+def _prepare_folder(out: Path, case: Case, tol_um: float, force: bool, asm: Assembly
+                    ) -> tuple[list[str], list[str], dict[str, Any]]:
+    """Claim (or with ``force`` clean) the output folder, remove stale temporary files and create it; returns
+    the removed files of another export, the removed temp files and the manifest (empty if missing or outdated)."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {str(out)!r} exists and is not a folder")
+    cleaned = _claim_folder(out, case, tol_um, force)
+    temps = [p.name for p in remove_stale_temps(out, output_names(asm))]
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = _load_manifest(out)
+    if manifest.get("version") != EXPORT_VERSION:
+        manifest = {"files": {}}
+    return cleaned, temps, manifest
+
+
+@dataclass
+class _Emitter:
+    """Writes the files of one export into ``out``, skipping those the manifest shows up to date
+    (unless ``force``), and records each one in the manifest, the report and ``progress``."""
+
+    out: Path
+    case: Case
+    tol_um: float
+    theta_in_deg: float
+    force: bool
+    manifest: dict[str, Any]
+    report: ExportReport
+    progress: Callable[[ExportedFile], None] | None
+    valid: set[str] = field(default_factory=set)
+
+    def checked(self, shape: Any, name: str) -> Any:
+        """``shape`` after BRepCheck (once per part and run)."""
+        if name not in self.valid:
+            check_solid(shape, name)
+            self.valid.add(name)
+        return shape
+
+    def save_manifest(self) -> None:
+        """Write the manifest (atomically) with the case, tolerance (um) and input angle (deg)."""
+        self.manifest.update({"version": EXPORT_VERSION, "case_name": self.case.name, "case_key": self.case.key(),
+                              "tolerance_um": self.tol_um, "theta_in_deg": float(self.theta_in_deg)})
+        data = json.dumps(self.manifest, indent=1, sort_keys=True).encode()
+        atomic_write(self.out / MANIFEST, _write_bytes(data))
+
+    def emit(self, fname: str, part: str, fmt: str, key: str,
+             build: Callable[[], tuple[Callable[[Path], None], int | None, float | None]]) -> None:
+        """Write ``fname`` with the writer ``build()`` returns (with its face count and deviation, um),
+        unless the manifest holds it under ``key`` with the size on disk."""
+        path = self.out / fname
+        entry = self.manifest["files"].get(fname)
+        if (not self.force and entry and entry.get("key") == key and path.is_file()
+                and path.stat().st_size == entry.get("bytes")):
+            ef = ExportedFile(fname, part, fmt, bytes=int(entry["bytes"]), skipped=True,
+                              faces=entry.get("faces"), max_deviation_um=entry.get("max_deviation_um"))
+        else:
+            t0 = time.perf_counter()
+            writer, faces, dev = build()
+            size = atomic_write(path, writer)
+            ef = ExportedFile(fname, part, fmt, bytes=size, seconds=time.perf_counter() - t0, faces=faces,
+                              max_deviation_um=dev)
+            self.manifest["files"][fname] = {"key": key, "bytes": size, "faces": faces, "max_deviation_um": dev}
+            self.save_manifest()
+        self.report.files.append(ef)
+        if self.progress is not None:
+            self.progress(ef)
+
+
+def _emit_parts(em: _Emitter, asm: Assembly, names: Sequence[str], fmts: Sequence[str], tol: float) -> None:
+    """Write the own-frame STEP and STL files of the selected parts (``tol``: tolerance, mm)."""
+    case, tol_um = em.case, em.tol_um
+    for name in names:
+        if name == "assembly":
+            continue
+        part: Part = asm[name]
+        if "step" in fmts:
+            def build_step(part: Part = part) -> tuple[Callable[[Path], None], int | None, float | None]:
+                s = em.checked(part.shape(tol), part.name)
+                return step_writer([(part.name, s, None)], part.name), count_faces(s), part.spline_deviation(tol) * 1e3
+            em.emit(f"{name}.step", name, "step", content_key(case, tol_um, "step", f"{name}.step"), build_step)
+        if "stl" in fmts:
+            def build_stl(part: Part = part) -> tuple[Callable[[Path], None], int | None, float | None]:
+                m = part.mesh(tol)
+                dev = part.outline_deviation(tol) * 1e3
+                return _write_bytes(stl_bytes(m, f"rvcad {case.name} {part.name} own frame mm")), len(m.faces), dev
+            em.emit(f"{name}.stl", name, "stl", content_key(case, tol_um, "stl", f"{name}.stl"), build_stl)
+
+
+def _emit_assembly(em: _Emitter, asm: Assembly, fmts: Sequence[str], tol: float) -> None:
+    """Write the assembly files, every part placed at the assembly's pose (``tol``: tolerance, mm)."""
+    case, tol_um = em.case, em.tol_um
+    th = float(em.theta_in_deg)
+    if "step" in fmts:
+        def build_asm_step() -> tuple[Callable[[Path], None], int | None, float | None]:
+            items = asm.shapes(tol)
+            for n, sh, _ in items:
+                em.checked(sh, n)
+            return (step_writer(items, f"rv-reducer {case.name}"), sum(count_faces(s) for _, s, _ in items),
+                    None)
+        em.emit("assembly.step", "assembly", "step", content_key(case, tol_um, "step", "assembly.step", th, asm.state),
+                build_asm_step)
+    if "stl" in fmts:
+        def build_asm_stl() -> tuple[Callable[[Path], None], int | None, float | None]:
+            m = asm.mesh(tol)
+            return (_write_bytes(stl_bytes(m, f"rvcad {case.name} assembly theta_in {th:g} deg mm")),
+                    len(m.faces), None)
+        em.emit("assembly.stl", "assembly", "stl", content_key(case, tol_um, "stl", "assembly.stl", th, asm.state),
+                build_asm_stl)
+
+
 def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] = FORMATS,
                 tolerance_um: float = DEFAULT_TOLERANCE_UM, theta_in_deg: float = 0.0,
                 parts: Sequence[str] | None = None, force: bool = False,
@@ -311,13 +431,7 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
     """
     t_start = time.perf_counter()
     case = case if case is not None else Case.from_dict({"name": "nominal"})
-    fmts = [f.strip().lower() for f in formats]
-    for f in fmts:
-        if f not in FORMATS:
-            raise ValueError(f"format {f!r} is unknown; allowed: {', '.join(FORMATS)}")
-    if not fmts:
-        raise ValueError("no format given; allowed: step, stl")
-    fmts = [f for f in FORMATS if f in fmts]
+    fmts = _check_formats(formats)
     tol_um = check_tolerance(tolerance_um)
     if isinstance(theta_in_deg, bool) or not isinstance(theta_in_deg, (int, float)) or not math.isfinite(theta_in_deg):
         raise ValueError(f"theta_in_deg {theta_in_deg!r} must be a finite number of degrees")
@@ -327,96 +441,20 @@ def export_case(case: Case | None, out_dir: str | Path, formats: Sequence[str] =
     asm = Assembly(case, float(theta_in_deg), state=state, geometry=geometry)
     names = select_parts(asm, parts)
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {str(out)!r} exists and is not a folder")
-    cleaned = _claim_folder(out, case, tol_um, force)
-    temps = [p.name for p in remove_stale_temps(out, output_names(asm))]
-    out.mkdir(parents=True, exist_ok=True)
-    manifest = _load_manifest(out)
-    if manifest.get("version") != EXPORT_VERSION:
-        manifest = {"files": {}}
+    cleaned, temps, manifest = _prepare_folder(out, case, tol_um, force, asm)
     report = ExportReport(out_dir=str(out), case_name=case.name, case_key=case.key(), tolerance_um=tol_um,
                           theta_in_deg=float(theta_in_deg), formats=fmts,
                           design_check={**asm.design_check(), "geometry": margins},
                           pose=pose or ("ideal" if state is None else "state"), overlaps=overlaps(asm, tol),
                           cleaned=cleaned, removed_temps=temps)
     report.overlaps["pose"] = report.pose
-
-    valid: set[str] = set()
-
-    def checked(shape: Any, name: str) -> Any:  # BRepCheck once per part and run
-        if name not in valid:
-            check_solid(shape, name)
-            valid.add(name)
-        return shape
-
-    def save_manifest() -> None:
-        manifest.update({"version": EXPORT_VERSION, "case_name": case.name, "case_key": case.key(),
-                         "tolerance_um": tol_um, "theta_in_deg": float(theta_in_deg)})
-        data = json.dumps(manifest, indent=1, sort_keys=True).encode()
-        atomic_write(out / MANIFEST, _write_bytes(data))
-
-    def emit(fname: str, part: str, fmt: str, key: str,
-             build: Callable[[], tuple[Callable[[Path], None], int | None, float | None]]) -> None:
-        path = out / fname
-        entry = manifest["files"].get(fname)
-        if (not force and entry and entry.get("key") == key and path.is_file()
-                and path.stat().st_size == entry.get("bytes")):
-            ef = ExportedFile(fname, part, fmt, bytes=int(entry["bytes"]), skipped=True,
-                              faces=entry.get("faces"), max_deviation_um=entry.get("max_deviation_um"))
-        else:
-            t0 = time.perf_counter()
-            writer, faces, dev = build()
-            size = atomic_write(path, writer)
-            ef = ExportedFile(fname, part, fmt, bytes=size, seconds=time.perf_counter() - t0, faces=faces,
-                              max_deviation_um=dev)
-            manifest["files"][fname] = {"key": key, "bytes": size, "faces": faces, "max_deviation_um": dev}
-            save_manifest()
-        report.files.append(ef)
-        if progress is not None:
-            progress(ef)
-
+    em = _Emitter(out, case, tol_um, theta_in_deg, force, manifest, report, progress)
     case_json = json.dumps(case.to_dict(), indent=1, sort_keys=True).encode()
-    emit("case.json", "case", "json", content_key(case, tol_um, "json", "case.json"),
-         lambda: (_write_bytes(case_json), None, None))
-
-    for name in names:
-        if name == "assembly":
-            continue
-        part: Part = asm[name]
-        if "step" in fmts:
-            def build_step(part: Part = part) -> tuple[Callable[[Path], None], int | None, float | None]:
-                s = checked(part.shape(tol), part.name)
-                return step_writer([(part.name, s, None)], part.name), count_faces(s), part.spline_deviation(tol) * 1e3
-            emit(f"{name}.step", name, "step", content_key(case, tol_um, "step", f"{name}.step"), build_step)
-        if "stl" in fmts:
-            def build_stl(part: Part = part) -> tuple[Callable[[Path], None], int | None, float | None]:
-                m = part.mesh(tol)
-                dev = part.outline_deviation(tol) * 1e3
-                return _write_bytes(stl_bytes(m, f"rvcad {case.name} {part.name} own frame mm")), len(m.faces), dev
-            emit(f"{name}.stl", name, "stl", content_key(case, tol_um, "stl", f"{name}.stl"), build_stl)
-
+    em.emit("case.json", "case", "json", content_key(case, tol_um, "json", "case.json"),
+            lambda: (_write_bytes(case_json), None, None))
+    _emit_parts(em, asm, names, fmts, tol)
     if "assembly" in names:
-        th = float(theta_in_deg)
-        if "step" in fmts:
-            def build_asm_step() -> tuple[Callable[[Path], None], int | None, float | None]:
-                items = asm.shapes(tol)
-                for n, sh, _ in items:
-                    checked(sh, n)
-                return (step_writer(items, f"rv-reducer {case.name}"), sum(count_faces(s) for _, s, _ in items),
-                        None)
-            emit("assembly.step", "assembly", "step",
-                 content_key(case, tol_um, "step", "assembly.step", th, asm.state),
-                 build_asm_step)
-        if "stl" in fmts:
-            def build_asm_stl() -> tuple[Callable[[Path], None], int | None, float | None]:
-                m = asm.mesh(tol)
-                return (_write_bytes(stl_bytes(m, f"rvcad {case.name} assembly theta_in {th:g} deg mm")),
-                        len(m.faces), None)
-            emit("assembly.stl", "assembly", "stl",
-                 content_key(case, tol_um, "stl", "assembly.stl", th, asm.state),
-                 build_asm_stl)
-
+        _emit_assembly(em, asm, fmts, tol)
     report.seconds = time.perf_counter() - t_start
     return report
 

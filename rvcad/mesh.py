@@ -289,6 +289,110 @@ def _circle_intersections(c1: np.ndarray, r1: float, c2: np.ndarray, r2: float) 
     return np.array([pm - h * perp, pm + h * perp])
 
 
+def _forced_angles(secs: list[tuple[float, float, np.ndarray, float]]
+                   ) -> tuple[list[list[float]], list[np.ndarray | None]]:
+    """Per section, the angles (about its centre, rad) of its circle's crossings with its neighbours; per
+    step between two sections, the two crossing points of their circles (mm; ``None`` when nested)."""
+    extra: list[list[float]] = [[] for _ in secs]
+    crossings: list[np.ndarray | None] = []
+    for i in range(len(secs) - 1):
+        (_, _, ca, ra), (_, _, cb, rb) = secs[i], secs[i + 1]
+        d = float(np.linalg.norm(cb - ca))
+        if d + min(ra, rb) < max(ra, rb) - 1e-9:
+            crossings.append(None)  # nested
+            continue
+        if d >= ra + rb or d < 1e-12:
+            raise ValueError("stacked circular sections must overlap")
+        x = _circle_intersections(ca, ra, cb, rb)
+        crossings.append(x)
+        extra[i] += [math.atan2(*(p - ca)[::-1]) for p in x]
+        extra[i + 1] += [math.atan2(*(p - cb)[::-1]) for p in x]
+    return extra, crossings
+
+
+def _ring_angles(r: float, forced: list[float], sagitta: float) -> np.ndarray:
+    """Vertex angles (rad) of a circle of radius ``r`` (mm) within the chord ``sagitta`` (mm), through
+    every ``forced`` angle (each arc between two forced angles is divided evenly)."""
+    n = arc_steps(r, 2.0 * math.pi, sagitta)
+    if not forced:
+        return 2.0 * math.pi * np.arange(n) / n
+    f = np.sort(np.mod(np.asarray(forced), 2.0 * math.pi))
+    out = []
+    for k in range(len(f)):
+        a0 = f[k]
+        a1 = f[(k + 1) % len(f)] + (2.0 * math.pi if k + 1 == len(f) else 0.0)
+        m = arc_steps(r, a1 - a0, sagitta)
+        out.append(a0 + (a1 - a0) * np.arange(m) / m)
+    return np.concatenate(out)
+
+
+def _annulus_step(pa: np.ndarray, hi_a: np.ndarray, pb: np.ndarray, lo_b: np.ndarray, lower_larger: bool
+                  ) -> np.ndarray:
+    """Faces of the annular step between nested rings: the top ring ``pa`` (vertex ids ``hi_a``) of the
+    lower section and the bottom ring ``pb`` (ids ``lo_b``) of the upper one, facing the open side."""
+    if lower_larger:  # face looks up, annulus lower \ upper
+        t = _tri([pa, pb[::-1]])
+        idx = np.concatenate([hi_a, lo_b[::-1]])
+        return idx[t]
+    # upper is larger: face looks down, annulus upper \ lower
+    t = _tri([pb, pa[::-1]])
+    idx = np.concatenate([lo_b, hi_a[::-1]])
+    return idx[t][:, ::-1]
+
+
+def _crescent(pp: np.ndarray, hh: np.ndarray, iia: list[int], outside: np.ndarray, qq: np.ndarray,
+              hq: np.ndarray, iiq: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Outline (mm) and vertex ids of the crescent of ring ``pp`` outside ring ``qq``.
+
+    Walks ``pp`` (CCW) over its ``outside`` part from one crossing vertex (``iia``) to the other, then
+    ``qq`` back (CW) between its crossing vertices ``iiq``, leaving out the shared crossing points.
+    """
+    n1, n2 = len(pp), len(qq)
+    start = next(k for k in iia if outside[(k + 1) % n1] and (k + 1) % n1 not in iia)
+    other = iia[1] if start == iia[0] else iia[0]
+    path1 = [start]
+    k = start
+    while k != other:
+        k = (k + 1) % n1
+        path1.append(k)
+    s2 = iiq[iia.index(other)]
+    e2 = iiq[iia.index(start)]
+    path2 = []
+    k = s2
+    while k != e2:
+        k = (k - 1) % n2
+        path2.append(k)
+    path2 = path2[:-1]
+    ring = np.concatenate([pp[path1], qq[path2]]) if path2 else pp[path1]
+    idx = np.concatenate([hh[path1], hq[path2]]) if path2 else hh[path1]
+    return ring, idx
+
+
+def _crescent_steps(a: tuple[np.ndarray, np.ndarray, np.ndarray, float],
+                    b: tuple[np.ndarray, np.ndarray, np.ndarray, float], x: np.ndarray, remap: np.ndarray
+                    ) -> list[np.ndarray]:
+    """Faces of the step between crossing circles: crescent A \\ B looks up, crescent B \\ A looks down.
+
+    ``a`` is (top ring points, their vertex ids, centre, radius) of the lower section, ``b`` the same
+    for the bottom ring of the upper one (mm); ``x`` holds the two crossing points (mm). Each crossing
+    point keeps one vertex, the lower ring's: ``remap`` is updated in place to merge the upper one.
+    """
+    (pa, hi_a, ca, ra_), (pb, lo_b, cb, rb_) = a, b
+    ia = [int(np.argmin(np.linalg.norm(pa - q, axis=1))) for q in x]
+    ib = [int(np.argmin(np.linalg.norm(pb - q, axis=1))) for q in x]
+    for ka, kb in zip(ia, ib):
+        remap[lo_b[kb]] = hi_a[ka]
+    out_a = np.linalg.norm(pa - cb, axis=1) > rb_ - 1e-12
+    out_b = np.linalg.norm(pb - ca, axis=1) > ra_ - 1e-12
+    faces = []
+    for (pp, hh, iia, outside, qq, hq, iiq, up) in (
+            (pa, hi_a, ia, out_a, pb, lo_b, ib, True), (pb, lo_b, ib, out_b, pa, hi_a, ia, False)):
+        ring, idx = _crescent(pp, hh, iia, outside, qq, hq, iiq)
+        t = _tri([ring])
+        faces.append(idx[t] if up else idx[t][:, ::-1])
+    return faces
+
+
 def stacked_circles(sections: Sequence[tuple[float, float, Sequence[float], float]], sagitta: float) -> Mesh:
     """Watertight mesh of a stack of circular cylinders (a crankshaft), vertex-exact on every circle.
 
@@ -309,40 +413,13 @@ def stacked_circles(sections: Sequence[tuple[float, float, Sequence[float], floa
         if abs(s0[1] - s1[0]) > 1e-12:
             raise ValueError("stacked sections must be contiguous in z")
     # angles (about each circle's centre) of extra vertices forced by crossing neighbours
-    extra: list[list[float]] = [[] for _ in secs]
-    crossings: list[np.ndarray | None] = []
-    for i in range(len(secs) - 1):
-        (_, _, ca, ra), (_, _, cb, rb) = secs[i], secs[i + 1]
-        d = float(np.linalg.norm(cb - ca))
-        if d + min(ra, rb) < max(ra, rb) - 1e-9:
-            crossings.append(None)  # nested
-            continue
-        if d >= ra + rb or d < 1e-12:
-            raise ValueError("stacked circular sections must overlap")
-        x = _circle_intersections(ca, ra, cb, rb)
-        crossings.append(x)
-        extra[i] += [math.atan2(*(p - ca)[::-1]) for p in x]
-        extra[i + 1] += [math.atan2(*(p - cb)[::-1]) for p in x]
-
-    def ring_angles(r: float, forced: list[float]) -> np.ndarray:
-        n = arc_steps(r, 2.0 * math.pi, sagitta)
-        if not forced:
-            return 2.0 * math.pi * np.arange(n) / n
-        f = np.sort(np.mod(np.asarray(forced), 2.0 * math.pi))
-        out = []
-        for k in range(len(f)):
-            a0 = f[k]
-            a1 = f[(k + 1) % len(f)] + (2.0 * math.pi if k + 1 == len(f) else 0.0)
-            m = arc_steps(r, a1 - a0, sagitta)
-            out.append(a0 + (a1 - a0) * np.arange(m) / m)
-        return np.concatenate(out)
-
+    extra, crossings = _forced_angles(secs)
     verts: list[np.ndarray] = []
     faces: list[np.ndarray] = []
     rings_idx: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (lo idx, hi idx, 2D pts)
     off = 0
     for (z0, z1, c, r), forced in zip(secs, extra):
-        a = ring_angles(r, forced)
+        a = _ring_angles(r, forced, sagitta)
         p = c + r * unit(a)
         n = len(p)
         verts += [np.c_[p, np.full(n, z0)], np.c_[p, np.full(n, z1)]]
@@ -361,48 +438,10 @@ def stacked_circles(sections: Sequence[tuple[float, float, Sequence[float], floa
         _, hi_a, pa = rings_idx[i]
         lo_b, _, pb = rings_idx[i + 1]
         if x is None:
-            ra, rb = secs[i][3], secs[i + 1][3]
-            if ra > rb:  # lower is larger: face looks up, annulus lower \ upper
-                t = _tri([pa, pb[::-1]])
-                idx = np.concatenate([hi_a, lo_b[::-1]])
-                faces.append(idx[t])
-            else:  # upper is larger: face looks down, annulus upper \ lower
-                t = _tri([pb, pa[::-1]])
-                idx = np.concatenate([lo_b, hi_a[::-1]])
-                faces.append(idx[t][:, ::-1])
-            continue
-        # crossing circles: crescent A \ B looks up, crescent B \ A looks down
-        ca, cb = secs[i][2], secs[i + 1][2]
-        ra_, rb_ = secs[i][3], secs[i + 1][3]
-        ia = [int(np.argmin(np.linalg.norm(pa - q, axis=1))) for q in x]
-        ib = [int(np.argmin(np.linalg.norm(pb - q, axis=1))) for q in x]
-        for ka, kb in zip(ia, ib):  # one vertex per crossing point: the lower ring's
-            remap[lo_b[kb]] = hi_a[ka]
-        out_a = np.linalg.norm(pa - cb, axis=1) > rb_ - 1e-12
-        out_b = np.linalg.norm(pb - ca, axis=1) > ra_ - 1e-12
-        for (pp, hh, iia, outside, qq, hq, iiq, up) in (
-                (pa, hi_a, ia, out_a, pb, lo_b, ib, True), (pb, lo_b, ib, out_b, pa, hi_a, ia, False)):
-            # walk pp (CCW) over its outside part from one crossing to the other, then walk qq back (CW)
-            n1, n2 = len(pp), len(qq)
-            start = next(k for k in iia if outside[(k + 1) % n1] and (k + 1) % n1 not in iia)
-            other = iia[1] if start == iia[0] else iia[0]
-            path1 = [start]
-            k = start
-            while k != other:
-                k = (k + 1) % n1
-                path1.append(k)
-            s2 = iiq[iia.index(other)]
-            e2 = iiq[iia.index(start)]
-            path2 = []
-            k = s2
-            while k != e2:
-                k = (k - 1) % n2
-                path2.append(k)
-            path2 = path2[:-1]
-            ring = np.concatenate([pp[path1], qq[path2]]) if path2 else pp[path1]
-            idx = np.concatenate([hh[path1], hq[path2]]) if path2 else hh[path1]
-            t = _tri([ring])
-            faces.append(idx[t] if up else idx[t][:, ::-1])
+            faces.append(_annulus_step(pa, hi_a, pb, lo_b, secs[i][3] > secs[i + 1][3]))
+        else:
+            faces += _crescent_steps((pa, hi_a, secs[i][2], secs[i][3]), (pb, lo_b, secs[i + 1][2], secs[i + 1][3]),
+                                     x, remap)
     return Mesh(np.concatenate(verts), remap[np.concatenate(faces).astype(np.int64)])
 
 

@@ -511,46 +511,7 @@ class CycloidProfile:
         far = np.abs(sd) > FAR_FOOT_MM
         if np.any(far):
             pf = p[far]
-            grid = np.linspace(-1.0, 1.0, 129) * (2.0 * math.pi / self.z_lobes)
-            tf = t[far]
-            start = np.empty_like(tf)
-            # q on the grid t + g by the angle-addition formulas: the trig of the 129 offsets once, of
-            # each foot once, products on the grid (q agrees with :meth:`q` to rounding, ~1e-14 mm, so
-            # the nearest grid point, hence the Newton start, is the same but at rounding-level ties, where
-            # either start leads to an equally near foot)
-            Rcg, Rsg = R * np.cos(grid), R * np.sin(grid)
-            ecg, esg = e * np.cos(Z * grid), e * np.sin(Z * grid)
-            a2f = Z * tf + self.cam_phase
-            cf1, sf1, cf2, sf2 = np.cos(tf), np.sin(tf), np.cos(a2f), np.sin(a2f)
-            chunk = 1024  # 1024 x 129 grid points at a time, in place (cache-sized work arrays)
-            gx, gy, tmp = (np.empty((min(chunk, len(pf)), grid.size)) for _ in range(3))
-            for c0 in range(0, len(pf), chunk):
-                sl = slice(c0, c0 + chunk)
-                m = len(tf[sl])
-                x, y, w = gx[:m], gy[:m], tmp[:m]
-                c1g, s1g = cf1[sl, None], sf1[sl, None]
-                c2g, s2g = cf2[sl, None], sf2[sl, None]
-                # x = R cos(t+g) - e cos(Z(t+g)+phi_c) - px, y likewise (evaluated left to right)
-                np.multiply(c1g, Rcg, out=x)
-                np.multiply(s1g, Rsg, out=w)
-                x -= w
-                np.multiply(c2g, ecg, out=w)
-                x -= w
-                np.multiply(s2g, esg, out=w)
-                x += w
-                x -= pf[sl, 0, None]
-                np.multiply(s1g, Rcg, out=y)
-                np.multiply(c1g, Rsg, out=w)
-                y += w
-                np.multiply(s2g, ecg, out=w)
-                y -= w
-                np.multiply(c2g, esg, out=w)
-                y -= w
-                y -= pf[sl, 1, None]
-                x *= x
-                y *= y
-                x += y
-                start[sl] = tf[sl] + grid[np.argmin(x, axis=1)]
+            start = self._far_foot_starts(pf, t[far])
             t2 = self.foot_point(pf, start, per_point)
             d_old = np.linalg.norm(pf - qt[far], axis=-1)
             d_new = np.linalg.norm(pf - self.q(t2), axis=-1)
@@ -561,6 +522,51 @@ class CycloidProfile:
                 n[idx] = self.normal(t[idx])
                 sd[idx] = np.einsum("...i,...i->...", p[idx] - self.q(t[idx]), n[idx])
         return sd, t, n
+
+    def _far_foot_starts(self, pf: np.ndarray, tf: np.ndarray) -> np.ndarray:
+        """Newton starts (rad) for the points ``pf`` (mm) whose feet ``tf`` (rad) are far: the nearest of 129
+        points of q on a grid over a lobe pitch either side of each foot."""
+        R, e, Z = self.pin_circle_radius, self.eccentricity, self.z_pins
+        grid = np.linspace(-1.0, 1.0, 129) * (2.0 * math.pi / self.z_lobes)
+        start = np.empty_like(tf)
+        # q on the grid t + g by the angle-addition formulas: the trig of the 129 offsets once, of
+        # each foot once, products on the grid (q agrees with :meth:`q` to rounding, ~1e-14 mm, so
+        # the nearest grid point, hence the Newton start, is the same but at rounding-level ties, where
+        # either start leads to an equally near foot)
+        Rcg, Rsg = R * np.cos(grid), R * np.sin(grid)
+        ecg, esg = e * np.cos(Z * grid), e * np.sin(Z * grid)
+        a2f = Z * tf + self.cam_phase
+        cf1, sf1, cf2, sf2 = np.cos(tf), np.sin(tf), np.cos(a2f), np.sin(a2f)
+        chunk = 1024  # 1024 x 129 grid points at a time, in place (cache-sized work arrays)
+        gx, gy, tmp = (np.empty((min(chunk, len(pf)), grid.size)) for _ in range(3))
+        for c0 in range(0, len(pf), chunk):
+            sl = slice(c0, c0 + chunk)
+            m = len(tf[sl])
+            x, y, w = gx[:m], gy[:m], tmp[:m]
+            c1g, s1g = cf1[sl, None], sf1[sl, None]
+            c2g, s2g = cf2[sl, None], sf2[sl, None]
+            # x = R cos(t+g) - e cos(Z(t+g)+phi_c) - px, y likewise (evaluated left to right)
+            np.multiply(c1g, Rcg, out=x)
+            np.multiply(s1g, Rsg, out=w)
+            x -= w
+            np.multiply(c2g, ecg, out=w)
+            x -= w
+            np.multiply(s2g, esg, out=w)
+            x += w
+            x -= pf[sl, 0, None]
+            np.multiply(s1g, Rcg, out=y)
+            np.multiply(c1g, Rsg, out=w)
+            y += w
+            np.multiply(s2g, ecg, out=w)
+            y -= w
+            np.multiply(c2g, esg, out=w)
+            y -= w
+            y -= pf[sl, 1, None]
+            x *= x
+            y *= y
+            x += y
+            start[sl] = tf[sl] + grid[np.argmin(x, axis=1)]
+        return start
 
     def boundary_distance(self, p: np.ndarray, t0: np.ndarray,
                           per_point: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
