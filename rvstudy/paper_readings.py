@@ -237,17 +237,7 @@ def run_readings(fs: Any, executor: Any, cache: Any, steps: int = READINGS_STEPS
         for label, pattern in patterns.items():
             cases = _pattern_cases(fs, t6, actual, label, pattern, law_name, load_Nm)
             out = runner(cases, f"Table 6 reading: EA on {label}, {law_name} law ({len(cases)} runs)")
-            st = pd.DataFrame([o["stats"] for o in out])
-            df = t6[["run"] + fs.names].copy()
-            df.insert(0, "contact", law_name)
-            df.insert(0, "ea_pins", label)
-            df["paper_te_arcmin"] = t6["te_arcmin"].to_numpy(float)
-            for key in STATISTICS.values():
-                df[f"{key}_arcmin"] = st[key].astype(float).to_numpy() / ARCSEC_PER_ARCMIN
-            df["status"] = [o.get("status", "ok") for o in out]
-            df["error_message"] = [o.get("error", "") for o in out]
-            for key in STATISTICS.values():
-                df.loc[df["status"] != "ok", f"{key}_arcmin"] = np.nan
+            df = _reading_runs(fs, t6, out, label, law_name)
             bad = df[df["status"] != "ok"]
             if len(bad):
                 notes.append(f"EA on {label}, {law_name} law: runs {list(bad['run'])} failed and are left out "
@@ -262,6 +252,41 @@ def run_readings(fs: Any, executor: Any, cache: Any, steps: int = READINGS_STEPS
     table = pd.DataFrame(rows)
     table = table.sort_values("rms_raw", na_position="last", kind="stable").reset_index(drop=True)
     return ReadingsResult(pd.concat(frames, ignore_index=True), table, int(steps), solver, notes, counters)
+
+
+def _reading_runs(fs: Any, t6: pd.DataFrame, out: list[dict[str, Any]], label: str,
+                  law_name: str) -> pd.DataFrame:
+    """The solved Table 6 runs of one EA pattern and contact law as a table.
+
+    Parameters
+    ----------
+    fs : rvstudy.study.FactorSet
+        The paper's factors (their coded columns are copied from ``t6``).
+    t6 : DataFrame
+        The Table 6 runs used (``run``, coded factors, ``te_arcmin``).
+    out : list of dict
+        The runner's results, one per run of ``t6``.
+    label, law_name : str
+        EA pattern label and contact law of the solves.
+
+    Returns
+    -------
+    DataFrame
+        ``ea_pins, contact, run, EA..ED, paper_te_arcmin``, every statistic of :data:`STATISTICS` in arcmin
+        (NaN for a failed run), ``status, error_message``.
+    """
+    st = pd.DataFrame([o["stats"] for o in out])
+    df = t6[["run"] + fs.names].copy()
+    df.insert(0, "contact", law_name)
+    df.insert(0, "ea_pins", label)
+    df["paper_te_arcmin"] = t6["te_arcmin"].to_numpy(float)
+    for key in STATISTICS.values():
+        df[f"{key}_arcmin"] = st[key].astype(float).to_numpy() / ARCSEC_PER_ARCMIN
+    df["status"] = [o.get("status", "ok") for o in out]
+    df["error_message"] = [o.get("error", "") for o in out]
+    for key in STATISTICS.values():
+        df.loc[df["status"] != "ok", f"{key}_arcmin"] = np.nan
+    return df
 
 
 @dataclass

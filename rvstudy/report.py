@@ -26,7 +26,6 @@ import numpy as np
 import pandas as pd
 
 from rvcad.atomic import atomic_path
-from rvcad.errors import ERROR_TYPES
 from rvstudy.screen import plot_screen, plot_sweeps
 from rvdyn.te import write_table_atomic
 import rvpaper as paper
@@ -34,10 +33,9 @@ from rvdyn.cache import write_text_atomic
 from rvstudy.augment_section import augment_section
 from rvstudy.paper_readings import readings_section
 import rvstudy.report_mc as report_mc
-from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyResult
+from rvstudy.report_claims import PRIMARY, conclusions
+from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyConfig, StudyResult
 from rvstudy.te_figure import plot_te_figure
-
-PRIMARY = "mean_abs_arcmin"
 
 
 # ---------------------------------------------------------------------------------------------- writers
@@ -194,129 +192,6 @@ def validation_table(res: StudyResult) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _top(anova: pd.DataFrame, kind: str) -> tuple[str, float, float]:
-    terms = [t for t in anova.index if t not in ("Model", "Residual", "Lack of fit", "Pure error", "Cor total")]
-    if kind == "interaction":
-        terms = [t for t in terms if ":" in t]
-    sub = anova.loc[terms]
-    t = str(sub["sum_sq"].idxmax())
-    return t, float(sub.loc[t, "F"]), float(sub.loc[t, "p"])
-
-
-def _factor_strength_note(res: StudyResult, f: str) -> str:
-    """How strongly factor ``f`` acts in our design runs and in the paper's (Table 6): mean response
-    of the runs at f = +-1 minus that of the runs at f = 0, arcmin; and what our f is physically."""
-    d = res.design
-    if d is None or f not in d or "paper_te_arcmin" not in d or f not in res.factors.names:
-        return ""
-    ok = d["status"] == "ok"
-    edge, centre = ok & (d[f].abs() == 1), ok & (d[f] == 0)
-    if not edge.any() or not centre.any():
-        return ""
-    ours = float(d.loc[edge, PRIMARY].mean() - d.loc[centre, PRIMARY].mean())
-    theirs = float(d.loc[edge, "paper_te_arcmin"].mean() - d.loc[centre, "paper_te_arcmin"].mean())
-    key = res.factors.errors[f]
-    et = ERROR_TYPES[key]
-    pattern = res.factors.patterns.get(f)
-    inst = (f"pattern {pattern}" if pattern else ", ".join(f"{k} {v}" for k, v in et.defaults.items()))
-    return (f" Mean response of the runs at {f} = +-1 minus that at {f} = 0: paper {theirs:.3g} arcmin, ours "
-            f"{ours:.3g} arcmin. Our {f} is `{res.factors.spec(f)}`: {et.meaning}" + (f" ({inst})" if inst else "")
-            + f"; the paper shows its {f} pattern only in a schematic (Fig. 10), not in the text. A pattern "
-            "that moves more pins acts more strongly: all 40 pins moved by EA rotate the pin ring and shift the "
-            "output by about EA itself, every other pin by about half of it (`--levels` with error "
-            "`pin_pitch[all]` or `pin_pitch[alternate]` runs these variants).")
-
-
-def conclusions(res: StudyResult) -> pd.DataFrame:
-    """Each checked claim of the paper: what the paper says, what we find, reproduced or not, why."""
-    rows: list[dict[str, str]] = []
-
-    def add(claim: str, ours: str, verdict: str, why: str) -> None:
-        rows.append({"claim": claim, "paper": paper.CLAIMS[claim], "ours": ours, "reproduced": verdict, "why": why})
-
-    if res.screen is not None:
-        sc = res.screen.stage_check
-        pp, ma = sc["pp"], sc["mean_abs"]
-        s = res.screen.screen
-        plus = s[s["sign"] == 1].set_index("letter")
-        dpp = plus["d_pp_arcsec"].abs()
-        # errors that move the whole TE curve (a clearance or a preload) but add no ripple
-        offset_only = [L for L in plus.index if L != "A" and dpp[L] <= 1e-3 * max(dpp.max(), 1e-30)
-                       and abs(plus.loc[L, "d_mean_abs_arcsec"]) > 0.1 * plus["d_mean_abs_arcsec"].abs().max()]
-        named = ", ".join(f"{L} ({plus.loc[L, 'error']})" for L in offset_only)
-        offset_note = (f" {named} shift the "
-                       "whole TE curve by a constant (a uniform clearance or preload at every pin) and add no "
-                       "ripple, so they rank last by peak-to-peak while changing the mean|TE| strongly."
-                       if offset_only else "")
-        v = "yes" if pp["reproduced"] and ma["reproduced"] else ("partly" if pp["reproduced"] or ma["reproduced"]
-                                                                  or pp["below_rsm_factors"] else "no")
-        add("stage1_below_stage2",
-            f"by TE pp: B rank {pp['rank_B']}, C rank {pp['rank_C']} of 11; by mean|TE|: B {ma['rank_B']}, "
-            f"C {ma['rank_C']}",
-            v, "stage II errors ranked below stage I: by pp " + (", ".join(pp["stage2_below_stage1"]) or "none")
-            + "; by mean|TE| " + (", ".join(ma["stage2_below_stage1"]) or "none")
-            + ". A stage I error disturbs the crank angle, which reaches the output reduced by the stage II "
-              "ratio; a stage II error acts at the pin circle." + offset_note)
-        ranks = {L: int(plus.loc[L, "rank_pp"]) for L in ("L", "I", "J", "G") if L in plus.index}
-        top4 = all(r <= 4 for r in ranks.values())
-        above = [f"{L}={int(plus.loc[L, 'rank_pp'])}" for L in plus.index
-                 if L not in ranks and L != "A" and plus.loc[L, "rank_pp"] < max(ranks.values())]
-        add("four_factors_obvious", "ranks by TE pp: " + ", ".join(f"{L}={r}" for L, r in ranks.items()),
-            "yes" if top4 else "partly",
-            "the four RSM factors are the four largest" if top4 else
-            "errors outside the paper's four that rank above one of them: " + ", ".join(above) + "." + offset_note)
-    b = res.fits.get(PRIMARY)
-    if b is not None and b.results is not None:
-        a = b.results.anova
-        st = b.results.fit_statistics()
-        mp = float(a.loc["Model", "p"])
-        add("model_significant", f"model p = {mp:.3g}, R2 = {st['r2']:.4f}, R2adj = {st['r2_adj']:.4f}",
-            "yes" if mp < 1e-4 and st["r2"] >= 0.95 else ("partly" if mp < 0.05 else "no"),
-            "quadratic in the coded factors fitted to our runs" + (
-                "" if st["r2"] >= 0.95 else "; our response is not as smooth a quadratic as the paper's"))
-        lof = float(a.loc["Lack of fit", "p"])
-        pe = float(a.loc["Pure error", "sum_sq"])
-        add("lack_of_fit_ns", f"lack-of-fit p = {lof:.3g}, pure error SS = {pe:.3g}",
-            "untestable" if not np.isfinite(lof) else ("yes" if lof > 0.05 else "no"),
-            "our simulator is deterministic: the replicated centre runs give identical responses, so the pure "
-            "error is zero and the lack-of-fit F test is undefined (the paper's centre runs differ, "
-            "0.1755 vs 0.1042 arcmin, i.e. its ADAMS runs carried numerical noise)" if not np.isfinite(lof) else
-            "pure error from the replicated centre runs")
-        t, F, p = _top(a, "any")
-        ea_note = _factor_strength_note(res, "EA")
-        add("ea2_dominant", f"largest term {t} (F = {F:.4g}, p = {p:.3g})", "yes" if t == "EA^2" else "no",
-            "EA^2 carries the most variance" if t == "EA^2" else
-            f"{t} carries the most variance in our model." + ea_note)
-        t, F, p = _top(a, "interaction")
-        add("ebec_top_interaction", f"largest interaction {t} (F = {F:.4g}, p = {p:.3g})",
-            "yes" if t == "EB:EC" and p < 0.05 else ("partly" if t == "EB:EC" else "no"),
-            "EB and EC both set the pin-to-profile clearance (pin circle diameter/2 + pin radius), so they act "
-            "through their sum; a clearance couples them" if t == "EB:EC" else
-            f"in our model {t} is the strongest interaction")
-        ss = {f: float(a.loc[[x for x in a.index if x == f or x == f"{f}^2"], "sum_sq"].sum())
-              for f in res.factors.names}
-        best = max(ss, key=ss.get)
-        add("ea_main_effect", "main + quadratic sum of squares: " + ", ".join(f"{f}={v:.3g}" for f, v in ss.items()),
-            "yes" if best == "EA" else "no", f"{best} has the largest own effect" + ("" if best == "EA" else "." + ea_note))
-        kept = set(b.comparison.paper.terms) - {"Intercept"} if b.comparison is not None else set()
-        p9 = set(paper.EQ9_TERMS) - {"Intercept"}
-        if b.comparison is not None:
-            add("eq9_terms", "significant (p < 0.05): " + (", ".join(sorted(kept)) or "none"),
-                "yes" if kept == p9 else ("partly" if kept & p9 else "no"),
-                "same term set" if kept == p9 else
-                f"paper-only: {', '.join(sorted(p9 - kept)) or 'none'}; ours only: {', '.join(sorted(kept - p9)) or 'none'}")
-        if b.validation:
-            v = b.validation["full"]
-            rng = float(res.design.loc[res.design["status"] == "ok", PRIMARY].agg(lambda s: s.max() - s.min()))
-            rel = v.rmse / rng if rng > 0 else float("nan")
-            add("validation_close", f"{v.n} random cases: RMSE {v.rmse:.4g} arcmin ({100 * rel:.1f} % of the design "
-                                    f"range), R2 {v.r2:.3f}, {100 * v.pi_coverage:.0f} % inside the 95 % PI",
-                "yes" if rel < 0.1 else ("partly" if rel < 0.25 else "no"),
-                "the paper gives no number (a plot only); 'close' is read here as RMSE < 10 % of the response "
-                "range of the design runs")
-    return pd.DataFrame(rows)
-
-
 # ---------------------------------------------------------------------------------------------- figures
 def _fit_figures(res: StudyResult, figs: Path) -> dict[str, str]:
     from itertools import combinations
@@ -382,34 +257,40 @@ def summary(res: StudyResult) -> dict[str, Any]:
     return clean(s)
 
 
-def write_report(res: StudyResult) -> Path:
-    """Write tables, figures, ``summary.json``, ``config.json`` and ``report.md`` into ``res.config.out``."""
-    out = Path(res.config.out)
-    tables, figs = out / "tables", out / "figures"
-    tables.mkdir(parents=True, exist_ok=True)
-    figs.mkdir(parents=True, exist_ok=True)
-    files: dict[str, str] = {}
-    cfg = res.config
-    fs = res.factors
-    with_paper = fs.is_paper and res.design_kind == "bbd" and res.paper_order
-    L: list[str] = []
-    add = L.append
+class _ReportFiles:
+    """The output folder of a report: writes its tables and keeps every file written, by key.
 
-    def tab(df: pd.DataFrame, name: str) -> None:
-        files[f"{name}_csv"] = write_table(df, tables, name)["csv"]
+    Parameters
+    ----------
+    out : Path
+        The output folder; ``tables/`` and ``figures/`` are made in it.
+    """
 
-    def fig_link(key: str, caption: str) -> None:
-        if key in files:
-            add(f"![{caption}]({os.path.relpath(files[key], out)})\n")
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        self.tables, self.figs = out / "tables", out / "figures"
+        self.tables.mkdir(parents=True, exist_ok=True)
+        self.figs.mkdir(parents=True, exist_ok=True)
+        self.files: dict[str, str] = {}
 
-    c = res.counters
+    def tab(self, df: pd.DataFrame, name: str) -> None:
+        """Write the table ``name`` (CSV and Parquet) and keep its CSV path as ``<name>_csv``."""
+        self.files[f"{name}_csv"] = write_table(df, self.tables, name)["csv"]
+
+    def fig_link(self, key: str, caption: str) -> list[str]:
+        """The Markdown line showing the figure kept as ``key`` (path relative to the report); none if the
+        figure was not drawn."""
+        if key in self.files:
+            return [f"![{caption}]({os.path.relpath(self.files[key], self.out)})\n"]
+        return []
+
+
+def _run_table(res: StudyResult) -> pd.DataFrame:
+    """The run's settings and counts (``item, value``): reducer, solver, load, contact models, executor,
+    design, cases solved and reused, solver and wall times, seed."""
+    cfg, fs, c = res.config, res.factors, res.counters
     laws = cfg.contact_models()
-    add("# rv-stackup report\n")
-    add("Transmission error (TE) of the RV reducer under manufacturing and assembly errors, after "
-        "*Effect of Multifactor Interaction on the Accuracy of RV Reducers* (sections 4.2-5). Every table "
-        "of ours below is computed by this run; the paper's numbers sit beside ours where the paper gives them.\n")
-    add("## Run\n")
-    run_rows = pd.DataFrame([
+    return pd.DataFrame([
         {"item": "reducer", "value": report_mc.reducer_text(res.reducer)
                                      + (f" (from {cfg.reducer})" if cfg.reducer else " (the paper's, default)")},
         {"item": "solver / steps per output revolution", "value": f"{cfg.solver} / {cfg.steps}"},
@@ -431,179 +312,258 @@ def write_report(res: StudyResult) -> Path:
             else ""), "value": ", ".join(f"{v:.1f}" for v in res.timings.values())},
         {"item": "seed (validation [seed,1], MC [seed,2], check [seed,3])", "value": str(cfg.seed)},
     ])
-    add(md_table(run_rows) + "\n")
-    add("**Responses.** `mean_abs_arcmin` is the mean of |TE| over one output revolution in arcmin: this is "
-        "our reading of the paper's \"mean value of transmission error\" (the paper does not define it; its "
-        "error-free value, 0.10-0.18 arcmin, is of the size of our elastic wind-up under load, so a mean of the "
-        "signed TE or of |TE| is plausible, and of these only |TE| grows with any error). `pp_arcmin` is the "
-        "peak-to-peak TE (the industry's angular transmission error), used for the yield. "
-        "TE = theta_out - theta_in/121, positive when the output leads.\n")
+
+
+def _intro_lines(res: StudyResult) -> list[str]:
+    """Title, introduction, the run table (:func:`_run_table`), the responses' definition and the run's notes."""
+    L = ["# rv-stackup report\n",
+         "Transmission error (TE) of the RV reducer under manufacturing and assembly errors, after "
+         "*Effect of Multifactor Interaction on the Accuracy of RV Reducers* (sections 4.2-5). Every table "
+         "of ours below is computed by this run; the paper's numbers sit beside ours where the paper gives them.\n",
+         "## Run\n",
+         md_table(_run_table(res)) + "\n",
+         "**Responses.** `mean_abs_arcmin` is the mean of |TE| over one output revolution in arcmin: this is "
+         "our reading of the paper's \"mean value of transmission error\" (the paper does not define it; its "
+         "error-free value, 0.10-0.18 arcmin, is of the size of our elastic wind-up under load, so a mean of the "
+         "signed TE or of |TE| is plausible, and of these only |TE| grows with any error). `pp_arcmin` is the "
+         "peak-to-peak TE (the industry's angular transmission error), used for the yield. "
+         "TE = theta_out - theta_in/121, positive when the output leads.\n"]
     if res.notes:
-        add("**Notes of this run.**\n")
-        for n in res.notes:
-            add(f"- {n}")
-        add("")
+        L.append("**Notes of this run.**\n")
+        L += [f"- {n}" for n in res.notes]
+        L.append("")
+    return L
 
-    # ---------------------------------------------------------------- screen
-    if res.screen is not None and "screen" in cfg.stages:
-        s = res.screen.screen
-        if cfg.figures:
-            files["screen_png"] = str(plot_screen(s, figs / "screen.png"))
-        if res.screen.curves and cfg.figures:
-            titles = {f"screen-{r.letter}": f"{r.letter} {r.error}" for r in s.itertuples()}
-            files["te_curves_png"] = str(plot_te_figure(
-                res.screen.curves, figs / "te_curves.png", crank_order=int(res.reducer.z_pins), titles=titles,
-                suptitle="Single-factor screen: TE of each case (blue: error at +value, red: at -value)"))
-        tab(s, "screen")
-        add("## 1. Single-factor screen (paper Table 4, Fig. 9)\n")
-        add("Each Table 4 error alone at its paper value (default instance) and at minus it; rank 1 = largest "
-            "increase of TE peak-to-peak over case A (`rank_pp`) or largest change of mean|TE| (`rank_mean_abs`). "
-            "The paper gives Fig. 9 as curves only (no numbers). "
-            f"Contact model: {laws['screen']}.\n")
-        cols = ["letter", "error", "stage", "value", "unit", "pp_arcsec", "mean_abs_arcsec", "d_pp_arcsec",
-                "d_mean_abs_arcsec", "rank_pp", "rank_mean_abs"]
-        add(md_table(s[s["sign"].isin([0, 1])][cols]) + "\n")
-        for m, chk in res.screen.stage_check.items():
-            add(f"- Stage I errors (B rank {chk['rank_B']}, C rank {chk['rank_C']}) below every stage II error by "
-                f"`{m}`: **{'reproduced' if chk['reproduced'] else 'not reproduced'}**"
-                + ("" if chk["reproduced"] else f" (stage II errors ranked below them: "
-                                                 f"{', '.join(chk['stage2_below_stage1'])})")
-                + f"; below the four RSM factors: {'yes' if chk['below_rsm_factors'] else 'no'}.")
-        add("")
-        fig_link("screen_png", "single-factor screen")
-        fig_link("te_curves_png", "TE curves of the single-factor cases")
-        sw = res.screen.sweeps
-        if len(sw):
-            if cfg.figures:
-                files["sweeps_png"] = str(plot_sweeps(sw, figs / "sweeps.png"))
-            tab(sw, "sweeps")
-            add("## 2. Factor sweeps (paper Fig. 11)\n")
-            add("Each RSM factor alone over its Table 5 range. The paper chose the level at the TE optimum of "
-                "these curves as the centre level (0 for all four). "
-                f"Contact model: {laws['sweeps']}.\n")
-            add(md_table(sw[["factor", "error", "value", "unit", "mean_abs_arcsec", "pp_arcsec",
-                             "te_mean_abs_arcmin", "te_pp_arcmin"]]) + "\n")
-            opt = sw.loc[sw.groupby("factor")["te_mean_abs_arcmin"].idxmin(), ["factor", "value", "unit",
-                                                                                "te_mean_abs_arcmin"]]
-            add("Minimum of mean|TE| along each sweep (the paper's centre levels are all 0):\n")
-            add(md_table(opt.rename(columns={"value": "value_at_minimum"})) + "\n")
-            fig_link("sweeps_png", "factor sweeps")
 
-    # ---------------------------------------------------------------- design and fits
-    if res.design is not None:
-        tab(res.design, "design_runs")
-        t6 = table6_compare(res)
-        tab(t6, "table6_compare")
-        add(f"## 3. Design runs (paper Table 6): {res.design_kind.upper()}, {len(res.design)} runs\n")
-        add(f"Contact model of these runs (and so of the fits in sections 4-7): {laws['design']}.\n")
-        if with_paper:
-            add("Generated by `rsm.make_design`; the point set equals the paper's Table 6, so the runs are numbered "
-                "as there and the paper's response stands beside ours.\n")
-        add(md_table(t6) + "\n")
-        if with_paper:
-            ok = t6["status"] == "ok"
-            r = np.corrcoef(t6.loc[ok, "mean_abs_arcmin"], t6.loc[ok, "paper_te_arcmin"])[0, 1] if ok.sum() > 2 else np.nan
-            add(f"Correlation of our mean|TE| with the paper's response over the {int(ok.sum())} solved runs: "
-                f"{_fmt(r)}; our range {_fmt(t6.loc[ok, 'mean_abs_arcmin'].min())}..{_fmt(t6.loc[ok, 'mean_abs_arcmin'].max())}"
-                f" arcmin, the paper's {_fmt(t6['paper_te_arcmin'].min())}..{_fmt(t6['paper_te_arcmin'].max())} arcmin.\n")
-        fst = fit_stats_table(res, with_paper)
-        tab(fst, "fit_statistics")
-        add("## 4. ANOVA of the full quadratic (paper Table 7)\n")
-        add(md_table(fst) + "\n")
-        for resp, b in res.fits.items():
-            if b.results is None:
-                add(f"**{resp}: no fit** ({b.error})\n")
-                continue
-            t7 = table7_compare(b, with_paper)
-            tab(t7, f"table7_compare_{resp}")
-            add(f"### {RESPONSE_LABEL[resp]}" + (" beside the paper's Table 7" if with_paper and resp == PRIMARY else "")
-                + "\n")
-            cols = list(t7.columns) if (with_paper and resp == PRIMARY) else [c for c in t7.columns if not c.startswith("paper")]
-            add(md_table(t7[cols]) + "\n")
-            for n in b.notes:
-                add(f"- {n}")
-            add("")
-        add("## 5. Coefficients in actual units (paper Eq. 8)\n")
-        add("EA in deg, EB/EC/ED in um, response in arcmin.\n")
-        for resp, b in res.fits.items():
-            if b.results is None:
-                continue
-            e8 = eq8_compare(b, with_paper and resp == PRIMARY)
-            tab(e8, f"eq8_compare_{resp}")
-            add(f"### {RESPONSE_LABEL[resp]}\n")
-            add(md_table(e8, digits=5) + "\n")
-        add("## 6. Reduced models (paper Eq. 9)\n")
-        add("*Paper mode* keeps the terms with p < 0.05 and their full-fit coefficients without refitting and "
-            "without hierarchy, as the paper's Eq. 9 does; *backward* removes the least significant term and refits, "
-            "keeping hierarchy.\n")
-        for resp, b in res.fits.items():
-            if b.results is None:
-                continue
-            if b.comparison is None:
-                add(f"### {RESPONSE_LABEL[resp]}\n")
-                add("No reduced models: " + "; ".join(n for n in b.notes if n.startswith("reduced models")) + "\n")
-                continue
-            e9 = eq9_compare(b, with_paper and resp == PRIMARY)
-            tab(e9, f"eq9_compare_{resp}")
-            rt = b.comparison.table.reset_index()
-            tab(rt, f"reductions_{resp}")
-            add(f"### {RESPONSE_LABEL[resp]}\n")
-            add(md_table(e9, digits=5) + "\n")
-            add(md_table(rt[["model", "n_terms", "sse", "rmse", "r2", "max_abs_resid", "refitted"]]) + "\n")
-            add(f"Cost of the paper's no-refit shortcut (SSE paper mode - SSE same terms refitted): "
-                f"{_fmt(b.comparison.shortcut_cost)}.\n")
-        if cfg.figures:
-            files.update(_fit_figures(res, figs))
-        add("## 7. Response surfaces and contours (paper Fig. 12)\n")
-        add(f"{RESPONSE_LABEL[PRIMARY]} (the paper's response), other factors at their centre level"
-            + ("." if cfg.figures else "; figures were not drawn (--no-figures).") + "\n")
-        for resp in res.fits:
-            for k in [k for k in files if k.startswith(f"surface_{resp}_")]:
-                fig_link(k, k)
+def _screen_lines(res: StudyResult, w: _ReportFiles) -> list[str]:
+    """Section 1, the single-factor screen (paper Table 4, Fig. 9): its figures and table, the ranking and
+    the stage check."""
+    cfg, s = res.config, res.screen.screen
+    if cfg.figures:
+        w.files["screen_png"] = str(plot_screen(s, w.figs / "screen.png"))
+    if res.screen.curves and cfg.figures:
+        titles = {f"screen-{r.letter}": f"{r.letter} {r.error}" for r in s.itertuples()}
+        w.files["te_curves_png"] = str(plot_te_figure(
+            res.screen.curves, w.figs / "te_curves.png", crank_order=int(res.reducer.z_pins), titles=titles,
+            suptitle="Single-factor screen: TE of each case (blue: error at +value, red: at -value)"))
+    w.tab(s, "screen")
+    L = ["## 1. Single-factor screen (paper Table 4, Fig. 9)\n",
+         "Each Table 4 error alone at its paper value (default instance) and at minus it; rank 1 = largest "
+         "increase of TE peak-to-peak over case A (`rank_pp`) or largest change of mean|TE| (`rank_mean_abs`). "
+         "The paper gives Fig. 9 as curves only (no numbers). "
+         f"Contact model: {cfg.contact_models()['screen']}.\n"]
+    cols = ["letter", "error", "stage", "value", "unit", "pp_arcsec", "mean_abs_arcsec", "d_pp_arcsec",
+            "d_mean_abs_arcsec", "rank_pp", "rank_mean_abs"]
+    L.append(md_table(s[s["sign"].isin([0, 1])][cols]) + "\n")
+    for m, chk in res.screen.stage_check.items():
+        L.append(f"- Stage I errors (B rank {chk['rank_B']}, C rank {chk['rank_C']}) below every stage II error by "
+                 f"`{m}`: **{'reproduced' if chk['reproduced'] else 'not reproduced'}**"
+                 + ("" if chk["reproduced"] else f" (stage II errors ranked below them: "
+                                                  f"{', '.join(chk['stage2_below_stage1'])})")
+                 + f"; below the four RSM factors: {'yes' if chk['below_rsm_factors'] else 'no'}.")
+    L.append("")
+    return L + w.fig_link("screen_png", "single-factor screen") + w.fig_link(
+        "te_curves_png", "TE curves of the single-factor cases")
 
-    # ---------------------------------------------------------------- validation
-    if res.validation is not None:
-        tab(res.validation, "validation_cases")
-        vt = validation_table(res)
-        tab(vt, "validation_metrics")
-        add(f"## 8. Validation on {cfg.n_validation} random cases (paper Fig. 13)\n")
-        add("Uniform in the coded design box, seed [seed, 1]. The paper shows a plot only (\"extremely close\"), "
-            "with no RMSE. PI = 95 % prediction interval of the full quadratic (the paper-mode surface has no "
-            "error model, hence no coverage). "
-            f"Contact model: {laws['validation']}.\n")
-        if len(vt):
-            add(md_table(vt) + "\n")
-        cols = ["case"] + fs.names + [c for c in res.validation.columns
-                                      if c.startswith(("mean_abs_arcmin", "pp_arcmin"))] + ["status"]
-        add(md_table(res.validation[cols]) + "\n")
-        for resp in res.fits:
-            fig_link(f"predicted_vs_observed_{resp}", f"predicted vs observed, {resp}")
 
-    # ---------------------------------------------------------------- 8b/8c: rvstudy.augment_section, rvstudy.paper_readings
+def _sweeps_lines(res: StudyResult, w: _ReportFiles) -> list[str]:
+    """Section 2, the factor sweeps (paper Fig. 11): table, figure and the minimum of mean|TE| per factor."""
+    cfg, sw = res.config, res.screen.sweeps
+    if cfg.figures:
+        w.files["sweeps_png"] = str(plot_sweeps(sw, w.figs / "sweeps.png"))
+    w.tab(sw, "sweeps")
+    opt = sw.loc[sw.groupby("factor")["te_mean_abs_arcmin"].idxmin(), ["factor", "value", "unit",
+                                                                        "te_mean_abs_arcmin"]]
+    return ["## 2. Factor sweeps (paper Fig. 11)\n",
+            "Each RSM factor alone over its Table 5 range. The paper chose the level at the TE optimum of "
+            "these curves as the centre level (0 for all four). "
+            f"Contact model: {cfg.contact_models()['sweeps']}.\n",
+            md_table(sw[["factor", "error", "value", "unit", "mean_abs_arcsec", "pp_arcsec",
+                         "te_mean_abs_arcmin", "te_pp_arcmin"]]) + "\n",
+            "Minimum of mean|TE| along each sweep (the paper's centre levels are all 0):\n",
+            md_table(opt.rename(columns={"value": "value_at_minimum"})) + "\n"] + w.fig_link("sweeps_png",
+                                                                                             "factor sweeps")
+
+
+def _design_lines(res: StudyResult, w: _ReportFiles, with_paper: bool) -> list[str]:
+    """Section 3, the design runs (paper Table 6) beside the paper's response, and how well they agree."""
+    w.tab(res.design, "design_runs")
+    t6 = table6_compare(res)
+    w.tab(t6, "table6_compare")
+    L = [f"## 3. Design runs (paper Table 6): {res.design_kind.upper()}, {len(res.design)} runs\n",
+         "Contact model of these runs (and so of the fits in sections 4-7): "
+         f"{res.config.contact_models()['design']}.\n"]
+    if with_paper:
+        L.append("Generated by `rsm.make_design`; the point set equals the paper's Table 6, so the runs are numbered "
+                 "as there and the paper's response stands beside ours.\n")
+    L.append(md_table(t6) + "\n")
+    if with_paper:
+        ok = t6["status"] == "ok"
+        r = np.corrcoef(t6.loc[ok, "mean_abs_arcmin"], t6.loc[ok, "paper_te_arcmin"])[0, 1] if ok.sum() > 2 else np.nan
+        L.append(f"Correlation of our mean|TE| with the paper's response over the {int(ok.sum())} solved runs: "
+                 f"{_fmt(r)}; our range {_fmt(t6.loc[ok, 'mean_abs_arcmin'].min())}..{_fmt(t6.loc[ok, 'mean_abs_arcmin'].max())}"
+                 f" arcmin, the paper's {_fmt(t6['paper_te_arcmin'].min())}..{_fmt(t6['paper_te_arcmin'].max())} arcmin.\n")
+    return L
+
+
+def _anova_lines(res: StudyResult, w: _ReportFiles, with_paper: bool) -> list[str]:
+    """Section 4, the fit statistics and the ANOVA of each response's full quadratic (paper Table 7)."""
+    fst = fit_stats_table(res, with_paper)
+    w.tab(fst, "fit_statistics")
+    L = ["## 4. ANOVA of the full quadratic (paper Table 7)\n", md_table(fst) + "\n"]
+    for resp, b in res.fits.items():
+        if b.results is None:
+            L.append(f"**{resp}: no fit** ({b.error})\n")
+            continue
+        t7 = table7_compare(b, with_paper)
+        w.tab(t7, f"table7_compare_{resp}")
+        L.append(f"### {RESPONSE_LABEL[resp]}" + (" beside the paper's Table 7" if with_paper and resp == PRIMARY else "")
+                 + "\n")
+        cols = list(t7.columns) if (with_paper and resp == PRIMARY) else [c for c in t7.columns if not c.startswith("paper")]
+        L.append(md_table(t7[cols]) + "\n")
+        L += [f"- {n}" for n in b.notes]
+        L.append("")
+    return L
+
+
+def _coefficient_lines(res: StudyResult, w: _ReportFiles, with_paper: bool) -> list[str]:
+    """Section 5, each fitted response's coefficients in actual units (paper Eq. 8)."""
+    L = ["## 5. Coefficients in actual units (paper Eq. 8)\n", "EA in deg, EB/EC/ED in um, response in arcmin.\n"]
+    for resp, b in res.fits.items():
+        if b.results is None:
+            continue
+        e8 = eq8_compare(b, with_paper and resp == PRIMARY)
+        w.tab(e8, f"eq8_compare_{resp}")
+        L += [f"### {RESPONSE_LABEL[resp]}\n", md_table(e8, digits=5) + "\n"]
+    return L
+
+
+def _reduced_model_lines(res: StudyResult, w: _ReportFiles, with_paper: bool) -> list[str]:
+    """Section 6, the reduced models of each fitted response (paper Eq. 9) and the cost of the paper's
+    no-refit shortcut."""
+    L = ["## 6. Reduced models (paper Eq. 9)\n",
+         "*Paper mode* keeps the terms with p < 0.05 and their full-fit coefficients without refitting and "
+         "without hierarchy, as the paper's Eq. 9 does; *backward* removes the least significant term and refits, "
+         "keeping hierarchy.\n"]
+    for resp, b in res.fits.items():
+        if b.results is None:
+            continue
+        if b.comparison is None:
+            L.append(f"### {RESPONSE_LABEL[resp]}\n")
+            L.append("No reduced models: " + "; ".join(n for n in b.notes if n.startswith("reduced models")) + "\n")
+            continue
+        e9 = eq9_compare(b, with_paper and resp == PRIMARY)
+        w.tab(e9, f"eq9_compare_{resp}")
+        rt = b.comparison.table.reset_index()
+        w.tab(rt, f"reductions_{resp}")
+        L += [f"### {RESPONSE_LABEL[resp]}\n", md_table(e9, digits=5) + "\n",
+              md_table(rt[["model", "n_terms", "sse", "rmse", "r2", "max_abs_resid", "refitted"]]) + "\n",
+              f"Cost of the paper's no-refit shortcut (SSE paper mode - SSE same terms refitted): "
+              f"{_fmt(b.comparison.shortcut_cost)}.\n"]
+    return L
+
+
+def _surface_lines(res: StudyResult, w: _ReportFiles) -> list[str]:
+    """Section 7, the response surfaces and contours (paper Fig. 12); draws the fits' figures when asked."""
+    cfg = res.config
+    if cfg.figures:
+        w.files.update(_fit_figures(res, w.figs))
+    L = ["## 7. Response surfaces and contours (paper Fig. 12)\n",
+         f"{RESPONSE_LABEL[PRIMARY]} (the paper's response), other factors at their centre level"
+         + ("." if cfg.figures else "; figures were not drawn (--no-figures).") + "\n"]
+    for resp in res.fits:
+        for k in [k for k in w.files if k.startswith(f"surface_{resp}_")]:
+            L += w.fig_link(k, k)
+    return L
+
+
+def _validation_lines(res: StudyResult, w: _ReportFiles) -> list[str]:
+    """Section 8, the models on the random validation cases (paper Fig. 13): metrics, cases and figures."""
+    cfg, fs = res.config, res.factors
+    w.tab(res.validation, "validation_cases")
+    vt = validation_table(res)
+    w.tab(vt, "validation_metrics")
+    L = [f"## 8. Validation on {cfg.n_validation} random cases (paper Fig. 13)\n",
+         "Uniform in the coded design box, seed [seed, 1]. The paper shows a plot only (\"extremely close\"), "
+         "with no RMSE. PI = 95 % prediction interval of the full quadratic (the paper-mode surface has no "
+         "error model, hence no coverage). "
+         f"Contact model: {cfg.contact_models()['validation']}.\n"]
+    if len(vt):
+        L.append(md_table(vt) + "\n")
+    cols = ["case"] + fs.names + [c for c in res.validation.columns
+                                  if c.startswith(("mean_abs_arcmin", "pp_arcmin"))] + ["status"]
+    L.append(md_table(res.validation[cols]) + "\n")
+    for resp in res.fits:
+        L += w.fig_link(f"predicted_vs_observed_{resp}", f"predicted vs observed, {resp}")
+    return L
+
+
+def _loop_and_readings_lines(res: StudyResult, w: _ReportFiles) -> list[str]:
+    """Sections 8b (the response-surface loop, :mod:`rvstudy.augment_section`) and 8c (the Table 6
+    readings, :mod:`rvstudy.paper_readings`), each when the run has it."""
+    L: list[str] = []
     for sec in filter(None, (augment_section(res) if res.design is not None else None, readings_section(res))):
         L.extend([sec.heading, sec.intro])
         for name, df in {**sec.tables, **sec.data}.items():
-            tab(df, name)
+            w.tab(df, name)
             if name in sec.tables:
-                add(md_table(df) + "\n")
+                L.append(md_table(df) + "\n")
         L.extend(sec.findings)
+    return L
 
-    # ---------------------------------------------------------------- Monte Carlo
-    if res.mc:
-        report_mc.section(res, add, tab, fig_link, files, figs, md_table)
 
-    # ---------------------------------------------------------------- conclusions
+def _mc_lines(res: StudyResult, w: _ReportFiles) -> list[str]:
+    """Section 9, the full-solver Monte Carlo (:func:`rvstudy.report_mc.section`)."""
+    L: list[str] = []
+    report_mc.section(res, L.append, w.tab, lambda key, caption: L.extend(w.fig_link(key, caption)), w.files,
+                      w.figs, md_table)
+    return L
+
+
+def _conclusions_lines(res: StudyResult, w: _ReportFiles) -> list[str]:
+    """Section 10, the paper's conclusions reproduced or not (:func:`rvstudy.report_claims.conclusions`);
+    none when no claim could be checked."""
     cc = conclusions(res)
-    if len(cc):
-        tab(cc, "conclusions")
-        add("## 10. The paper's conclusions: reproduced or not\n")
-        add(md_table(cc) + "\n")
-    add("## Files\n")
+    if not len(cc):
+        return []
+    w.tab(cc, "conclusions")
+    return ["## 10. The paper's conclusions: reproduced or not\n", md_table(cc) + "\n"]
+
+
+def _files_lines(cfg: StudyConfig) -> list[str]:
+    """The closing section: where the tables, figures, cached cases and key numbers are."""
     cache_txt = (f"solved cases in the cache (`{cfg.cache_dir or Path(cfg.out) / 'cache'}`)" if cfg.use_cache
                  else "no case cache (`--no-cache`)")
-    add(f"Tables in `tables/` (CSV and Parquet), figures in `figures/`, {cache_txt}, key numbers in "
-        "`summary.json`.\n")
-    res.files = files
+    return ["## Files\n",
+            f"Tables in `tables/` (CSV and Parquet), figures in `figures/`, {cache_txt}, key numbers in "
+            "`summary.json`.\n"]
+
+
+def write_report(res: StudyResult) -> Path:
+    """Write tables, figures, ``summary.json``, ``config.json`` and ``report.md`` into ``res.config.out``."""
+    out = Path(res.config.out)
+    w = _ReportFiles(out)
+    cfg = res.config
+    with_paper = res.factors.is_paper and res.design_kind == "bbd" and res.paper_order
+    L = _intro_lines(res)
+    if res.screen is not None and "screen" in cfg.stages:
+        L += _screen_lines(res, w)
+        if len(res.screen.sweeps):
+            L += _sweeps_lines(res, w)
+    if res.design is not None:
+        L += _design_lines(res, w, with_paper)
+        L += _anova_lines(res, w, with_paper)
+        L += _coefficient_lines(res, w, with_paper)
+        L += _reduced_model_lines(res, w, with_paper)
+        L += _surface_lines(res, w)
+    if res.validation is not None:
+        L += _validation_lines(res, w)
+    L += _loop_and_readings_lines(res, w)
+    if res.mc:
+        L += _mc_lines(res, w)
+    L += _conclusions_lines(res, w)
+    L += _files_lines(cfg)
+    files = res.files = w.files
     cfg_path = write_text_atomic(json.dumps(res.config.to_dict(), indent=2, default=str), out / "config.json")
     files["config_json"] = str(cfg_path)
     files["summary_json"] = str(out / "summary.json")

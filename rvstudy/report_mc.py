@@ -62,30 +62,11 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
             fig_link: Callable[[str, str], None], files: dict[str, str], figs: Path, md_table: Callable) -> None:
     """Write section 9 of the report (the full-solver Monte Carlo)."""
     mc, cfg = res.mc, res.config
-    d = res.reducer
     tt = tolerance_table(mc["tolerances"])
     tab(tt, "mc_tolerances")
     tab(mc["features"], "mc_features")
-    t = mc["timing"]
-    add("## 9. Monte Carlo tolerance stack-up through the full solver\n")
-    law = "contact model " + cfg.contact_models()["monte_carlo"]
-    add(f"Reducer: {reducer_text(d)}. Every draw is a case solved by the quasi-static solver (analytic contact "
-        f"provider, {cfg.steps} steps per output revolution, {law}, load "
-        f"{cfg.load_Nm:g} N m); {mc['n_features']} toleranced features are drawn per case (each pin's radius, pitch "
-        "and radial position, each cam, crank, hole and disc, as the scope of each tolerance says; positional "
-        "errors as independent x and y components). "
-        f"{t['independent_draws']} independent draws (seed [{cfg.seed}, 2]) give the statistics; "
-        f"{t['design_draws']} more solver draws form the designed sample of the contributors. "
-        "Failed solves and invalid draws count as out of spec.\n")
-    add(f"Responses: **TE peak-to-peak** (the angular transmission error); **two-direction play at +-3 % of rated "
-        f"torque** ({PLAY_LOAD_FRACTION * cfg.rated_Nm:.3g} N m of {cfg.rated_Nm:g} N m rated): at {mc['play_positions']} "
-        "locked input positions over one output revolution, output angle at +3 % minus that at -3 % (TE of direction "
-        "-1 minus TE of direction +1 at that load), the largest over the positions: a *proxy* for lost motion, read "
-        "on rvdyn.stiffness's elastic (friction-free) curve, not its lost-motion figure (which adds the curve's "
-        "friction band and is read at one input angle; rvdyn.stiffness cannot be run per draw: its rigid "
-        "zero-torque point refuses preloaded draws); **torsional rigidity** b/a on the same elastic curve (secant "
-        "3 %..100 % of rated torque, both sides averaged), the smallest over the positions; **mean |TE|**, the "
-        "paper's response, without a specification.\n")
+    for line in _intro_lines(res):
+        add(line)
     add(md_table(tt) + "\n")
     cap = capability_table(mc)
     tab(cap, "mc_capability")
@@ -100,54 +81,21 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
     sob = mc.get("sobol")
     if sob is not None and len(sob):
         tab(sob, "mc_contributors")
-        add("### Contributors (variance-based indices of the full model)\n")
-        add(f"From a designed sample (not estimated from the independent draws): A and B are the first two blocks "
-            f"of {mc['sobol_n']} independent draws; for each tolerance a block of A with that tolerance's features "
-            "taken from B. First order: Saltelli (2010); total: Jansen (1999); 95 % bootstrap intervals over the "
-            "rows. A tolerance's index covers all its features together (e.g. all pin radii). With blocks this "
-            "small the intervals are wide: read the ranking, not the digits.\n")
-        for r in MC_RESPONSES:
-            s = sob[sob["response"] == r]
-            if len(s):
-                add(f"**{MC_RESPONSES[r]}**\n")
-                add(md_table(s.drop(columns="response")) + "\n")
+        for line in _contributor_lines(mc, sob, md_table):
+            add(line)
         if cfg.figures:
             files["mc_shares_png"] = str(_pareto(sob, figs / "mc_shares.png"))
         fig_link("mc_shares_png", "Pareto of the contributors")
     al = mc.get("allocation")
     if al is not None and len(al):
         tab(al, "mc_allocation")
-        add("### Tolerance allocation\n")
-        add(f"Yield if one tolerance's spread is scaled by {', '.join(f'{f:g}' for f in TIGHTEN)}, estimated by "
-            "re-weighting the existing independent draws with the likelihood ratio of the tightened over the drawn "
-            f"distribution (product over the tolerance's features; no new solves). Rows with an effective sample "
-            f"size below {MIN_ESS:g} are marked unreliable (a tolerance with many features, e.g. 40 pins, loses "
-            "effective draws fast).\n")
-        for r, c in mc["responses"].items():
-            rec = c.get("allocation")
-            if c["usl"] is None and c["lsl"] is None:
-                continue
-            if rec is None:
-                add(f"- {r}: no reliable yield gain from tightening one tolerance (yield now {_pct(c['yield'])}).")
-            else:
-                add(f"- {r}: tighten **{rec['tolerance']}** to {rec['factor']:g} x its spread (std "
-                    f"{rec['std_now']:.4g} -> {rec['std_new']:.4g}): yield {_pct(c['yield'])} -> {_pct(rec['yield'])} "
-                    f"(effective draws {rec['ess']:.0f})" + (f", reaching the target {_pct(rec['target'])}."
-                                                              if rec["reaches_target"] else
-                                                              f"; the target {_pct(rec['target'])} is not reached by one "
-                                                              "tolerance within these factors."))
-        add("")
-        best = al.sort_values("gain", ascending=False).groupby("response").head(3)
-        add(md_table(best) + "\n")
+        for line in _allocation_lines(mc, al, md_table):
+            add(line)
     chk = mc.get("check")
     if chk is not None and len(chk):
         tab(chk, "mc_fcl_check")
-        add("### fcl check of the analytic solver\n")
-        a = mc["check_agreement"]
-        add(f"The first {len(chk)} draws solved again with the fcl contact provider (python-fcl distances on the "
-            "exported meshes): " + "; ".join(f"{r}: max |fcl - analytic| {_num(v['max_abs_diff'], 3)} arcmin, RMS "
-                                            f"{_num(v['rms_diff'], 3)} (n = {v['n']})" for r, v in a.items()) + ".\n")
-        add(md_table(chk) + "\n")
+        for line in _check_lines(mc, chk, md_table):
+            add(line)
     surf = mc.get("surface", {})
     if surf:
         st = pd.DataFrame([{"response": r, **v} for r, v in surf.items()])
@@ -157,17 +105,160 @@ def section(res: Any, add: Callable[[str], None], tab: Callable[[pd.DataFrame, s
             "value (pin 0's pitch, disc 0 hole 0) or the mean over the pins (all-pins errors). Difference = surface - "
             "full solver, arcmin:\n")
         add(md_table(st) + "\n")
+    add(_throughput_text(mc["timing"]))
+
+
+def _intro_lines(res: Any) -> list[str]:
+    """Heading of section 9 and its two introductory paragraphs: how the draws are solved, and the responses.
+
+    Parameters
+    ----------
+    res : rvstudy.study.StudyResult
+        The run (its ``mc``, ``config`` and ``reducer``).
+
+    Returns
+    -------
+    list of str
+        Report lines.
+    """
+    mc, cfg, t = res.mc, res.config, res.mc["timing"]
+    law = "contact model " + cfg.contact_models()["monte_carlo"]
+    return [
+        "## 9. Monte Carlo tolerance stack-up through the full solver\n",
+        f"Reducer: {reducer_text(res.reducer)}. Every draw is a case solved by the quasi-static solver (analytic "
+        f"contact provider, {cfg.steps} steps per output revolution, {law}, load "
+        f"{cfg.load_Nm:g} N m); {mc['n_features']} toleranced features are drawn per case (each pin's radius, pitch "
+        "and radial position, each cam, crank, hole and disc, as the scope of each tolerance says; positional "
+        "errors as independent x and y components). "
+        f"{t['independent_draws']} independent draws (seed [{cfg.seed}, 2]) give the statistics; "
+        f"{t['design_draws']} more solver draws form the designed sample of the contributors. "
+        "Failed solves and invalid draws count as out of spec.\n",
+        f"Responses: **TE peak-to-peak** (the angular transmission error); **two-direction play at +-3 % of rated "
+        f"torque** ({PLAY_LOAD_FRACTION * cfg.rated_Nm:.3g} N m of {cfg.rated_Nm:g} N m rated): at "
+        f"{mc['play_positions']} locked input positions over one output revolution, output angle at +3 % minus that "
+        "at -3 % (TE of direction -1 minus TE of direction +1 at that load), the largest over the positions: a "
+        "*proxy* for lost motion, read on rvdyn.stiffness's elastic (friction-free) curve, not its lost-motion "
+        "figure (which adds the curve's friction band and is read at one input angle; rvdyn.stiffness cannot be "
+        "run per draw: its rigid zero-torque point refuses preloaded draws); **torsional rigidity** b/a on the same "
+        "elastic curve (secant 3 %..100 % of rated torque, both sides averaged), the smallest over the positions; "
+        "**mean |TE|**, the paper's response, without a specification.\n",
+    ]
+
+
+def _contributor_lines(mc: dict[str, Any], sob: pd.DataFrame, md_table: Callable) -> list[str]:
+    """The contributors subsection: how the variance-based indices are estimated, one table per response.
+
+    Parameters
+    ----------
+    mc : dict
+        The Monte Carlo results (:func:`rvstudy.stackup.run_full_mc`).
+    sob : DataFrame
+        The indices, one row per response and tolerance.
+    md_table : callable
+        DataFrame -> Markdown table.
+
+    Returns
+    -------
+    list of str
+        Report lines.
+    """
+    lines = ["### Contributors (variance-based indices of the full model)\n",
+             f"From a designed sample (not estimated from the independent draws): A and B are the first two blocks "
+             f"of {mc['sobol_n']} independent draws; for each tolerance a block of A with that tolerance's features "
+             "taken from B. First order: Saltelli (2010); total: Jansen (1999); 95 % bootstrap intervals over the "
+             "rows. A tolerance's index covers all its features together (e.g. all pin radii). With blocks this "
+             "small the intervals are wide: read the ranking, not the digits.\n"]
+    for r in MC_RESPONSES:
+        s = sob[sob["response"] == r]
+        if len(s):
+            lines.append(f"**{MC_RESPONSES[r]}**\n")
+            lines.append(md_table(s.drop(columns="response")) + "\n")
+    return lines
+
+
+def _allocation_lines(mc: dict[str, Any], al: pd.DataFrame, md_table: Callable) -> list[str]:
+    """The tolerance-allocation subsection: the recommendation per response with a limit, then the best
+    three tightenings of each response.
+
+    Parameters
+    ----------
+    mc : dict
+        The Monte Carlo results (:func:`rvstudy.stackup.run_full_mc`).
+    al : DataFrame
+        The allocation table (one row per response, tolerance and factor, with its ``gain``).
+    md_table : callable
+        DataFrame -> Markdown table.
+
+    Returns
+    -------
+    list of str
+        Report lines.
+    """
+    lines = ["### Tolerance allocation\n",
+             f"Yield if one tolerance's spread is scaled by {', '.join(f'{f:g}' for f in TIGHTEN)}, estimated by "
+             "re-weighting the existing independent draws with the likelihood ratio of the tightened over the drawn "
+             f"distribution (product over the tolerance's features; no new solves). Rows with an effective sample "
+             f"size below {MIN_ESS:g} are marked unreliable (a tolerance with many features, e.g. 40 pins, loses "
+             "effective draws fast).\n"]
+    for r, c in mc["responses"].items():
+        rec = c.get("allocation")
+        if c["usl"] is None and c["lsl"] is None:
+            continue
+        if rec is None:
+            lines.append(f"- {r}: no reliable yield gain from tightening one tolerance (yield now {_pct(c['yield'])}).")
+        else:
+            lines.append(
+                f"- {r}: tighten **{rec['tolerance']}** to {rec['factor']:g} x its spread (std "
+                f"{rec['std_now']:.4g} -> {rec['std_new']:.4g}): yield {_pct(c['yield'])} -> {_pct(rec['yield'])} "
+                f"(effective draws {rec['ess']:.0f})" + (f", reaching the target {_pct(rec['target'])}."
+                                                          if rec["reaches_target"] else
+                                                          f"; the target {_pct(rec['target'])} is not reached by one "
+                                                          "tolerance within these factors."))
+    lines.append("")
+    best = al.sort_values("gain", ascending=False).groupby("response").head(3)
+    lines.append(md_table(best) + "\n")
+    return lines
+
+
+def _check_lines(mc: dict[str, Any], chk: pd.DataFrame, md_table: Callable) -> list[str]:
+    """The fcl-check subsection: agreement of the fcl and analytic providers on the check draws, and their table.
+
+    Parameters
+    ----------
+    mc : dict
+        The Monte Carlo results (its ``check_agreement``).
+    chk : DataFrame
+        The check draws, both providers' responses.
+    md_table : callable
+        DataFrame -> Markdown table.
+
+    Returns
+    -------
+    list of str
+        Report lines.
+    """
+    a = mc["check_agreement"]
+    return ["### fcl check of the analytic solver\n",
+            f"The first {len(chk)} draws solved again with the fcl contact provider (python-fcl distances on the "
+            "exported meshes): " + "; ".join(f"{r}: max |fcl - analytic| {_num(v['max_abs_diff'], 3)} arcmin, RMS "
+                                            f"{_num(v['rms_diff'], 3)} (n = {v['n']})" for r, v in a.items()) + ".\n",
+            md_table(chk) + "\n"]
+
+
+def _throughput_text(t: dict[str, Any]) -> str:
+    """The throughput paragraph of section 9 from the Monte Carlo's ``timing``: draws, solves, wall and
+    worker seconds, draws per second per worker, solves computed and taken from the cache."""
     busy = t.get("worker_s")
-    add(f"Throughput: {t['full_solver_draws']} full-solver draws ({t['solves_per_draw']} solves each: the TE "
-        "revolution, and +-3 % and +-100 % of rated torque at the locked positions; one worker task per draw) in "
-        f"{t['wall_s']:.1f} s wall on {t['workers']} worker(s)"
-        + (f" (solved beside the other stages' cases; {busy:.1f} worker-seconds on the draws)" if busy else "")
-        + f": {t['draws_per_s_per_worker']:.3g} draws per second per worker"
-        + (" (draws / worker-seconds on the draws)" if busy else "")
-        + f", with {t['analytic_solves_computed']} analytic solves computed now and "
-        f"{t['analytic_solves_reused']} taken from the cache"
-        + (" (a rerun: the figure is not the solver's speed)" if t['analytic_solves_reused'] else "")
-        + ", plus the fcl check.\n")
+    return (f"Throughput: {t['full_solver_draws']} full-solver draws ({t['solves_per_draw']} solves each: the TE "
+            "revolution, and +-3 % and +-100 % of rated torque at the locked positions; one worker task per draw) in "
+            f"{t['wall_s']:.1f} s wall on {t['workers']} worker(s)"
+            + (f" (solved beside the other stages' cases; {busy:.1f} worker-seconds on the draws)" if busy else "")
+            + f": {t['draws_per_s_per_worker']:.3g} draws per second per worker"
+            + (" (draws / worker-seconds on the draws)" if busy else "")
+            + f", with {t['analytic_solves_computed']} analytic solves computed now and "
+            f"{t['analytic_solves_reused']} taken from the cache"
+            + (" (a rerun: the figure is not the solver's speed)" if t['analytic_solves_reused'] else "")
+            + ", plus the fcl check.\n")
 
 
 def reducer_text(d: Any) -> str:

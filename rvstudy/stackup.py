@@ -301,44 +301,81 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
     """
     sv = solved if solved is not None else solve_full_mc(cfg, design, runners, base_model)
     notes.extend(sv["notes"])
-    t0, done0 = sv["t0"], sv["counts"]
     tols = cfg.tolerances
-    feats, X, Xab, groups, n_s = sv["feats"], sv["X"], sv["Xab"], sv["groups"], sv["n_s"]
-    Y, Yab = sv["Y"], sv["Yab"]
-    n_design = len(Xab)
+    feats, X, groups, Y = sv["feats"], sv["X"], sv["groups"], sv["Y"]
+    n_design = len(sv["Xab"])
     specs = cfg.specs()
     out: dict[str, Any] = {"tolerances": tols, "n_features": len(feats), "specs": specs,
                            "play_positions": play_positions(design), "play_load_Nm": PLAY_LOAD_FRACTION * cfg.rated_Nm,
                            "features": pd.DataFrame([{"feature": f.name, "tolerance": f.tolerance,
                                                       "component": f.component} for f in feats])}
-    out["sobol_n"] = n_s
+    out["sobol_n"] = sv["n_s"]
+    out["sobol"] = _sobol_table(Y, sv["Yab"], groups, sv["n_s"], cfg.seed) if n_design else pd.DataFrame()
+    out["responses"], out["allocation"] = _capabilities(Y, X, groups, tols, specs, out["sobol"], cfg.yield_target)
+    out["surface"] = _surface_comparison(feats, X, Y, fs, fits, specs)
+    if sv["check"] is not None:
+        out["check"], out["check_agreement"] = _fcl_check(Y, sv["check"])
+    out["draws"] = pd.concat([X, Y], axis=1)
+    out["timing"] = _mc_timing(sv["t0"], sv["counts"], runners, len(X), n_design, workers)
+    return out
+
+
+def _sobol_table(Y: pd.DataFrame, Yab: pd.DataFrame, groups: dict[str, Any], n_s: int, seed: int) -> pd.DataFrame:
+    """Variance-based indices of every tolerance group for every response, from the designed sample.
+
+    ``Y``'s first two blocks of ``n_s`` rows are the matrices A and B; ``Yab`` holds one block of ``n_s``
+    rows per group of ``groups`` (A with that group's features from B), in its order. Returns one row per
+    response and group (:func:`rvstudy.capability.sobol_from_design` with a ``response`` column first).
+    """
     sob_rows = []
-    if n_design:
-        for resp in MC_RESPONSES:
-            yA, yB = Y[resp].to_numpy()[:n_s], Y[resp].to_numpy()[n_s:2 * n_s]
-            yab = {g: Yab[resp].to_numpy()[j * n_s:(j + 1) * n_s] for j, g in enumerate(groups)}
-            s = sobol_from_design(yA, yB, yab, var=float(np.nanvar(Y[resp].to_numpy())), seed=cfg.seed)
-            s.insert(0, "response", resp)
-            sob_rows.append(s)
-    out["sobol"] = pd.concat(sob_rows, ignore_index=True) if sob_rows else pd.DataFrame()
+    for resp in MC_RESPONSES:
+        yA, yB = Y[resp].to_numpy()[:n_s], Y[resp].to_numpy()[n_s:2 * n_s]
+        yab = {g: Yab[resp].to_numpy()[j * n_s:(j + 1) * n_s] for j, g in enumerate(groups)}
+        s = sobol_from_design(yA, yB, yab, var=float(np.nanvar(Y[resp].to_numpy())), seed=seed)
+        s.insert(0, "response", resp)
+        sob_rows.append(s)
+    return pd.concat(sob_rows, ignore_index=True) if sob_rows else pd.DataFrame()
+
+
+def _capabilities(Y: pd.DataFrame, X: pd.DataFrame, groups: dict[str, Any], tols: dict[str, Any],
+                  specs: dict[str, Any], sob: pd.DataFrame,
+                  yield_target: float) -> tuple[dict[str, Any], pd.DataFrame]:
+    """Capability of each response on the independent draws, its contributors and its tolerance allocation.
+
+    Returns
+    -------
+    per : dict
+        Response -> :func:`rvstudy.capability.capability` dict with ``contributors`` (from ``sob``) and,
+        for a response with a limit whose allocation table is not empty, the ``allocation`` recommendation.
+    alloc : DataFrame
+        The allocation tables of every response with a limit, ``response`` column first.
+    """
     per: dict[str, Any] = {}
     alloc_rows = []
     for resp in MC_RESPONSES:
         lsl, usl = specs.get(resp, (None, None))
         c = capability(Y[resp].to_numpy(), lsl, usl)
-        s = out["sobol"]
         c["contributors"] = ([{"tolerance": r.tolerance, "first_order": r.first_order, "total": r.total}
-                              for r in s[s["response"] == resp].itertuples()] if len(s) else [])
+                              for r in sob[sob["response"] == resp].itertuples()] if len(sob) else [])
         if lsl is not None or usl is not None:
             a = allocation(X, groups, tols, Y[resp].to_numpy(), lsl, usl)
             if len(a):
                 a.insert(0, "response", resp)
                 alloc_rows.append(a)
-                c["allocation"] = recommend(a, target=cfg.yield_target)
+                c["allocation"] = recommend(a, target=yield_target)
         per[resp] = c
-    out["responses"] = per
-    out["allocation"] = pd.concat(alloc_rows, ignore_index=True) if alloc_rows else pd.DataFrame()
-    # the quadratic surface on the same draws (comparison only)
+    return per, (pd.concat(alloc_rows, ignore_index=True) if alloc_rows else pd.DataFrame())
+
+
+def _surface_comparison(feats: list[Feature], X: pd.DataFrame, Y: pd.DataFrame, fs: Any, fits: dict[str, Any],
+                        specs: dict[str, Any]) -> dict[str, Any]:
+    """The design stage's quadratic surface on the same draws, against the full solver (comparison only).
+
+    For each TE response with a fit, adds the column ``<response>_surface`` (the prediction) to ``Y`` and
+    returns response -> ``n, rmse, bias, max_abs`` of surface - solver (arcmin), the fraction of negative
+    predictions, their correlation and the yield the surface would give; empty when a factor has no
+    reading in the draws (:func:`factor_values`) or no fit exists.
+    """
     Z = factor_values(feats, X, fs)
     surf = {}
     for resp, key in (("te_pp_arcmin", "pp_arcmin"), ("te_mean_abs_arcmin", "mean_abs_arcmin")):
@@ -355,39 +392,50 @@ def run_full_mc(cfg: Any, fs: Any, design: Design, runners: dict[str, Runner], f
                       "corr": float(np.corrcoef(pred[ok], Y[resp].to_numpy()[ok])[0, 1]) if ok.sum() > 2 else None,
                       "yield_surface": (capability(pred, lsl, usl)["yield"] if lsl is not None or usl is not None
                                         else None)}
-    out["surface"] = surf
-    # fcl on a check subsample of the independent draws
-    if sv["check"] is not None:
-        chk = sv["check"]
-        n_chk = len(chk)
-        cdf = pd.DataFrame({"draw": np.arange(1, n_chk + 1),
-                            "te_pp_arcmin_analytic": Y["te_pp_arcmin"].to_numpy()[:n_chk],
-                            "te_pp_arcmin_fcl": [_stat(r, "pp") for r in chk],
-                            "te_mean_abs_arcmin_analytic": Y["te_mean_abs_arcmin"].to_numpy()[:n_chk],
-                            "te_mean_abs_arcmin_fcl": [_stat(r, "mean_abs") for r in chk]})
-        out["check"] = cdf
-        agr = {}
-        for r in ("te_pp_arcmin", "te_mean_abs_arcmin"):
-            d = (cdf[f"{r}_fcl"] - cdf[f"{r}_analytic"]).to_numpy()
-            d = d[np.isfinite(d)]
-            agr[r] = {"n": int(d.size), "max_abs_diff": float(np.max(np.abs(d))) if d.size else None,
-                      "rms_diff": float(np.sqrt(np.mean(d ** 2))) if d.size else None}
-        out["check_agreement"] = agr
-    out["draws"] = pd.concat([X, Y], axis=1)
+    return surf
+
+
+def _fcl_check(Y: pd.DataFrame, chk: list[dict[str, Any] | None]) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """The fcl solves of the first independent draws beside their analytic results, and their agreement.
+
+    Returns the table (``draw`` and each TE response by both providers, arcmin) and, per response,
+    ``n, max_abs_diff, rms_diff`` over the draws both providers solved (None when there is none).
+    """
+    n_chk = len(chk)
+    cdf = pd.DataFrame({"draw": np.arange(1, n_chk + 1),
+                        "te_pp_arcmin_analytic": Y["te_pp_arcmin"].to_numpy()[:n_chk],
+                        "te_pp_arcmin_fcl": [_stat(r, "pp") for r in chk],
+                        "te_mean_abs_arcmin_analytic": Y["te_mean_abs_arcmin"].to_numpy()[:n_chk],
+                        "te_mean_abs_arcmin_fcl": [_stat(r, "mean_abs") for r in chk]})
+    agr = {}
+    for r in ("te_pp_arcmin", "te_mean_abs_arcmin"):
+        d = (cdf[f"{r}_fcl"] - cdf[f"{r}_analytic"]).to_numpy()
+        d = d[np.isfinite(d)]
+        agr[r] = {"n": int(d.size), "max_abs_diff": float(np.max(np.abs(d))) if d.size else None,
+                  "rms_diff": float(np.sqrt(np.mean(d ** 2))) if d.size else None}
+    return cdf, agr
+
+
+def _mc_timing(t0: float, done0: dict[str, Any], runners: dict[str, Runner], n_indep: int, n_design: int,
+               workers: int) -> dict[str, Any]:
+    """Throughput of the Monte Carlo since ``t0``: wall and worker seconds, solves computed and reused.
+
+    ``done0`` holds each runner's ``(computed, reused, worker_seconds)`` when the draws started; the fcl
+    ``check`` runner is left out.
+    """
     wall = time.perf_counter() - t0
-    n_eval = len(X) + n_design
+    n_eval = n_indep + n_design
     computed = sum(getattr(r, "computed", 0) - done0[k][0] for k, r in runners.items() if k != "check")
     reused = sum(getattr(r, "reused", 0) - done0[k][1] for k, r in runners.items() if k != "check")
     busy = sum(getattr(r, "worker_seconds", 0.0) - done0[k][2] for k, r in runners.items() if k != "check")
-    out["timing"] = {"wall_s": wall, "full_solver_draws": n_eval, "independent_draws": len(X),
-                     "analytic_solves_computed": computed, "analytic_solves_reused": reused,
-                     "design_draws": n_design, "solves_per_draw": 1 + len(PLAY_RUNS), "workers": workers,
-                     "worker_s": busy, "draws_per_s_wall": n_eval / wall if wall > 0 else float("nan"),
-                     # worker time on the Monte Carlo tasks (case reading, geometry, the five solves): the rate
-                     # of one worker, also when the draws shared the workers with other stages
-                     "draws_per_s_per_worker": (n_eval / busy if busy > 0 else
-                                                n_eval / wall / max(1, workers) if wall > 0 else float("nan"))}
-    return out
+    return {"wall_s": wall, "full_solver_draws": n_eval, "independent_draws": n_indep,
+            "analytic_solves_computed": computed, "analytic_solves_reused": reused,
+            "design_draws": n_design, "solves_per_draw": 1 + len(PLAY_RUNS), "workers": workers,
+            "worker_s": busy, "draws_per_s_wall": n_eval / wall if wall > 0 else float("nan"),
+            # worker time on the Monte Carlo tasks (case reading, geometry, the five solves): the rate
+            # of one worker, also when the draws shared the workers with other stages
+            "draws_per_s_per_worker": (n_eval / busy if busy > 0 else
+                                       n_eval / wall / max(1, workers) if wall > 0 else float("nan"))}
 
 
 def closed_form_lever_mm(design: Design) -> float:

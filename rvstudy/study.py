@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -458,6 +459,133 @@ def _fit(data: pd.DataFrame, fs: FactorSet, response: str, alpha: float) -> FitB
     return b
 
 
+@dataclass
+class _Stages:
+    """What the study's stages solve, made before any case is solved (so that all can be submitted at once).
+    ``coded`` and ``val_points`` are None and ``readings`` and ``mc`` (their runners) empty for a stage not run."""
+
+    half: dict[str, float]                        # sweep half ranges: RSM factors on their own error, centre 0
+    coded: pd.DataFrame | None = None             # the design, coded (:func:`_design`)
+    actual: np.ndarray | None = None              # its points in actual units
+    doe_cases: list[Case] = field(default_factory=list)
+    val_points: tuple[np.ndarray, np.ndarray] | None = None
+    val_cases: list[Case] = field(default_factory=list)
+    readings: dict[str, Runner] = field(default_factory=dict)
+    mc: dict[str, Runner] = field(default_factory=dict)
+
+
+def _plan_stages(cfg: StudyConfig, res: StudyResult, base: dict[str, Any], law: ContactLaw,
+                 make_runner: Callable[..., Runner]) -> _Stages:
+    """The cases and runners of every stage of ``cfg.stages`` (sets ``res.paper_order``; a note when the fcl
+    check of the Monte Carlo cannot run)."""
+    fs = res.factors
+    st = _Stages({f: fs.levels[f].half_range for f in fs.names if f in RSM_FACTORS and fs.errors[f] == RSM_FACTORS[f]
+                  and fs.patterns.get(f) is None and fs.levels[f].center == 0})
+    if {"doe", "validation", "mc"} & set(cfg.stages):
+        st.coded, res.paper_order = _design(cfg, fs)
+        st.actual = fs.levels.coded_to_actual(st.coded[fs.names].to_numpy(float), fs.names)
+        st.doe_cases = _cases_for(fs, st.actual, "doe", cfg, base)
+    if "validation" in cfg.stages and cfg.n_validation > 0:
+        st.val_points = _validation_points(cfg, fs)
+        st.val_cases = _cases_for(fs, st.val_points[1], "validation", cfg, base)
+    if "readings" in cfg.stages and fs.is_paper:
+        st.readings = {ln: make_runner("analytic", min(cfg.steps, READINGS_STEPS),
+                                       law if ln == "impact" else ContactLaw(kind=ln)) for ln in READINGS_LAWS}
+    if "mc" in cfg.stages:
+        mc_law = law if cfg.mc_contact == "impact" else ContactLaw(cfg.K, cfg.n, kind=cfg.mc_contact)
+        st.mc["mc"] = make_runner("analytic", cfg.steps, mc_law)
+        if cfg.mc_check > 0:
+            import importlib.util
+
+            if importlib.util.find_spec("fcl") is None or importlib.util.find_spec("rvdyn.fcl_contacts") is None:
+                res.notes.append("the fcl check of the Monte Carlo is skipped: python-fcl is not installed")
+            else:
+                st.mc["check"] = make_runner("fcl", cfg.steps, mc_law)
+    return st
+
+
+def _submit_ahead(bg: ThreadPoolExecutor, cfg: StudyConfig, res: StudyResult, base: dict[str, Any],
+                  runner: Runner, st: _Stages) -> dict[str, Future]:
+    """Submit every stage's cases to the workers at once, from the threads of ``bg``: the paper stages'
+    cases in one batch (``paper``), the readings per law and the Monte Carlo (``mc``). Returns the futures."""
+    pending: dict[str, Future] = {}
+    ahead: list[Case] = []
+    if "screen" in cfg.stages:
+        ahead += list(screen_cases(cfg.load_Nm, True, base)["case"])
+        ahead += list(sweep_cases(cfg.sweep_points, cfg.load_Nm, st.half or None, base)["case"])
+    ahead += st.doe_cases + st.val_cases
+    if ahead:
+        pending["paper"] = bg.submit(runner.prefetch, ahead, f"paper stages ({len(ahead)} cases)")
+    for ln, r in st.readings.items():
+        pending[ln] = bg.submit(r.prefetch, readings_cases(res.factors, cfg.load_Nm, ln), f"Table 6 readings, {ln} law")
+    if st.mc:
+        pending["mc"] = bg.submit(solve_full_mc, cfg, res.reducer, st.mc, None, bg)
+    return pending
+
+
+def _ready(pending: dict[str, Future], name: str) -> None:
+    """Wait until the cases submitted ahead as ``name`` (if any) are solved, re-raising their error."""
+    if name in pending:
+        pending.pop(name).result()
+
+
+def _run_paper_stages(res: StudyResult, runner: Runner, st: _Stages, pending: dict[str, Future],
+                      base: dict[str, Any]) -> None:
+    """Run the screen and sweeps, the design runs with their fits, and the validation, into ``res``, each
+    timed (``res.timings``)."""
+    cfg, fs = res.config, res.factors
+    if "screen" in cfg.stages:
+        t0 = time.perf_counter()
+        _ready(pending, "paper")
+        res.screen = run_screen(cfg.solver, cfg.steps, cfg.sweep_points, cfg.load_Nm, runner=runner,
+                                both_signs=True, half_range=st.half or None, progress=cfg.progress,
+                                sweeps="screen" in cfg.stages, base=base)
+        res.timings["screen"] = time.perf_counter() - t0
+    if st.coded is not None:
+        t0 = time.perf_counter()
+        _ready(pending, "paper")
+        out = runner(st.doe_cases, f"design ({cfg.design}, {len(st.doe_cases)} runs)")
+        table = st.coded.copy()
+        for j, f in enumerate(fs.names):
+            table[f"{f}_actual"] = [float(f"{v:.12g}") for v in st.actual[:, j]]
+        res.design = pd.concat([table.reset_index(drop=True), _responses(out)], axis=1)
+        res.design_kind = cfg.design
+        failed = res.design[res.design["status"] != "ok"]
+        for r in failed.itertuples():
+            res.notes.append(f"design run {r.run} failed and is left out of the fit: {r.error_message}")
+        for resp in RESPONSES:
+            res.fits[resp] = _fit(res.design, fs, resp, cfg.alpha)
+        res.timings["doe"] = time.perf_counter() - t0
+    if st.val_points is not None:
+        t0 = time.perf_counter()
+        _ready(pending, "paper")
+        res.validation = _validation(cfg, fs, runner, res, st.val_points, st.val_cases)
+        res.timings["validation"] = time.perf_counter() - t0
+
+
+def _run_readings_and_mc(res: StudyResult, st: _Stages, pending: dict[str, Future], ex: Executor,
+                         cache: CaseCache, kw: dict[str, Any], parallel: bool) -> None:
+    """Run the Table 6 readings and the Monte Carlo into ``res``, each timed; ``parallel``: the draws were
+    submitted ahead, so the Monte Carlo's wait for them is timed too (``mc_wait_and_analysis``)."""
+    cfg, fs = res.config, res.factors
+    if st.readings:  # Table 6 as measurements (rvstudy.paper_readings)
+        t0 = time.perf_counter()
+        for ln in st.readings:
+            _ready(pending, ln)
+        res.readings = run_readings(fs, ex, cache, min(cfg.steps, READINGS_STEPS), cfg.load_Nm,
+                                    ContactLaw(cfg.K, cfg.n), progress=cfg.progress, runners=st.readings, **kw)
+        res.notes.extend(res.readings.notes)
+        res.timings["readings"] = time.perf_counter() - t0
+    if st.mc:
+        t0 = time.perf_counter()
+        solved = pending.pop("mc").result() if "mc" in pending else None
+        res.mc = run_full_mc(cfg, fs, res.reducer, st.mc, res.fits, res.notes, workers=getattr(ex, "workers", 1),
+                             solved=solved)
+        res.timings["mc"] = res.mc["timing"]["wall_s"]
+        if parallel:  # the draws were solved beside the other stages
+            res.timings["mc_wait_and_analysis"] = time.perf_counter() - t0
+
+
 def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any = None) -> StudyResult:
     """Run the study and return its results (no files but the cache are written here).
 
@@ -501,95 +629,11 @@ def run_study(cfg: StudyConfig, executor: Executor | None = None, solve_fn: Any 
     # waits while this process fits a stage or builds the next stage's cases; the stages then read their
     # results in the usual order (Runner.prefetch keeps them in memory, counted once).
     bg = ThreadPoolExecutor(max_workers=6, thread_name_prefix="rv-stackup") if getattr(ex, "workers", 1) > 1 else None
-    pending: dict[str, Future] = {}
     try:
-        half = {f: fs.levels[f].half_range for f in fs.names if f in RSM_FACTORS and fs.errors[f] == RSM_FACTORS[f]
-                and fs.patterns.get(f) is None and fs.levels[f].center == 0}
-        if {"doe", "validation", "mc"} & set(cfg.stages):
-            coded, res.paper_order = _design(cfg, fs)
-            actual = fs.levels.coded_to_actual(coded[fs.names].to_numpy(float), fs.names)
-            doe_cases = _cases_for(fs, actual, "doe", cfg, base)
-        val_on = "validation" in cfg.stages and cfg.n_validation > 0
-        val_points = _validation_points(cfg, fs) if val_on else None
-        val_cases = _cases_for(fs, val_points[1], "validation", cfg, base) if val_on else []
-        readings_on = "readings" in cfg.stages and fs.is_paper
-        r_runners = ({ln: make_runner("analytic", min(cfg.steps, READINGS_STEPS),
-                                      law if ln == "impact" else ContactLaw(kind=ln)) for ln in READINGS_LAWS}
-                     if readings_on else {})
-        mc_runners: dict[str, Runner] = {}
-        if "mc" in cfg.stages:
-            mc_law = law if cfg.mc_contact == "impact" else ContactLaw(cfg.K, cfg.n, kind=cfg.mc_contact)
-            mc_runners["mc"] = make_runner("analytic", cfg.steps, mc_law)
-            if cfg.mc_check > 0:
-                import importlib.util
-
-                if importlib.util.find_spec("fcl") is None or importlib.util.find_spec("rvdyn.fcl_contacts") is None:
-                    res.notes.append("the fcl check of the Monte Carlo is skipped: python-fcl is not installed")
-                else:
-                    mc_runners["check"] = make_runner("fcl", cfg.steps, mc_law)
-        if bg is not None:
-            ahead: list[Case] = []
-            if "screen" in cfg.stages:
-                ahead += list(screen_cases(cfg.load_Nm, True, base)["case"])
-                ahead += list(sweep_cases(cfg.sweep_points, cfg.load_Nm, half or None, base)["case"])
-            if {"doe", "validation", "mc"} & set(cfg.stages):
-                ahead += doe_cases
-            ahead += val_cases
-            if ahead:
-                pending["paper"] = bg.submit(runner.prefetch, ahead, f"paper stages ({len(ahead)} cases)")
-            for ln, r in r_runners.items():
-                pending[ln] = bg.submit(r.prefetch, readings_cases(fs, cfg.load_Nm, ln),
-                                        f"Table 6 readings, {ln} law")
-            if mc_runners:
-                pending["mc"] = bg.submit(solve_full_mc, cfg, design, mc_runners, None, bg)
-
-        def ready(name: str) -> None:
-            if name in pending:
-                pending.pop(name).result()
-
-        if "screen" in cfg.stages:
-            t0 = time.perf_counter()
-            ready("paper")
-            res.screen = run_screen(cfg.solver, cfg.steps, cfg.sweep_points, cfg.load_Nm, runner=runner,
-                                    both_signs=True, half_range=half or None, progress=cfg.progress,
-                                    sweeps="screen" in cfg.stages, base=base)
-            res.timings["screen"] = time.perf_counter() - t0
-        if {"doe", "validation", "mc"} & set(cfg.stages):
-            t0 = time.perf_counter()
-            ready("paper")
-            out = runner(doe_cases, f"design ({cfg.design}, {len(doe_cases)} runs)")
-            table = coded.copy()
-            for j, f in enumerate(fs.names):
-                table[f"{f}_actual"] = [float(f"{v:.12g}") for v in actual[:, j]]
-            res.design = pd.concat([table.reset_index(drop=True), _responses(out)], axis=1)
-            res.design_kind = cfg.design
-            failed = res.design[res.design["status"] != "ok"]
-            for r in failed.itertuples():
-                res.notes.append(f"design run {r.run} failed and is left out of the fit: {r.error_message}")
-            for resp in RESPONSES:
-                res.fits[resp] = _fit(res.design, fs, resp, cfg.alpha)
-            res.timings["doe"] = time.perf_counter() - t0
-        if val_on:
-            t0 = time.perf_counter()
-            ready("paper")
-            res.validation = _validation(cfg, fs, runner, res, val_points, val_cases)
-            res.timings["validation"] = time.perf_counter() - t0
-        if readings_on:  # Table 6 as measurements (rvstudy.paper_readings)
-            t0 = time.perf_counter()
-            for ln in r_runners:
-                ready(ln)
-            res.readings = run_readings(fs, ex, cache, min(cfg.steps, READINGS_STEPS), cfg.load_Nm,
-                                        ContactLaw(cfg.K, cfg.n), progress=cfg.progress, runners=r_runners, **kw)
-            res.notes.extend(res.readings.notes)
-            res.timings["readings"] = time.perf_counter() - t0
-        if mc_runners:
-            t0 = time.perf_counter()
-            solved = pending.pop("mc").result() if "mc" in pending else None
-            res.mc = run_full_mc(cfg, fs, design, mc_runners, res.fits, res.notes, workers=getattr(ex, "workers", 1),
-                                 solved=solved)
-            res.timings["mc"] = res.mc["timing"]["wall_s"]
-            if bg is not None:  # the draws were solved beside the other stages
-                res.timings["mc_wait_and_analysis"] = time.perf_counter() - t0
+        st = _plan_stages(cfg, res, base, law, make_runner)
+        pending = _submit_ahead(bg, cfg, res, base, runner, st) if bg is not None else {}
+        _run_paper_stages(res, runner, st, pending, base)
+        _run_readings_and_mc(res, st, pending, ex, cache, kw, bg is not None)
     finally:
         if own:
             ex.close()
