@@ -34,7 +34,7 @@ from rvstudy.augment_section import augment_section
 from rvstudy.paper_readings import readings_section
 import rvstudy.report_mc as report_mc
 from rvstudy.report_claims import PRIMARY, conclusions
-from rvstudy.study import RESPONSE_LABEL, RESPONSES, FitBundle, StudyConfig, StudyResult
+from rvstudy.study import RESPONSE_LABEL, FitBundle, StudyConfig, StudyResult
 from rvstudy.te_figure import plot_te_figure
 
 

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from rvstudy.capability import MIN_ESS, TIGHTEN, ci_text
+from rvstudy.capability import MIN_ESS, TIGHTEN
 from rvstudy.montecarlo import tolerance_table
 from rvstudy.stackup import MC_RESPONSES, PLAY_LOAD_FRACTION
 
