@@ -269,7 +269,7 @@ class TEAdjoint:
         gradient over the coordinates that turn their geometry: the kinematic ones and the discs' turns), the
         adjoint ``lambda = H^+T e_0 / Rp`` (pseudo-inverse: a free body stays where it is), the pose velocity
         ``w = Pi_x lambda``, the pins' weights and the stationarity of the states (one Newton step)."""
-        s, N, nj, nk, D = self.s, self.N, self.s.nj, 1 + self.s.nc, self.s.ndof
+        s, nj, nk, D = self.s, self.s.nj, 1 + self.s.nc, self.s.ndof
         self.phi_sum = self.phi_c.sum(axis=2)
         self.rest = r = _rest_parts(s, self, self.x)
         (_, Y1), (_, k1) = r["s1"], r["s1_law"]

@@ -177,8 +177,8 @@ def parse_spec_limits(text: str) -> dict[str, tuple[float | None, float | None]]
         hi = float(hi_s) if hi_s.strip() else None
     except ValueError:
         raise ValueError(f"--spec {text!r}: LSL and USL must be numbers or empty") from None
-    for v in (lo, hi):
-        if v is not None and not math.isfinite(v):
+    for limit in (lo, hi):
+        if limit is not None and not math.isfinite(limit):
             raise ValueError(f"--spec {text!r}: limits must be finite")
     return {key.strip(): (lo, hi)}
 
