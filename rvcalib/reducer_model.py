@@ -577,15 +577,5 @@ def _blocks(n: int, parts: int) -> list:
     return [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
 
 
-def clip_state(candidates: list, theta: np.ndarray) -> np.ndarray:
-    """The state with every bounded parameter inside its bounds."""
-    out = theta.copy()
-    pos = 0
-    for c in candidates:
-        out[pos:pos + c.n_params] = np.clip(out[pos:pos + c.n_params], c.lower, c.upper)
-        pos += c.n_params
-    return out
-
-
 def finite(x: float) -> bool:
     return isinstance(x, float) and math.isfinite(x)

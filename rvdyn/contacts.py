@@ -148,9 +148,6 @@ class PhysicalLaw:
     def describe(self) -> str:
         return "the physical contact law (Hertz line contact, ISO 6336 mesh stiffness)"
 
-    def _C(self, rows):
-        return self.line.C if rows is None else self.line.C[rows]
-
     def floor_stiffness(self) -> float:
         C = np.median(self.line.C)
         return float(self.line.stiffness(np.array(1e-4), np.array(C)))

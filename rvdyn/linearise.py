@@ -161,12 +161,6 @@ class LinearisationMixin:
             self._C_last, self._R_last = C, R
         return C, R
 
-    def _stage1(self, th_in: np.ndarray, x: np.ndarray, direction: int, provider: bool) -> np.ndarray:
-        to, ps, _, _ = self._unpack(th_in, x)
-        if provider:
-            return self.contacts.stage1_gaps(th_in, to, ps, direction)
-        return self.geom.stage1_gaps(th_in, to, ps, direction)
-
     def _linearise(self, th_in: np.ndarray, x: np.ndarray, direction) -> tuple[np.ndarray, np.ndarray]:
         """Gaps (N, M) mm and their Jacobians (N, M, nj) mm/mm at the states x (nj: the coordinates the
         contacts depend on, the first nj of the state; the support coordinates follow them).

@@ -383,52 +383,6 @@ def sobol_indices(f: Callable[[pd.DataFrame], np.ndarray], tols: Mapping[str, To
     return pd.DataFrame(rows)
 
 
-def piecewise_linear(x_nodes: np.ndarray, y_nodes: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-    """Piecewise-linear interpolant through the nodes, extended linearly beyond the end nodes."""
-    o = np.argsort(x_nodes)
-    xs, ys = np.asarray(x_nodes, float)[o], np.asarray(y_nodes, float)[o]
-    xs, idx = np.unique(xs, return_index=True)
-    ys = ys[idx]
-
-    def g(x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, float)
-        y = np.interp(x, xs, ys)
-        if xs.size >= 2:
-            lo, hi = x < xs[0], x > xs[-1]
-            y[lo] = ys[0] + (x[lo] - xs[0]) * (ys[1] - ys[0]) / (xs[1] - xs[0])
-            y[hi] = ys[-1] + (x[hi] - xs[-1]) * (ys[-1] - ys[-2]) / (xs[-1] - xs[-2])
-        return y
-
-    return g
-
-
-def oat_variance_shares(nodes: Mapping[str, tuple[np.ndarray, np.ndarray]], samples: pd.DataFrame) -> pd.DataFrame:
-    """One-at-a-time variance of each error's single-factor response under its tolerance.
-
-    Parameters
-    ----------
-    nodes : mapping
-        ``{error: (values, responses)}`` from single-factor solver runs (including 0 = case A).
-    samples : DataFrame
-        Draws of every error (from :func:`sample_errors`).
-
-    Returns
-    -------
-    DataFrame
-        ``error, variance, share`` (share of the summed one-at-a-time variances; interactions are
-        not represented).
-    """
-    rows = []
-    for k, (x, y) in nodes.items():
-        g = piecewise_linear(np.asarray(x), np.asarray(y))
-        v = float(np.var(g(samples[k].to_numpy()))) if k in samples else 0.0
-        rows.append({"error": k, "variance": v})
-    df = pd.DataFrame(rows)
-    tot = df["variance"].sum()
-    df["share"] = df["variance"] / tot if tot > 0 else np.nan
-    return df
-
-
 def yield_estimate(values: np.ndarray, spec: float) -> dict[str, float]:
     """Fraction of ``values <= spec`` with its 95 % Wilson interval.
 

@@ -436,10 +436,3 @@ def _mc_timing(t0: float, done0: dict[str, Any], runners: dict[str, Runner], n_i
             # of one worker, also when the draws shared the workers with other stages
             "draws_per_s_per_worker": (n_eval / busy if busy > 0 else
                                        n_eval / wall / max(1, workers) if wall > 0 else float("nan"))}
-
-
-def closed_form_lever_mm(design: Design) -> float:
-    """The largest pin lever ``(i Z1/Z2) e`` of the clearance closed form (docs/physics.md section 6), mm:
-    an upper bound of max_i lambda_i (52.4 mm for the paper's design)."""
-    return design.ratio * design.z_sun / design.z_planet * design.eccentricity_mm
-

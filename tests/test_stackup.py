@@ -25,7 +25,6 @@ from rvstudy.montecarlo import (
     Tolerance,
     load_tolerances,
     parse_tolerance,
-    piecewise_linear,
     sobol_indices,
     yield_estimate,
 )
@@ -347,8 +346,6 @@ def test_sobol_of_additive_function_and_yield():
     assert abs(s.loc["cam_phase", "ST"] - 0.8) < 0.03
     y = yield_estimate(np.array([0.5, 0.9, 1.5, 2.0]), 1.0)
     assert y["yield"] == 0.5 and y["lower"] < 0.5 < y["upper"]
-    g = piecewise_linear(np.array([-1.0, 0.0, 1.0]), np.array([1.0, 0.0, 2.0]))
-    np.testing.assert_allclose(g(np.array([-2.0, -0.5, 0.5, 3.0])), [2.0, 0.5, 1.0, 6.0])
 
 
 # ---------------------------------------------------------------------------------------------- pin patterns
