@@ -20,8 +20,9 @@ appends to ``benchmarks/results.csv`` (:mod:`results_log`, benchmark ``bench_loo
 ``<method>_<set>_passed`` ...; ``<method>_<set>_seeds_<s1>_<s2>..._...`` for a subset of the seeds).
 
 Run: ``python benchmarks/bench_loop.py --set dev|heldout [--method new] [--seeds N ...] [--workers 1|2]
-[--out DIR] [--draws DIR] [--fresh] [--verbose] [--report-only]`` (``--report-only``: the table of the draws
-already run, none run, nothing recorded).
+[--secant-width W] [--out DIR] [--draws DIR] [--fresh] [--verbose] [--report-only]`` (``--report-only``: the
+table of the draws already run, none run, nothing recorded; ``--secant-width``: the loop with that setting, an
+ablation, its method labelled ``new-secant-width-W``).
 """
 from __future__ import annotations
 
@@ -47,20 +48,24 @@ from score import pool, score, score_lines  # noqa: E402
 METHODS = ("new", "tolerance-prior")
 
 
-def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = None, workers: int = 1) -> dict[str, Any]:
-    """One method with its default options on a dataset; the result in the schema (:mod:`score`)."""
+def run_method(method: str, dataset: Any, log: Callable[[str], None] | None = None, workers: int = 1,
+               **settings: Any) -> dict[str, Any]:
+    """One method with its default options (but ``settings``, fields of ``CalibrationSettings``) on a dataset; the
+    result in the schema (:mod:`score`)."""
     if method in METHODS:
         from rvcalib.loop import calibrate as calibrate_new
         from rvcalib.settings import CalibrationSettings
 
         est = "sparse" if method == "new" else method
-        return calibrate_new(dataset, settings=CalibrationSettings(workers=workers, estimator=est), log=log).to_dict()
+        return calibrate_new(dataset, settings=CalibrationSettings(workers=workers, estimator=est, **settings),
+                             log=log).to_dict()
     raise ValueError(f"method {method!r} is unknown; allowed: {list(METHODS)}")
 
 
 def run_draw(seed: int, set_name: str, method: str, draws: Path, workers: int,
-             verbose: bool = False) -> dict[str, Any]:
-    """Draw (or reuse), run and time one seed; returns the per-draw record (not yet scored)."""
+             verbose: bool = False, settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Draw (or reuse), run and time one seed; returns the per-draw record (not yet scored). ``settings``: the
+    fields of ``CalibrationSettings`` set other than by default; the record's method is then labelled with them."""
     from rvrig.dataset import read_dataset
 
     folder = generate(seed, draws)
@@ -68,14 +73,19 @@ def run_draw(seed: int, set_name: str, method: str, draws: Path, workers: int,
     t0, c0 = time.perf_counter(), cpu_seconds()
     log = (lambda s: print(f"    [{time.perf_counter() - t0:7.1f} s] {s}", flush=True)) if verbose else None
     try:
-        result = run_method(method, read_dataset(folder / "dataset"), log, workers)
+        result = run_method(method, read_dataset(folder / "dataset"), log, workers, **(settings or {}))
     except Exception as exc:  # a method that raises fails the draw; the protocol goes on
         error = f"{type(exc).__name__}: {exc}"
         traceback.print_exc()
     wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
-    return {"seed": seed, "set": set_name, "method": method, "workers": workers, "wall_s": wall, "cpu_s": cpu,
+    return {"seed": seed, "set": set_name, "method": label(method, settings), "workers": workers, "wall_s": wall, "cpu_s": cpu,
             "load_average": os.getloadavg()[0], "dataset": str(folder / "dataset"), "error": error,
             "result": result}
+
+
+def label(method: str, settings: dict[str, Any] | None) -> str:
+    """The method's label in records: its name, then each setting given as ``-name-value``."""
+    return method + "".join(f"-{k.replace('_', '-')}-{v:g}" for k, v in sorted((settings or {}).items()))
 
 
 def rescore(rec: dict[str, Any]) -> dict[str, Any]:
@@ -139,26 +149,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=None, help="folder of the per-draw JSON (default ./bench-loop-METHOD-SET)")
     ap.add_argument("--draws", default=None, help="folder of the cached draws (default OUT/draws)")
     ap.add_argument("--fresh", action="store_true", help="run draws already scored in OUT again")
+    ap.add_argument("--secant-width", dest="secant_width", type=float, default=None,
+                    help="the loop's secant_width (default: its own); the method is then labelled with it")
     ap.add_argument("--verbose", action="store_true", help="print the method's progress")
     ap.add_argument("--report-only", action="store_true",
                     help="print the draws already run in OUT (scored again), run none and record nothing")
     args = ap.parse_args(argv)
     seeds = seeds_of(args.set, args.seeds)
-    out = Path(args.out or f"bench-loop-{args.method}-{args.set}")
+    settings = {} if args.secant_width is None else {"secant_width": args.secant_width}
+    method = label(args.method, settings)
+    out = Path(args.out or f"bench-loop-{method}-{args.set}")
     draws = (Path(args.draws) if args.draws else out / "draws").resolve()
     out.mkdir(parents=True, exist_ok=True)
-    print(f"{args.method} loop on the {args.set} set, seeds {seeds}, {args.workers} worker process(es); "
+    print(f"{method} loop on the {args.set} set, seeds {seeds}, {args.workers} worker process(es); "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; draws in {draws}", flush=True)
     recs = []
     for seed in seeds:
         path = out / f"seed{seed}.json"
         old = json.loads(path.read_text()) if path.is_file() and not args.fresh else None
-        if old is not None and old.get("method") == args.method:
+        if old is not None and old.get("method") == method:
             rec, note = old, "  (run by an earlier call, scored again)"
         elif args.report_only:
             continue
         else:
-            rec, note = run_draw(seed, args.set, args.method, draws, args.workers, args.verbose), ""
+            rec, note = run_draw(seed, args.set, args.method, draws, args.workers, args.verbose, settings), ""
             save(rec, path)             # the run is kept even if the scoring fails
         rec = rescore(rec)
         save(rec, path)
@@ -172,12 +186,12 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     summ = summary(recs)
     cov = "none named" if summ["coverage"] is None else f"{summ['coverage']:.1%}"
-    print(f"SUMMARY {args.method} {args.set}: {summ['passed']}/{summ['draws']} pass ({summ['raised']} raised); "
+    print(f"SUMMARY {method} {args.set}: {summ['passed']}/{summ['draws']} pass ({summ['raised']} raised); "
           f"pooled coverage {summ['covered']}/{summ['n_intervals']} = {cov}; median wall "
           f"{summ['median_wall_s']:.0f} s, median CPU {summ['median_cpu_s']:.0f} s ({args.workers} worker(s); "
           f"load average now {os.getloadavg()[0]:.1f})", flush=True)
     if not args.report_only:
-        record_summary(args.method, args.set, None if set(seeds) == set(SETS[args.set]) else sorted(seeds), summ)
+        record_summary(method, args.set, None if set(seeds) == set(SETS[args.set]) else sorted(seeds), summ)
     return 0 if summ["passed"] == summ["draws"] else 1
 
 

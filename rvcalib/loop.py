@@ -97,15 +97,16 @@ def prior_scales(library: Library, model: ReducerModel, J: np.ndarray, R: np.nda
     return ts, tr
 
 
-def _next_linearisation(fit, F: Features, n: int, ts: np.ndarray, share: float = 0.99,
+def _next_linearisation(fit, F: Features, n: int, ts: np.ndarray, width: float, share: float = 0.99,
                         most: int = 10) -> tuple[np.ndarray, np.ndarray]:
     """The spread and the columns to renew for the next statistical linearisation.
 
     Spread: a parameter's posterior standard deviation given that it is an effect where its inclusion probability
-    is at least one half (at least 5 % of its prior scale), else its prior scale (what it would be, were it the
-    effect). Renewed: the parameters of the features that hold the first ``share`` of a supported effect's
-    inclusion probability (at most ``most`` per effect): the ones the posterior may still choose."""
-    spread = ts.copy()
+    is at least one half (at least 5 % of its prior scale), else ``width`` times its prior scale (the sigma point of
+    what it would be, were it the effect: ``settings.secant_width``). Renewed: the parameters of the features that
+    hold the first ``share`` of a supported effect's inclusion probability (at most ``most`` per effect): the ones
+    the posterior may still choose."""
+    spread = width * ts
     renew = np.zeros(n, dtype=bool)
     for e in fit.effects:
         if e.prior_variance <= 0:
@@ -180,7 +181,8 @@ class Problem:
                        [c for c in self.library if c.solved and not c.dense])
         self.readings = [c for c in self.library if not c.solved]
         law = None if settings.contact is None else law_from_model({"contact": settings.contact})
-        self.model = model if model is not None else ReducerModel(dataset, self.solved, law, settings.workers)
+        self.model = (model if model is not None else
+                      ReducerModel(dataset, self.solved, law, settings.workers, secant_width=settings.secant_width))
         self.R = (np.column_stack([reading_columns(c, dataset) for c in self.readings]) if self.readings
                   else np.zeros((self.y.size, 0)))
         Nc, self.tests = nuisance_columns(dataset)
@@ -359,7 +361,7 @@ def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -
         a_s, a_r, sd = _active(fit, F, m.n_params, settings, pb.fixed)
         linear = np.zeros(m.n_params)
         linear[a_s] = fit.coef[:m.n_params][a_s] * ts[a_s]
-        spread, renew = _next_linearisation(fit, F, m.n_params, ts)
+        spread, renew = _next_linearisation(fit, F, m.n_params, ts, settings.secant_width)
         new = propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log)
         if new is None:
             m.te(cur.theta)                         # the model's states back at the current state

@@ -343,6 +343,8 @@ class ReducerModel:
         Processes for the Jacobian's columns (1: this process).
     jacobian_fn : callable or None
         ``fn(case_dict, deltas, loads, angles, states, law, steps) -> (n, m)``; default :func:`implicit_jacobian`.
+    secant_width : float
+        The secants' default half-width, in prior scales (where :meth:`jacobian` is given no spread).
     """
 
     dataset: object
@@ -352,6 +354,7 @@ class ReducerModel:
     jacobian_fn: object = None
     groups: list = field(default_factory=list)
     solves: int = 0
+    secant_width: float = 1.0
 
     def __post_init__(self) -> None:
         if self.jacobian_fn is None:
@@ -424,7 +427,7 @@ class ReducerModel:
         (call it first); see the module docstring for the kinds of column.
 
         ``spread`` (n_params,): each parameter's current spread, the half-width of its secant (default its prior
-        scale). ``renew`` (n_params,) bool: the columns to solve (default all); the others keep their columns of
+        scale times :attr:`secant_width`). ``renew`` (n_params,) bool: the columns to solve (default all); the others keep their columns of
         the last call (the form modes are always recombined from the single pins').
         """
         return self._columns(theta, spread, renew, pool, self.column_kinds())
@@ -458,7 +461,7 @@ class ReducerModel:
     def _columns(self, theta: np.ndarray, spread: np.ndarray | None, renew: np.ndarray | None,
                  pool: ProcessPoolExecutor | None, kinds: np.ndarray) -> np.ndarray:
         """:meth:`jacobian` with the columns' kinds given."""
-        spread = self.steps() * 10.0 if spread is None else np.asarray(spread, dtype=float)
+        spread = self.steps() * 10.0 * self.secant_width if spread is None else np.asarray(spread, dtype=float)
         if renew is None or self._J is None:
             renew = np.ones(self.n_params, dtype=bool)
         J = np.zeros((self.offsets[-1], self.n_params)) if self._J is None else self._J.copy()

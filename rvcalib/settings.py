@@ -59,6 +59,13 @@ class CalibrationSettings:
         class, their joint maximum a posteriori through the reducer model and its Laplace posterior, no selection
         (:mod:`rvcalib.gaussian`). ``max_effects``, ``min_purity``, ``max_linearisations``, ``step_tolerance`` and
         ``swaps`` are the sparse estimator's.
+    secant_width : float
+        Half-width of the secant column of a pin-wise or kinked candidate the posterior has not chosen, in prior
+        scales (:mod:`rvcalib.reducer_model`): the statistical linearisation over the values the candidate may
+        have. 1: over its tolerance class. sqrt(3) is the unscented transform's sigma point of one Gaussian
+        parameter (``n + kappa = 3``; S. J. Julier, J. K. Uhlmann, Proc. SPIE 3068, 1997): the secant then keeps
+        the prior's fourth moment too and sees a response that bends within a few classes further out; it changes
+        other results as well (docs/calibration.md, section 9).
     half_turn : bool
         The tolerance-prior estimator's second search, from the half-turn image of its first end, and its one answer
         over both ends (:mod:`rvcalib.arrangements`); no effect where no crank stands half a turn from another.
@@ -79,6 +86,7 @@ class CalibrationSettings:
     families: tuple = FAMILIES
     estimator: str = "sparse"
     half_turn: bool = True
+    secant_width: float = 1.0
 
     def validate(self) -> "CalibrationSettings":
         """Return self, or raise ValueError naming the field, its value and what is allowed."""
@@ -110,6 +118,9 @@ class CalibrationSettings:
             bad("families", f"a non-empty tuple from {list(FAMILIES)}")
         if self.estimator not in ESTIMATORS:
             bad("estimator", f"one of {list(ESTIMATORS)}")
+        if not (isinstance(self.secant_width, (int, float)) and not isinstance(self.secant_width, bool)
+                and 0.1 <= self.secant_width <= 10.0):
+            bad("secant_width", "a number in [0.1, 10] prior scales")
         if not isinstance(self.half_turn, bool):
             bad("half_turn", "True or False")
         return self

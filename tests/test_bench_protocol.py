@@ -233,8 +233,8 @@ def test_bench_loop_fails_a_raising_method_and_resumes(tmp_path, monkeypatch, ca
                           hidden={"model": {"torsional_compliance_arcsec_per_Nm": 0.2}})
     calls, recorded = [], []
 
-    def boom(method, dataset, log=None, workers=1):
-        calls.append(method)
+    def boom(method, dataset, log=None, workers=1, **settings):
+        calls.append((method, settings))
         raise RuntimeError("no convergence")
     monkeypatch.setattr(bench_loop, "generate", lambda seed, root: ds)
     monkeypatch.setattr(bench_loop, "run_method", boom)
@@ -247,13 +247,17 @@ def test_bench_loop_fails_a_raising_method_and_resumes(tmp_path, monkeypatch, ca
     out = capsys.readouterr().out
     assert "seed 101: FAIL (raised)" in out and "SUMMARY new dev: 0/1 pass (1 raised)" in out
     bench_loop.main(argv)                                              # reused, not run again
-    assert calls == ["new"] and len(recorded) == 2
+    assert calls == [("new", {})] and len(recorded) == 2
     bench_loop.main(argv + ["--report-only"])                          # printed, not recorded
-    assert calls == ["new"] and len(recorded) == 2
+    assert calls == [("new", {})] and len(recorded) == 2
     assert bench_loop.main(["--set", "dev", "--out", str(tmp_path / "empty"), "--report-only"]) == 1
-    assert calls == ["new"] and "no draw run yet" in capsys.readouterr().out
+    assert calls == [("new", {})] and "no draw run yet" in capsys.readouterr().out
     bench_loop.main(argv + ["--fresh"])
-    assert calls == ["new", "new"]
+    assert calls == [("new", {})] * 2
+    bench_loop.main(argv + ["--secant-width", "1"])                     # another method: run, not reused
+    assert calls[-1] == ("new", {"secant_width": 1.0})
+    assert recorded[-1][0] == "new-secant-width-1"
+    assert json.loads((tmp_path / "out" / "seed101.json").read_text())["method"] == "new-secant-width-1"
     assert json.loads(ap.read_text())["test_offsets"] == {}
 
 

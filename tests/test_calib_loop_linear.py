@@ -204,7 +204,9 @@ def test_a_swap_is_accepted_only_beyond_chi2_1(base):
     ("contact", "soft", "contact = 'soft'"), ("rated_Nm", 0.0, "rated_Nm = 0.0"),
     ("families", ("table4", "magic"), "families"), ("workers", 0, "workers = 0"), ("swaps", -1, "swaps = -1"),
     ("estimator", "ridge", "estimator = 'ridge' is not allowed: one of"),
-    ("half_turn", "yes", "half_turn = 'yes' is not allowed: True or False")])
+    ("half_turn", "yes", "half_turn = 'yes' is not allowed: True or False"),
+    ("secant_width", 0.0, r"secant_width = 0.0 is not allowed: a number in \[0.1, 10\] prior scales"),
+    ("secant_width", True, "secant_width = True")])
 def test_settings_refused_naming_the_field(field, value, match):
     with pytest.raises(ValueError, match=match):
         CalibrationSettings(**{field: value}).validate()

@@ -52,3 +52,18 @@ def test_tangent_columns_are_the_derivatives_of_converged_solves(model):
         else:
             assert np.all(gap <= scatter + 1e-3 * np.abs(J[:, j]).max()), (model.candidates[j].effect_name, gap.max())
     assert np.abs(secants[:, 0] - J[:, 0]).max() > 0.05 * np.abs(J[:, 0]).max()
+
+
+def test_secant_width_is_the_default_half_width_of_the_secants(model):
+    """With ``secant_width`` w a pin's column, given no spread, is its secant over w prior scales: the column the
+    spread w times the prior scale gives, and not the one over one prior scale (the pin's response bends)."""
+    w = np.sqrt(3.0)
+    wide = ReducerModel(model.dataset, model.candidates, secant_width=w)
+    scales = np.array([c.prior_scale for c in model.candidates])
+    theta = np.zeros(model.n_params)
+    wide.te(theta)
+    default = wide.jacobian(theta)
+    given = wide.jacobian(theta, spread=w * scales)
+    one = wide.jacobian(theta, spread=scales)
+    np.testing.assert_allclose(default, given, rtol=0, atol=1e-12 * np.abs(given).max())   # the spread's rounding
+    assert np.abs(default[:, 0] - one[:, 0]).max() > 0.01 * np.abs(one[:, 0]).max()
