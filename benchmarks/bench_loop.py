@@ -78,8 +78,8 @@ def run_draw(seed: int, set_name: str, method: str, draws: Path, workers: int,
         error = f"{type(exc).__name__}: {exc}"
         traceback.print_exc()
     wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
-    return {"seed": seed, "set": set_name, "method": label(method, settings), "workers": workers, "wall_s": wall, "cpu_s": cpu,
-            "load_average": os.getloadavg()[0], "dataset": str(folder / "dataset"), "error": error,
+    return {"seed": seed, "set": set_name, "method": label(method, settings), "workers": workers, "wall_s": wall,
+            "cpu_s": cpu, "load_average": os.getloadavg()[0], "dataset": str(folder / "dataset"), "error": error,
             "result": result}
 
 

@@ -102,10 +102,10 @@ def _next_linearisation(fit, F: Features, n: int, ts: np.ndarray, width: float, 
     """The spread and the columns to renew for the next statistical linearisation.
 
     Spread: a parameter's posterior standard deviation given that it is an effect where its inclusion probability
-    is at least one half (at least 5 % of its prior scale), else ``width`` times its prior scale (the sigma point of
-    what it would be, were it the effect: ``settings.secant_width``). Renewed: the parameters of the features that
-    hold the first ``share`` of a supported effect's inclusion probability (at most ``most`` per effect): the ones
-    the posterior may still choose."""
+    is at least one half (at least 5 % of its prior scale), else ``width`` (``settings.secant_width``) times its
+    prior scale (what it would be, were it the effect). Renewed: the parameters of the features that hold the first
+    ``share`` of a supported effect's inclusion probability (at most ``most`` per effect): the ones the posterior
+    may still choose."""
     spread = width * ts
     renew = np.zeros(n, dtype=bool)
     for e in fit.effects:

@@ -427,8 +427,8 @@ class ReducerModel:
         (call it first); see the module docstring for the kinds of column.
 
         ``spread`` (n_params,): each parameter's current spread, the half-width of its secant (default its prior
-        scale times :attr:`secant_width`). ``renew`` (n_params,) bool: the columns to solve (default all); the others keep their columns of
-        the last call (the form modes are always recombined from the single pins').
+        scale times :attr:`secant_width`). ``renew`` (n_params,) bool: the columns to solve (default all); the
+        others keep their columns of the last call (the form modes are always recombined from the single pins').
         """
         return self._columns(theta, spread, renew, pool, self.column_kinds())
 
@@ -447,14 +447,13 @@ class ReducerModel:
 
     def statistical_jacobian(self, theta: np.ndarray, pool: ProcessPoolExecutor | None = None) -> np.ndarray:
         """The columns of the statistical linearisation over the prior at ``theta`` (n, n_params), at the states of
-        the last :meth:`te` (call it first): every column a secant over +- the parameter's prior scale (within its
-        bounds), the derivative columns' too. Where the response over a tolerance class is not linear (the run
-        means under load are nearly even in a planet's eccentricity at the perfect reducer), the secant is a
-        straight line through the response over that class, where the tangent at one state would extrapolate that
-        state's slope (statistical linear
-        regression, A. F. Garcia-Fernandez, L. Svensson, M. R. Morelande, S. Sarkka, "Posterior linearization
-        filter: principles and implementation using sigma points", IEEE Trans. Signal Process. 63 (2015)
-        5561-5573, with two points per parameter)."""
+        the last :meth:`te` (call it first): every column a secant over +- the parameter's prior scale times
+        :attr:`secant_width` (within its bounds), the derivative columns' too. Where the response over a tolerance
+        class is not linear (the run means under load are nearly even in a planet's eccentricity at the perfect
+        reducer), the secant is a straight line through the response over that class, where the tangent at one
+        state would extrapolate that state's slope (statistical linear regression, A. F. Garcia-Fernandez,
+        L. Svensson, M. R. Morelande, S. Sarkka, "Posterior linearization filter: principles and implementation
+        using sigma points", IEEE Trans. Signal Process. 63 (2015) 5561-5573, with two points per parameter)."""
         kinds = self.column_kinds()
         return self._columns(theta, None, None, pool, np.where(kinds == "derivative", "kink", kinds))
 
