@@ -11,8 +11,13 @@ chooses the effects (:mod:`rvcalib.sparse`) does not give their sizes. For the c
 
 over ``theta_A`` and the active reading coefficients ``b`` (``P`` removes the tests' constants; the other
 parameters stay at their posterior means), by a trust-region Levenberg-Marquardt method
-(``scipy.optimize.least_squares``, method ``trf``, within the parameters' physical bounds) whose Jacobian is the
-reducer model's columns for the active parameters (:meth:`rvcalib.reducer_model.ReducerModel.jacobian`).
+(``scipy.optimize.least_squares``, method ``trf``, within the parameters' physical bounds). Its Jacobian is the
+reducer model's columns for the active parameters (:meth:`rvcalib.reducer_model.ReducerModel.jacobian`) at the
+search's first Jacobian point, then kept by Broyden's rank-one update with the secant to every point the search
+evaluates, in the parameters scaled by their prior standard deviations (K. Madsen, H. B. Nielsen, O. Tingleff,
+"Methods for non-linear least squares problems", 2nd ed., IMM, DTU, 2004, section 3.4, the secant version of the
+Levenberg-Marquardt method). A pin's or a clearance's column is a secant over its spread, two solves per
+condition; the update costs none, so a search costs its evaluations and one set of columns.
 """
 from __future__ import annotations
 
@@ -92,6 +97,8 @@ class _Objective:
         self.A = self.Ra.T @ self.Ra / sigma ** 2 + np.diag(self.ra_prior)
         self.fixed_r = R @ _zero(b_r, active_r)         # the inactive reading coefficients' TE
         self.last: dict = {}
+        self.Jm: np.ndarray | None = None                # the model's columns of the active parameters
+        self.anchor: tuple | None = None                # (x, model TE) where Jm was last accepted
 
     def linear(self, r: np.ndarray) -> np.ndarray:
         """The active reading coefficients' ridge solution on the residual ``r``."""
@@ -111,18 +118,35 @@ class _Objective:
             te = self.model.te(self.state(x))
         except ModelEvaluationError:
             return np.full(self.y.size + x.size + self.active_r.size, 1e6)
+        self._update(x, te)
         r = self.proj(self.y - te - self.fixed_r)
         br = self.linear(r)
         f = np.concatenate([(r - self.Ra @ br) / self.sigma, x / self.sd, br * np.sqrt(self.ra_prior)])
         self.last = {"x": x.copy(), "te": te, "br": br, "f": f}
         return f.copy()
 
+    def _update(self, x: np.ndarray, te: np.ndarray) -> None:
+        """Broyden's rank-one update of the model's columns with the secant from the anchor to ``x`` (model TE
+        ``te``), in the parameters scaled by ``sd``: the least change of the columns that makes them reproduce
+        that secant."""
+        if self.Jm is None:
+            return
+        xa, tea = self.anchor
+        dx = x - xa
+        du = dx / self.sd
+        dd = float(du @ du)
+        if dd > 0.0:
+            self.Jm += np.outer(te - tea - self.Jm @ dx, du / self.sd) / dd
+
     def jac(self, x: np.ndarray) -> np.ndarray:
         if not np.array_equal(self.last.get("x"), x):
             self(x)
-        renew = np.zeros(self.theta.size, dtype=bool)
-        renew[self.active_s] = True
-        J = self.proj(self.model.jacobian(self.state(x), self.spread, renew, self.pool)[:, self.active_s])
+        if self.Jm is None:
+            renew = np.zeros(self.theta.size, dtype=bool)
+            renew[self.active_s] = True
+            self.Jm = self.model.jacobian(self.state(x), self.spread, renew, self.pool)[:, self.active_s].copy()
+        self.anchor = (x.copy(), self.last["te"])
+        J = self.proj(self.Jm)
         if self.active_r.size:
             J = J - self.Ra @ np.linalg.solve(self.A, self.Ra.T @ J / self.sigma ** 2)
         return np.vstack([-J / self.sigma, np.diag(1.0 / self.sd), np.zeros((self.active_r.size, self.active_s.size))])

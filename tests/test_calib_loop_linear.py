@@ -523,3 +523,32 @@ def test_tolerance_prior_names_nothing_where_the_models_columns_fail(base):
     assert len(note) == 1, res.notes
     assert any("cannot be computed at this state: no secant can be solved" in s for s in lines), lines
     assert res.rms_after < res.rms_before
+
+
+def test_refine_takes_the_columns_once_and_reaches_the_map_of_a_nonlinear_model():
+    """The nonlinear estimate on ``a exp(b t)`` from far from the truth asks the model for its columns once (the
+    search keeps them by Broyden's update) and ends at the MAP that ``scipy.optimize.least_squares`` finds with the
+    exact Jacobian on the same prior-augmented residual."""
+    from types import SimpleNamespace
+
+    t = np.linspace(0.0, 1.0, 60)
+    y = 2.0 * np.exp(1.5 * t) + np.random.default_rng(4).normal(0.0, 0.05, t.size)
+    calls = []
+
+    def jacobian(th, spread=None, renew=None, pool=None):
+        calls.append(th.copy())
+        e = np.exp(th[1] * t)
+        return np.column_stack([e, th[0] * t * e])
+
+    model = SimpleNamespace(_lower=np.full(2, -50.0), _upper=np.full(2, 50.0), te=lambda th: th[0] * np.exp(th[1] * t),
+                            jacobian=jacobian)
+    sd, sigma, none = np.array([10.0, 10.0]), 0.05, np.zeros(0, dtype=int)
+    theta, _, te, cost = refine(model, y, lambda v: v, np.zeros((t.size, 0)), np.array([0.5, 0.5]), np.zeros(0),
+                                np.arange(2), none, sd, sigma, max_nfev=100)
+    assert len(calls) == 1
+    want = optimize.least_squares(lambda th: np.concatenate([(y - model.te(th)) / sigma, th / sd]), [0.5, 0.5],
+                                  jac=lambda th: np.vstack([-jacobian(th) / sigma, np.diag(1.0 / sd)]),
+                                  xtol=1e-12, ftol=1e-12, gtol=1e-12).x
+    assert theta == pytest.approx(want, rel=1e-5)
+    assert te == pytest.approx(model.te(theta))
+    assert cost == pytest.approx(np.sum(((y - te) / sigma) ** 2) + np.sum((theta / sd) ** 2))
