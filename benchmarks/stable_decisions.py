@@ -12,7 +12,7 @@ the grid, its own noise, a rig zero per test): the physical contact law (the loo
 ways, a pin's pitch, a cam's phase, a planet's eccentricity, a torsional compliance and an output encoder
 eccentricity at once.
 
-Run: ``python benchmarks/stable_decisions.py`` (about 13 minutes on two cores); figures to
+Run: ``python benchmarks/stable_decisions.py`` (about two minutes on two cores); figures to
 ``benchmarks/results.csv`` (benchmark ``stable_decisions``).
 """
 from __future__ import annotations
