@@ -70,6 +70,41 @@ PRIOR_SCALES = {"friction_torque_Nm": 0.03, "cam_bearing_clearance_um": 3.0, "pi
 MODEL_VECTORS = {"carrier_offset": ("carrier_offset_x_um", "carrier_offset_y_um")}
 
 
+def carrier_offset_axes(design: Design) -> tuple[tuple[float, float], ...]:
+    """The directions (unit vectors of the carrier frame) of the carrier offset the library holds.
+
+    An offset ``d`` of the carrier's crank-hole pattern moves every crank hole by ``d``. At crank ``i`` (angle
+    ``beta_i``, radial unit vector ``u_i``, tangential ``t_i``) its radial part ``d . u_i`` is that crank's
+    carrier-hole eccentricity (Table 4 F), already a candidate; only the tangential part ``d . t_i`` is new. The
+    library's carrier offset is therefore the offset with its radial parts taken back off the holes, and its
+    directions are those whose tangential pattern is not zero: both axes with three or more cranks, only the axis
+    across the crank line with two cranks at 0 and 180 deg, where an offset along the line is the two holes moved
+    radially apart, exactly.
+    """
+    b = np.array(design.crank_angles_rad, dtype=float)
+    t = np.column_stack([-np.sin(b), np.cos(b)])        # row i: t_i; t @ d is each hole's tangential move
+    _, s, vt = np.linalg.svd(t)
+    if s.size == 2 and s[1] > 1e-9 * s[0]:
+        return ((1.0, 0.0), (0.0, 1.0))
+    axis = np.where(np.abs(vt[0]) < 1e-12, 0.0, vt[0])
+    axis = axis / np.linalg.norm(axis) * (1.0 if axis[np.argmax(np.abs(axis))] > 0 else -1.0) + 0.0
+    return ((float(axis[0]), float(axis[1])),)
+
+
+def _add_carrier_offset(acc: "CaseDelta", axes: tuple, crank_angles_rad: tuple, p: np.ndarray) -> None:
+    """Add the library's carrier offset at parameters ``p`` (:func:`carrier_offset_axes`): the offset options,
+    and each crank's carrier hole moved radially back by the offset's radial part there."""
+    d = sum(float(pj) * np.asarray(ax, dtype=float) for pj, ax in zip(p, axes))
+    kx, ky = MODEL_VECTORS["carrier_offset"]
+    acc.model[kx] = acc.model.get(kx, 0.0) + float(d[0])
+    acc.model[ky] = acc.model.get(ky, 0.0) + float(d[1])
+    scale = float(np.hypot(*d))
+    for i, b in enumerate(crank_angles_rad):
+        radial = float(d[0] * math.cos(b) + d[1] * math.sin(b))
+        if abs(radial) > 1e-12 * scale:
+            acc.items.append(("carrier_hole_eccentricity", {"value": -radial, "crank": i}))
+
+
 @dataclass(frozen=True)
 class Candidate:
     """One candidate effect.
@@ -115,6 +150,10 @@ class Candidate:
     dense : bool
         Always estimated (not chosen): the reducer's global fit and stiffness, which every reducer has and which
         change how every other error shows (all the pins' radius and circle diameter, the torsional compliance).
+    axes : tuple of (float, float) or None
+        The carrier offset: per parameter, its direction in the carrier frame (:func:`carrier_offset_axes`).
+    crank_angles_rad : tuple of float
+        The carrier offset: the cranks' angles, rad, whose holes take back the offset's radial part.
     """
 
     @property
@@ -139,6 +178,8 @@ class Candidate:
     kink: bool = False
     side: int = 0
     dense: bool = False
+    axes: tuple[tuple[float, float], ...] | None = None
+    crank_angles_rad: tuple[float, ...] = ()
 
     @property
     def n_params(self) -> int:
@@ -171,6 +212,9 @@ class Candidate:
 
     def add_to(self, acc: "CaseDelta", p: np.ndarray) -> None:
         """Add this effect at parameters ``p`` to a case under construction."""
+        if self.axes is not None:
+            _add_carrier_offset(acc, self.axes, self.crank_angles_rad, p)
+            return
         if self.family == "model":
             for k, v in zip(MODEL_VECTORS.get(self.key, (self.key,)), p):
                 acc.model[k] = acc.model.get(k, 0.0) + float(v)
@@ -342,6 +386,7 @@ def _form(design: Design) -> list:
 
 def _model(dataset) -> tuple[list, list]:
     mo = MODEL_OPTIONS
+    design = dataset.design
     out, notes = [], []
     loads = [r.load_Nm for r in dataset.runs]
     if max(loads) > 0:
@@ -357,10 +402,19 @@ def _model(dataset) -> tuple[list, list]:
     out.append(Candidate(o.key, o.key, "model", "um", o.meaning, prior_scale=PRIOR_SCALES[o.key], lower=0.0,
                          upper=o.high, type_key=o.key, kink=True))
     o = mo["carrier_offset_x_um"]
+    axes = carrier_offset_axes(design)
+    if len(axes) == 2:
+        params, where = ("x", "y"), "x along crank angle 0 of the carrier frame, y at 90 deg"
+    else:
+        ang = math.degrees(math.atan2(axes[0][1], axes[0][0]))
+        params, where = ("value",), (f"along {ang:g} deg of the carrier frame (across the crank line; an offset "
+                                     "along it is the carrier holes' eccentricities, Table 4 F)")
     out.append(Candidate("carrier_offset", "carrier_offset", "model", "um",
                          "the carrier's crank-hole pattern off the carrier's axis of rotation (the main bearings' "
-                         "radial runout), x along crank angle 0 of the carrier frame", ("x", "y"),
-                         PRIOR_SCALES["carrier_offset"], o.low, o.high, type_key="carrier_offset", kink=True))
+                         "radial runout), less the radial part at each hole, which is that crank's carrier-hole "
+                         f"eccentricity (Table 4 F): the holes moved tangentially; {where}", params,
+                         PRIOR_SCALES["carrier_offset"], o.low, o.high, type_key="carrier_offset", kink=True,
+                         axes=axes, crank_angles_rad=tuple(design.crank_angles_rad)))
     if dataset.temperatures_vary:
         o = mo["pin_circle_diameter_um_per_K"]
         out.append(Candidate(o.key, o.key, "model", "um/K", o.meaning, prior_scale=PRIOR_SCALES[o.key], lower=o.low,

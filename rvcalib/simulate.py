@@ -42,7 +42,8 @@ from rvdyn.options import MODEL_OPTIONS
 from rvcad.params import Design
 
 from rvcalib.equivalents import EQUIVALENTS
-from rvcalib.library import INPUT_ENCODER_RADIUS_MM, MODEL_VECTORS, OUTPUT_ENCODER_RADIUS_MM, CaseDelta
+from rvcalib.library import (INPUT_ENCODER_RADIUS_MM, MODEL_VECTORS, OUTPUT_ENCODER_RADIUS_MM, CaseDelta,
+                             carrier_offset_axes)
 from rvrig.orders import check_periodic, period_deg
 
 MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg",
@@ -55,8 +56,9 @@ def _write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
             df.to_csv(fh, index=False, float_format="%.10f")
 
 
-def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
-    """The effects the loop should find for a ``hidden`` specification (names as in the library).
+def expected_effects(hidden: dict[str, Any], design: Design | None = None) -> list[dict[str, Any]]:
+    """The effects the loop should find for a ``hidden`` specification (names as in the library), for the reducer
+    ``design`` (default the paper's): a carrier offset as the library holds it (:func:`_carrier_offset_effects`).
 
     Returns
     -------
@@ -84,11 +86,7 @@ def expected_effects(hidden: dict[str, Any]) -> list[dict[str, Any]]:
                 d["angle_deg"] = float(item.get("angle_deg", 0.0))
             out.append(d)
     model = hidden.get("model") or {}
-    for key, (kx, ky) in MODEL_VECTORS.items():            # two options, one effect of a size and a direction
-        x, y = float(model.get(kx, 0.0)), float(model.get(ky, 0.0))
-        if x or y:
-            out.append({"name": key, "key": key, "value": math.hypot(x, y), "unit": MODEL_OPTIONS[kx].unit,
-                        "angle_deg": math.degrees(math.atan2(y, x))})
+    _carrier_offset_effects(out, model, design or Design())
     vectors = {k for keys in MODEL_VECTORS.values() for k in keys}
     for key, v in model.items():
         if key in ("pin_circle_ovality_angle_deg", "temperature_C", "cam_bearing_stiffness_N_per_um") or \
@@ -189,12 +187,40 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
     _write_dataset(out, [_run_row(r, declared_keys, speed_rpm) for r in runs], samples, int(duplicates), rng,
                    any("temperature_C" in r for r in runs),
                    des.to_dict() if design and write_design and des != Design() else None)
-    answer = {"dataset": str(out), "hidden": hidden, "expected_effects": expected_effects(hidden), **rig.answer(),
+    answer = {"dataset": str(out), "hidden": hidden, "expected_effects": expected_effects(hidden, des), **rig.answer(),
               "start_deg": float(start_deg), "revolutions": revolutions, "duplicates": int(duplicates), "seed": seed,
               "design": des.to_dict(), "test_offsets": offsets, "run_tests": run_tests}
     ap = Path(answer_path) if answer_path is not None else out.parent / f"{out.name}.answer.json"
     _write_json_atomic(answer, ap)
     return ap
+
+
+def _carrier_offset_effects(out: list[dict[str, Any]], model: dict[str, Any], design: Design) -> None:
+    """Add a hidden carrier offset ``d`` to ``out`` as the library holds it
+    (:func:`rvcalib.library.carrier_offset_axes`): its radial part at each crank's hole, ``d . u_i``, added to that crank's carrier-hole eccentricity, and the
+    offset along the library's axes (a size and a direction with two axes, one value with one)."""
+    kx, ky = MODEL_VECTORS["carrier_offset"]
+    d = np.array([float(model.get(kx, 0.0)), float(model.get(ky, 0.0))])
+    if not d.any():
+        return
+    key = "carrier_hole_eccentricity"
+    for i, b in enumerate(design.crank_angles_rad):
+        radial = float(d @ [math.cos(b), math.sin(b)])
+        if abs(radial) <= 1e-12 * float(np.hypot(*d)):
+            continue
+        hit = [e for e in out if e["key"] == key and e["instance"].get("crank") == i]
+        if hit:
+            hit[0]["value"] += radial
+        else:
+            out.append({"name": f"{key}[crank={i}]", "key": key, "value": radial, "unit": ERROR_TYPES[key].unit,
+                        "instance": {"crank": i}})
+    axes = carrier_offset_axes(design)
+    unit = MODEL_OPTIONS[kx].unit
+    if len(axes) == 2:
+        out.append({"name": "carrier_offset", "key": "carrier_offset", "value": float(np.hypot(*d)), "unit": unit,
+                    "angle_deg": math.degrees(math.atan2(d[1], d[0]))})
+    else:
+        out.append({"name": "carrier_offset", "key": "carrier_offset", "value": float(d @ axes[0]), "unit": unit})
 
 
 def _check_runs(runs: list[dict[str, Any]], revolutions: float, samples_per_rev: int) -> list[str]:

@@ -4,6 +4,7 @@ candidate in the calibration library."""
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,7 +14,9 @@ from rvcad.errors import Case, CaseError
 from rvcad.validation import DesignError
 from rvcad.geometry import ReducerGeometry
 from rvcad.tolerances import TOL
-from rvcalib.library import Candidate, CaseDelta, PRIOR_SCALES
+from rvcad.params import Design
+from rvcalib.library import Candidate, CaseDelta, PRIOR_SCALES, _model
+from rvcalib.simulate import expected_effects
 from rvdyn.solver import ARCSEC_PER_RAD
 from rvdyn.te import run_te
 
@@ -105,14 +108,65 @@ def test_a_bad_offset_names_the_option_and_its_range():
         ReducerGeometry(Case.from_dict({"model": {"carrier_offset_y_um": 250.0}}))
 
 
-def test_the_library_candidate_writes_both_options():
-    cand = Candidate("carrier_offset", "carrier_offset", "model", "um", "", ("x", "y"),
-                     PRIOR_SCALES["carrier_offset"], -200.0, 200.0)
+def _library_offset(design: Design) -> Candidate:
+    return next(c for c in _model(SimpleNamespace(design=design, runs=[SimpleNamespace(load_Nm=10.0)],
+                                                  temperatures_vary=False))[0] if c.key == "carrier_offset")
+
+
+def _holes_moved(design: Design, delta: dict) -> np.ndarray:
+    """The crank holes' moves (um, carrier frame) of a case delta on the design."""
+    base = {"design": design.to_dict()}
+    return (ReducerGeometry(Case.from_dict({**delta, **base})).carrier_holes
+            - ReducerGeometry(Case.from_dict(base)).carrier_holes) * 1e3
+
+
+@pytest.mark.parametrize("angles, n_params", [((0.0, 180.0), 1), ((0.0, 120.0, 240.0), 2)])
+def test_the_library_candidate_moves_the_holes_tangentially_only(angles, n_params):
+    """The offset's radial part at each hole is that crank's carrier-hole eccentricity (Table 4 F), a candidate
+    already: the library's offset holds only the tangential moves, and with two cranks only the axis across them."""
+    design = Design(crank_angles_deg=angles)
+    cand = _library_offset(design)
+    assert cand.n_params == n_params
+    b = np.radians(angles)
+    for j in range(n_params):
+        mv = _holes_moved(design, cand.deltas()[j])
+        radial = mv[:, 0] * np.cos(b) + mv[:, 1] * np.sin(b)
+        assert np.abs(radial).max() < 1e-9                          # um: rounding at 30 mm
+        assert np.abs(mv[:, 1] * np.cos(b) - mv[:, 0] * np.sin(b)).max() > 0.5    # a unit offset moves them
+
+
+@pytest.mark.parametrize("angles", [(0.0, 180.0), (0.0, 120.0, 240.0)])
+def test_a_hidden_offset_is_expected_as_the_library_holds_it(angles):
+    """The simulator's answer for a hidden offset, put back through the library's candidates, moves the holes as
+    the offset does."""
+    design = Design(crank_angles_deg=angles)
+    hidden = {"model": {"carrier_offset_x_um": 4.0, "carrier_offset_y_um": -3.0},
+              "errors": {"carrier_hole_eccentricity": {"value": 1.5, "crank": 1}}}
+    expected = {e["name"]: e for e in expected_effects(hidden, design)}
+    acc = CaseDelta()
+    for e in expected.values():
+        if e["key"] == "carrier_hole_eccentricity":
+            acc.items.append((e["key"], {"value": e["value"], **e["instance"]}))
+    cand = _library_offset(design)
+    e = expected["carrier_offset"]
+    a = math.radians(e.get("angle_deg", 0.0))
+    cand.add_to(acc, np.array([e["value"] * math.cos(a), e["value"] * math.sin(a)]) if cand.polar
+                else np.array([e["value"]]))
+    assert np.allclose(_holes_moved(design, acc.to_dict(None)), _holes_moved(design, hidden), rtol=0, atol=1e-9)
+    if len(angles) == 2:
+        assert expected["carrier_offset"]["value"] == pytest.approx(-3.0)
+        assert expected["carrier_hole_eccentricity[crank=0]"]["value"] == pytest.approx(4.0)
+        assert expected["carrier_hole_eccentricity[crank=1]"]["value"] == pytest.approx(1.5 - 4.0)
+
+
+def test_the_library_candidate_writes_both_options_and_reports_a_size_and_direction():
+    cand = _library_offset(Design(crank_angles_deg=(0.0, 120.0, 240.0)))
     acc = CaseDelta()
     cand.add_to(acc, np.array([1.5, -2.5]))
     assert acc.to_dict({"model": {"carrier_offset_x_um": 1.0}})["model"] == {"carrier_offset_x_um": 2.5,
                                                                               "carrier_offset_y_um": -2.5}
     assert cand.size(np.array([3.0, 4.0])) == pytest.approx((5.0, math.degrees(math.atan2(4.0, 3.0))))
+    assert cand.prior_scale == PRIOR_SCALES["carrier_offset"]
 
 
 @pytest.mark.parametrize("model", [{"carrier_offset_y_um": 150.0}, {"pin_circle_ovality_um": 150.0}])
