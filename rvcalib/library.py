@@ -11,8 +11,8 @@ Families (the first four are physical and may be *named*; the last is never name
   gives order k of the TE. Mode 2 of the radial form is the ring's ovality.
 * ``model``: physical effects of the reducer the declared model lacks, passed to rvdyn as model options:
   a lumped torsional compliance, a friction torque, a cam-bearing clearance, the carrier's offset from its axis
-  of rotation (the main bearings' runout, two components), and (when the runs differ in temperature) the pin
-  circle's thermal growth.
+  of rotation (the main bearings' runout) less the radial part each crank's carrier-hole eccentricity holds
+  (:func:`carrier_offset_axes`), and (when the runs differ in temperature) the pin circle's thermal growth.
 * ``measurement``: errors of the encoders: eccentricity of the output and of the input encoder scale (two
   components), the output encoder's scale error and a drift of the reading in time. The last two are ramps;
   they are candidates only where the record shows a ramp (:func:`ramp_shown`).
