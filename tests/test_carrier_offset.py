@@ -15,7 +15,7 @@ from rvcad.validation import DesignError
 from rvcad.geometry import ReducerGeometry
 from rvcad.tolerances import TOL
 from rvcad.params import Design
-from rvcalib.library import Candidate, CaseDelta, PRIOR_SCALES, _model
+from rvcalib.library import Candidate, CaseDelta, PRIOR_SCALES, build_library
 from rvcalib.simulate import expected_effects
 from rvdyn.solver import ARCSEC_PER_RAD
 from rvdyn.te import run_te
@@ -109,8 +109,9 @@ def test_a_bad_offset_names_the_option_and_its_range():
 
 
 def _library_offset(design: Design) -> Candidate:
-    return next(c for c in _model(SimpleNamespace(design=design, runs=[SimpleNamespace(load_Nm=10.0)],
-                                                  temperatures_vary=False))[0] if c.key == "carrier_offset")
+    dataset = SimpleNamespace(design=design, runs=[SimpleNamespace(load_Nm=10.0, direction=1)], declared_keys=(),
+                              temperatures_vary=False)
+    return build_library(dataset, max_order=1, families=("model",)).by_name("carrier_offset")
 
 
 def _holes_moved(design: Design, delta: dict) -> np.ndarray:
