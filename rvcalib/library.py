@@ -91,6 +91,17 @@ def carrier_offset_axes(design: Design) -> tuple[tuple[float, float], ...]:
     return ((float(axis[0]), float(axis[1])),)
 
 
+def carrier_offset_radial(d: np.ndarray, crank_angles_rad: tuple) -> dict[int, float]:
+    """The radial part ``d . u_i`` of a carrier offset ``d`` (um, carrier frame) at each crank's hole, by crank; a
+    part below the rounding of ``d`` (a crank on the offset's normal) is left out."""
+    out = {}
+    for i, b in enumerate(crank_angles_rad):
+        radial = float(d[0] * math.cos(b) + d[1] * math.sin(b))
+        if abs(radial) > 1e-12 * float(np.hypot(d[0], d[1])):
+            out[i] = radial
+    return out
+
+
 def _add_carrier_offset(acc: "CaseDelta", axes: tuple, crank_angles_rad: tuple, p: np.ndarray) -> None:
     """Add the library's carrier offset at parameters ``p`` (:func:`carrier_offset_axes`): the offset options,
     and each crank's carrier hole moved radially back by the offset's radial part there."""
@@ -98,11 +109,8 @@ def _add_carrier_offset(acc: "CaseDelta", axes: tuple, crank_angles_rad: tuple, 
     kx, ky = MODEL_VECTORS["carrier_offset"]
     acc.model[kx] = acc.model.get(kx, 0.0) + float(d[0])
     acc.model[ky] = acc.model.get(ky, 0.0) + float(d[1])
-    scale = float(np.hypot(*d))
-    for i, b in enumerate(crank_angles_rad):
-        radial = float(d[0] * math.cos(b) + d[1] * math.sin(b))
-        if abs(radial) > 1e-12 * scale:
-            acc.items.append(("carrier_hole_eccentricity", {"value": -radial, "crank": i}))
+    for i, radial in carrier_offset_radial(d, crank_angles_rad).items():
+        acc.items.append(("carrier_hole_eccentricity", {"value": -radial, "crank": i}))
 
 
 @dataclass(frozen=True)

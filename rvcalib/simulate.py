@@ -43,7 +43,7 @@ from rvcad.params import Design
 
 from rvcalib.equivalents import EQUIVALENTS
 from rvcalib.library import (INPUT_ENCODER_RADIUS_MM, MODEL_VECTORS, OUTPUT_ENCODER_RADIUS_MM, CaseDelta,
-                             carrier_offset_axes)
+                             carrier_offset_axes, carrier_offset_radial)
 from rvrig.orders import check_periodic, period_deg
 
 MEASUREMENT_KEYS = ("output_encoder_eccentricity_um", "output_encoder_phase_deg",
@@ -197,17 +197,15 @@ def simulate_dataset(out_dir: str | Path, runs: list[dict[str, Any]], hidden: di
 
 def _carrier_offset_effects(out: list[dict[str, Any]], model: dict[str, Any], design: Design) -> None:
     """Add a hidden carrier offset ``d`` to ``out`` as the library holds it
-    (:func:`rvcalib.library.carrier_offset_axes`): its radial part at each crank's hole, ``d . u_i``, added to that crank's carrier-hole eccentricity, and the
-    offset along the library's axes (a size and a direction with two axes, one value with one)."""
+    (:func:`rvcalib.library.carrier_offset_axes`): its radial part at each crank's hole, ``d . u_i``, added to
+    that crank's carrier-hole eccentricity, and the offset along the library's axes (a size and a direction with
+    two axes, one value with one)."""
     kx, ky = MODEL_VECTORS["carrier_offset"]
     d = np.array([float(model.get(kx, 0.0)), float(model.get(ky, 0.0))])
     if not d.any():
         return
     key = "carrier_hole_eccentricity"
-    for i, b in enumerate(design.crank_angles_rad):
-        radial = float(d @ [math.cos(b), math.sin(b)])
-        if abs(radial) <= 1e-12 * float(np.hypot(*d)):
-            continue
+    for i, radial in carrier_offset_radial(d, design.crank_angles_rad).items():
         hit = [e for e in out if e["key"] == key and e["instance"].get("crank") == i]
         if hit:
             hit[0]["value"] += radial
