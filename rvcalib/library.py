@@ -223,9 +223,8 @@ class Candidate:
         if self.axes is not None:
             _add_carrier_offset(acc, self.axes, self.crank_angles_rad, p)
             return
-        if self.family == "model":
-            for k, v in zip(MODEL_VECTORS.get(self.key, (self.key,)), p):
-                acc.model[k] = acc.model.get(k, 0.0) + float(v)
+        if self.family == "model":                   # one option each; the carrier offset's two: axes above
+            acc.model[self.key] = acc.model.get(self.key, 0.0) + float(p[0])
             return
         if self.pattern is not None:
             v = acc.pinwise.setdefault(self.key, np.zeros(len(self.pattern[0])))
