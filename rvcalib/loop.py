@@ -13,11 +13,13 @@ reducer model through rvdyn (:mod:`rvcalib.reducer_model`); the method is writte
 5. The chosen parameters (the always-estimated block, and the candidates of pure credible sets) are estimated
    through the reducer model itself (their nonlinear MAP, :mod:`rvcalib.refine`, started from where they are or
    from the linearised estimate, whichever fits better); the others leave the model (zero). That is a proposal;
-   where it does not lower the criterion (:func:`criterion`: the likelihood at its best noise variance, the
-   tolerance prior, the risk inflation criterion's price per parameter), the union of the current and the chosen
-   sets, started from the current state, is the second; the best swaps of one chosen parameter for another are
-   the third. A proposal is accepted only when it lowers the criterion (a swap: by more than chi2(1) at 95 %), so
-   the loop never goes back: the estimator proposes, the criterion decides.
+   after the first linearisation the posterior with the current set held in the model proposes too (what the
+   data add to the current set, :func:`_held_fit`), and the lower criterion of the two is taken (:func:`criterion`:
+   the likelihood at its best noise variance, the tolerance prior, the risk inflation criterion's price per
+   parameter). Where neither lowers it, the union of the current and the chosen sets, started from the current
+   state, is the third; the best swaps of one chosen parameter for another are the last. A proposal is accepted
+   only when it lowers the criterion (a swap: by more than chi2(1) at 95 %), so the loop never goes back: the
+   estimator proposes, the criterion decides.
 6. Repeat from 3 until no proposal lowers the criterion, or the chosen set no longer changes and the model TE
    moves by less than ``step_tolerance`` times the noise (or ``max_linearisations``). The empirical block joins
    only once the physical candidates have converged: what the physics cannot give is judged against the best
@@ -277,24 +279,32 @@ def _swap_tries(pb, cur: LoopState, F: Features, z: np.ndarray, tau: np.ndarray,
         psd = cur.sd.copy()
         psd[feature_columns(F.starts, [sw.into])] = 1.0
         tries.append((s_cols, cols[cols >= n] - n, alt, psd, f"swap {pb.feature_name(sw.out)} -> "
-                      f"{pb.feature_name(sw.into)} (linearised change {sw.delta:+.2f})", DELTA_CHI2))
+                      f"{pb.feature_name(sw.into)} (linearised change {sw.delta:+.2f})", DELTA_CHI2, None, None))
     return tries
 
 
-def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log) -> LoopState | None:
+def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log,
+            held: tuple | None = None) -> LoopState | None:
     """The best of the proposals from one linearisation, if it lowers the criterion below the current state's:
-    the posterior's chosen set (from where its parameters are, or from the linearised estimate); where that does
-    not lower it with another set than the current one, the union of the current and the chosen sets started from
-    the current state; where neither does, the best swaps of the current set (:func:`_swap_tries`). A swap keeps
-    the set's size, so its criterion drop is a likelihood ratio: it counts only beyond chi2(1) at 95 % (the swap
-    is judged by its drop less that margin); below it the pair is one the data cannot split."""
+    the posterior's chosen set (from where its parameters are, or from the linearised estimate) and, where given,
+    ``held``: the chosen set of the posterior with the current set held in the model (:func:`_held_fit`; a tuple
+    ``(fit, a_s, a_r, sd, linear, spread)``), both refined and the lower criterion taken; where neither lowers it
+    with another set than the current one, the union of the current and the chosen sets started from the current
+    state; where none does, the best swaps of the current set (:func:`_swap_tries`). A swap keeps the set's size,
+    so its criterion drop is a likelihood ratio: it counts only beyond chi2(1) at 95 % (the swap is judged by its
+    drop less that margin); below it the pair is one the data cannot split. The accepted state keeps the
+    posterior that proposed it."""
     m = pb.model
     n = m.n_params
     best, best_key = None, math.inf
-    tries = [(a_s, a_r, linear, sd, "chosen set", 0.0)]
+    tries = [(a_s, a_r, linear, sd, "chosen set", 0.0, fit, spread)]
+    if held is not None:
+        h_fit, h_s, h_r, h_sd, h_linear, h_spread = held
+        tries.append((h_s, h_r, h_linear, h_sd, "current set held, the posterior's additions", 0.0, h_fit, h_spread))
+    primaries = len(tries)
     union_s, union_r = np.union1d(cur.a_s, a_s).astype(int), np.union1d(cur.a_r, a_r).astype(int)
     if union_s.size + union_r.size > cur.a_s.size + cur.a_r.size:
-        tries.append((union_s, union_r, None, sd, "union with the current set", 0.0))
+        tries.append((union_s, union_r, None, sd, "union with the current set", 0.0, fit, spread))
 
     def moves() -> bool:
         """Whether the best state lowers the criterion with another chosen set than the current one."""
@@ -303,21 +313,22 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
 
     k, last, swapped = 0, None, False
     while k < len(tries):
-        if k > 0 and moves():
+        if k >= primaries and moves():
             break
-        ps, pr, alt, psd, label, margin = tries[k]
+        ps, pr, alt, psd, label, margin, t_fit, t_spread = tries[k]
+        t_fit, t_spread = (fit, spread) if t_fit is None else (t_fit, t_spread)
         here = np.zeros(n)
         here[ps] = cur.theta[ps]
         b0 = np.zeros(cur.b_r.size)
         b0[pr] = cur.b_r[pr]
-        th, b, te, _ = refine(m, pb.y, pb.proj, pb.R, here, b0, ps, pr, psd * tau, sigma, spread=spread, pool=pool,
-                              log=log, feasible=cur.theta, alternative=alt)
+        th, b, te, _ = refine(m, pb.y, pb.proj, pb.R, here, b0, ps, pr, psd * tau, sigma, spread=t_spread,
+                              pool=pool, log=log, feasible=cur.theta, alternative=alt)
         phi = criterion(pb, th, te, b, ps, pr, tau)
         log(f"  {label}: criterion {phi:.4f} (current {cur.phi:.4f}" +
             (f", to be accepted below {cur.phi - margin:.4f})" if margin else ")"))
         last = th
         if phi + margin < best_key:
-            best, best_key = LoopState(th, te, b, ps, pr, psd, phi, fit, F), phi + margin
+            best, best_key = LoopState(th, te, b, ps, pr, psd, phi, t_fit, F), phi + margin
         k += 1
         if k == len(tries) and not swapped and not moves():
             tries += _swap_tries(pb, cur, F, z, tau, pb.settings.swaps)
@@ -327,6 +338,35 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
     if best.theta is not last:
         m.te(best.theta)                        # the model's states at the accepted state (the next Jacobian's)
     return best
+
+
+def _held_fit(pb, cur: LoopState, F: Features, z: np.ndarray, ts: np.ndarray, free: tuple) -> tuple | None:
+    """The posterior with the current chosen set held in the model, and its proposal: the sum of single effects
+    on the linearised data with every feature of the current set a fixed effect (inclusion probability one, a
+    Gaussian prior of its tolerance class), so its single effects are what the data add to the current set.
+
+    The free posterior (its chosen solved and reading parameters ``free``) may trade a chosen candidate for
+    another whose column at this state fits the linearised data as well: a chosen candidate's column is taken
+    where it is, an unchosen one's at zero, and through the contacts they differ, so a twin or a stand-in can
+    displace it while a small true effect goes unseen. Held, the chosen set's columns carry the current fit and
+    the additions are judged on what is left. The criterion (:func:`criterion`) decides between the two
+    proposals.
+
+    Returns None when the current set is the always-estimated block alone (the free posterior is then the held
+    one) or the held posterior chooses the free one's set; else ``(fit, a_s, a_r, sd, linear, spread)``."""
+    m, settings = pb.model, pb.settings
+    n = m.n_params
+    held = tuple(sorted(set(pb.fixed) | set(features_of(F.starts, np.concatenate([cur.a_s, n + cur.a_r])))))
+    if held == tuple(pb.fixed):
+        return None
+    h_fit = fit_sparse(F, z, settings.sparse(), fixed=held)
+    h_s, h_r, h_sd = _active(h_fit, F, n, settings, held)
+    if (tuple(h_s), tuple(h_r)) == (tuple(free[0]), tuple(free[1])):
+        return None
+    linear = np.zeros(n)
+    linear[h_s] = h_fit.coef[:n][h_s] * ts[h_s]
+    spread, _ = _next_linearisation(h_fit, F, n, ts, settings.secant_width)
+    return h_fit, h_s, h_r, h_sd, linear, spread
 
 
 def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -> tuple:
@@ -362,7 +402,8 @@ def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -
         linear = np.zeros(m.n_params)
         linear[a_s] = fit.coef[:m.n_params][a_s] * ts[a_s]
         spread, renew = _next_linearisation(fit, F, m.n_params, ts, settings.secant_width)
-        new = propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log)
+        held = _held_fit(pb, cur, F, z, ts, (a_s, a_r))
+        new = propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log, held)
         if new is None:
             m.te(cur.theta)                         # the model's states back at the current state
             log(f"linearisation {it}: no proposal lowers the criterion ({time.perf_counter() - t0:.0f} s)")
@@ -377,6 +418,9 @@ def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -
         log(f"linearisation {it}: {fit.n_supported} effects supported, {new.a_s.size + new.a_r.size} parameters "
             f"chosen, sigma {sigma:.4g} arcsec, criterion {cur.phi:.4f} -> {new.phi:.4f}, the model TE moved "
             f"{moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")
+        if held is not None and new.fit is held[0]:         # the held posterior's proposal: its spreads
+            spread, renew_h = _next_linearisation(held[0], F, m.n_params, ts, settings.secant_width)
+            renew = renew | renew_h
         cur, theta, te, J = new, new.theta, new.te, None
         renew = renew | (m.column_kinds() != "pin")
         if same and moved <= settings.step_tolerance * sigma:
