@@ -279,7 +279,7 @@ def _swap_tries(pb, cur: LoopState, F: Features, z: np.ndarray, tau: np.ndarray,
         psd = cur.sd.copy()
         psd[feature_columns(F.starts, [sw.into])] = 1.0
         tries.append((s_cols, cols[cols >= n] - n, alt, psd, f"swap {pb.feature_name(sw.out)} -> "
-                      f"{pb.feature_name(sw.into)} (linearised change {sw.delta:+.2f})", DELTA_CHI2, None, None))
+                      f"{pb.feature_name(sw.into)} (linearised change {sw.delta:+.2f})", DELTA_CHI2))
     return tries
 
 
@@ -287,10 +287,10 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
             held: tuple | None = None) -> LoopState | None:
     """The best of the proposals from one linearisation, if it lowers the criterion below the current state's:
     the posterior's chosen set (from where its parameters are, or from the linearised estimate) and, where given,
-    ``held``: the chosen set of the posterior with the current set held in the model (:func:`_held_fit`; a tuple
-    ``(fit, a_s, a_r, sd, linear, spread)``), both refined and the lower criterion taken; where neither lowers it
-    with another set than the current one, the union of the current and the chosen sets started from the current
-    state; where none does, the best swaps of the current set (:func:`_swap_tries`). A swap keeps the set's size,
+    ``held``: the chosen set of the posterior with the current set held in the model (:func:`_held_fit`'s tuple),
+    both refined and the lower criterion taken; where neither lowers it with another set than the current one, the
+    union of the current and the chosen sets started from the current state; where none does, the best swaps of
+    the current set (:func:`_swap_tries`). A swap keeps the set's size,
     so its criterion drop is a likelihood ratio: it counts only beyond chi2(1) at 95 % (the swap is judged by its
     drop less that margin); below it the pair is one the data cannot split. The accepted state keeps the
     posterior that proposed it."""
@@ -299,7 +299,7 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
     best, best_key = None, math.inf
     tries = [(a_s, a_r, linear, sd, "chosen set", 0.0, fit, spread)]
     if held is not None:
-        h_fit, h_s, h_r, h_sd, h_linear, h_spread = held
+        h_fit, h_s, h_r, h_sd, h_linear, h_spread, _ = held
         tries.append((h_s, h_r, h_linear, h_sd, "current set held, the posterior's additions", 0.0, h_fit, h_spread))
     primaries = len(tries)
     union_s, union_r = np.union1d(cur.a_s, a_s).astype(int), np.union1d(cur.a_r, a_r).astype(int)
@@ -316,7 +316,6 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
         if k >= primaries and moves():
             break
         ps, pr, alt, psd, label, margin, t_fit, t_spread = tries[k]
-        t_fit, t_spread = (fit, spread) if t_fit is None else (t_fit, t_spread)
         here = np.zeros(n)
         here[ps] = cur.theta[ps]
         b0 = np.zeros(cur.b_r.size)
@@ -331,7 +330,7 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
             best, best_key = LoopState(th, te, b, ps, pr, psd, phi, t_fit, F), phi + margin
         k += 1
         if k == len(tries) and not swapped and not moves():
-            tries += _swap_tries(pb, cur, F, z, tau, pb.settings.swaps)
+            tries += [t + (fit, spread) for t in _swap_tries(pb, cur, F, z, tau, pb.settings.swaps)]
             swapped = True
     if best is None or best_key >= cur.phi:
         return None
@@ -353,7 +352,8 @@ def _held_fit(pb, cur: LoopState, F: Features, z: np.ndarray, ts: np.ndarray, fr
     proposals.
 
     Returns None when the current set is the always-estimated block alone (the free posterior is then the held
-    one) or the held posterior chooses the free one's set; else ``(fit, a_s, a_r, sd, linear, spread)``."""
+    one) or the held posterior chooses the free one's set; else ``(fit, a_s, a_r, sd, linear, spread, renew)``
+    (:func:`_next_linearisation`'s spread and renewal for that posterior)."""
     m, settings = pb.model, pb.settings
     n = m.n_params
     held = tuple(sorted(set(pb.fixed) | set(features_of(F.starts, np.concatenate([cur.a_s, n + cur.a_r])))))
@@ -365,8 +365,8 @@ def _held_fit(pb, cur: LoopState, F: Features, z: np.ndarray, ts: np.ndarray, fr
         return None
     linear = np.zeros(n)
     linear[h_s] = h_fit.coef[:n][h_s] * ts[h_s]
-    spread, _ = _next_linearisation(h_fit, F, n, ts, settings.secant_width)
-    return h_fit, h_s, h_r, h_sd, linear, spread
+    spread, renew = _next_linearisation(h_fit, F, n, ts, settings.secant_width)
+    return h_fit, h_s, h_r, h_sd, linear, spread, renew
 
 
 def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -> tuple:
@@ -415,12 +415,11 @@ def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -
             continue                                # the same state: its columns stand
         moved = float(np.sqrt(np.mean(proj(new.te - cur.te) ** 2)))
         same = (tuple(new.a_s), tuple(new.a_r)) == (tuple(cur.a_s), tuple(cur.a_r))
-        log(f"linearisation {it}: {fit.n_supported} effects supported, {new.a_s.size + new.a_r.size} parameters "
+        log(f"linearisation {it}: {new.fit.n_supported} effects supported, {new.a_s.size + new.a_r.size} parameters "
             f"chosen, sigma {sigma:.4g} arcsec, criterion {cur.phi:.4f} -> {new.phi:.4f}, the model TE moved "
             f"{moved:.3g} arcsec RMS ({time.perf_counter() - t0:.0f} s)")
         if held is not None and new.fit is held[0]:         # the held posterior's proposal: its spreads
-            spread, renew_h = _next_linearisation(held[0], F, m.n_params, ts, settings.secant_width)
-            renew = renew | renew_h
+            spread, renew = held[5], renew | held[6]
         cur, theta, te, J = new, new.theta, new.te, None
         renew = renew | (m.column_kinds() != "pin")
         if same and moved <= settings.step_tolerance * sigma:
