@@ -290,10 +290,9 @@ def propose(pb, cur: LoopState, fit, F, a_s, a_r, sd, sigma, linear, spread, tau
     ``held``: the chosen set of the posterior with the current set held in the model (:func:`_held_fit`'s tuple),
     both refined and the lower criterion taken; where neither lowers it with another set than the current one, the
     union of the current and the chosen sets started from the current state; where none does, the best swaps of
-    the current set (:func:`_swap_tries`). A swap keeps the set's size,
-    so its criterion drop is a likelihood ratio: it counts only beyond chi2(1) at 95 % (the swap is judged by its
-    drop less that margin); below it the pair is one the data cannot split. The accepted state keeps the
-    posterior that proposed it."""
+    the current set (:func:`_swap_tries`). A swap keeps the set's size, so its criterion drop is a likelihood
+    ratio: it counts only beyond chi2(1) at 95 % (the swap is judged by its drop less that margin); below it the
+    pair is one the data cannot split. The accepted state keeps the posterior that proposed it."""
     m = pb.model
     n = m.n_params
     best, best_key = None, math.inf
@@ -360,13 +359,22 @@ def _held_fit(pb, cur: LoopState, F: Features, z: np.ndarray, ts: np.ndarray, fr
     if held == tuple(pb.fixed):
         return None
     h_fit = fit_sparse(F, z, settings.sparse(), fixed=held)
-    h_s, h_r, h_sd = _active(h_fit, F, n, settings, held)
-    if (tuple(h_s), tuple(h_r)) == (tuple(free[0]), tuple(free[1])):
+    chosen = _chosen(h_fit, F, pb, held, ts)
+    if (tuple(chosen[0]), tuple(chosen[1])) == (tuple(free[0]), tuple(free[1])):
         return None
+    return (h_fit,) + chosen
+
+
+def _chosen(fit, F: Features, pb, fixed: tuple, ts: np.ndarray) -> tuple:
+    """What a posterior proposes: its chosen solved and reading parameters with their prior standard deviations
+    (:func:`_active`), the solved ones' linearised estimate (in their units) and the spread and renewal of the next
+    linearisation (:func:`_next_linearisation`)."""
+    n, settings = pb.model.n_params, pb.settings
+    a_s, a_r, sd = _active(fit, F, n, settings, fixed)
     linear = np.zeros(n)
-    linear[h_s] = h_fit.coef[:n][h_s] * ts[h_s]
-    spread, renew = _next_linearisation(h_fit, F, n, ts, settings.secant_width)
-    return h_fit, h_s, h_r, h_sd, linear, spread, renew
+    linear[a_s] = fit.coef[:n][a_s] * ts[a_s]
+    spread, renew = _next_linearisation(fit, F, n, ts, settings.secant_width)
+    return a_s, a_r, sd, linear, spread, renew
 
 
 def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -> tuple:
@@ -398,10 +406,7 @@ def sparse_search(pb, theta: np.ndarray, te: np.ndarray, pool, log, t0: float) -
         z = proj(y - te + J @ theta)
         fit = fit_sparse(F, z, settings.sparse(), init=fit.effects if fit is not None else None, fixed=pb.fixed)
         sigma = math.sqrt(fit.sigma2)
-        a_s, a_r, sd = _active(fit, F, m.n_params, settings, pb.fixed)
-        linear = np.zeros(m.n_params)
-        linear[a_s] = fit.coef[:m.n_params][a_s] * ts[a_s]
-        spread, renew = _next_linearisation(fit, F, m.n_params, ts, settings.secant_width)
+        a_s, a_r, sd, linear, spread, renew = _chosen(fit, F, pb, pb.fixed, ts)
         held = _held_fit(pb, cur, F, z, ts, (a_s, a_r))
         new = propose(pb, cur, fit, F, a_s, a_r, sd, sigma, linear, spread, tau, z, pool, log, held)
         if new is None:
